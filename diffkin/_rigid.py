@@ -1,0 +1,247 @@
+"""Rigid transforms as structure-of-arrays, composed entry by entry.
+
+A :class:`Rigid` holds the 3x3 rotation and the translation of a pose as nested tuples whose
+entries are either arrays of the batch shape or Python floats. XLA's CPU backend is much
+faster on elementwise arithmetic over a batch than on a ``vmap`` of tiny 4x4 matrix
+products, and Python-float entries (exact 0 and +-1 of the constant parts of a chain) are
+folded away at trace time, so only the arithmetic a robot really needs is compiled.
+
+Model constants are folded only when they are concrete (not traced): a chain closed over by
+``jit`` compiles to its sparse arithmetic, while a chain passed as a traced argument (for
+gradients with respect to its parameters) takes the general path with the same result.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, Union
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+Entry = Union[jax.Array, float]
+Vec3 = tuple[Entry, Entry, Entry]
+Mat3 = tuple[Vec3, Vec3, Vec3]
+
+_SNAP = 1e-12  # constants this close to 0 or +-1 are taken as exactly that
+
+
+class Rigid(NamedTuple):
+    """Pose ``[R p; 0 1]`` with entries that are arrays (one batch shape) or Python floats."""
+
+    R: Mat3
+    p: Vec3
+
+
+def is_concrete(x) -> bool:
+    """Whether ``x`` holds known values at trace time (not a tracer)."""
+    return not isinstance(x, jax.core.Tracer)
+
+
+def constant(x) -> Entry:
+    """A scalar model parameter: a snapped Python float if concrete, else the traced array."""
+    if not is_concrete(x):
+        return x
+    value = float(np.asarray(x, dtype=np.float64))
+    for exact in (0.0, 1.0, -1.0):
+        if abs(value - exact) < _SNAP:
+            return exact
+    return value
+
+
+def mul(a: Entry, b: Entry) -> Entry:
+    """Product, folding exact Python-float zeros and ones."""
+    for x, y in ((a, b), (b, a)):
+        if isinstance(x, float):
+            if x == 0.0:
+                return 0.0
+            if x == 1.0:
+                return y
+            if x == -1.0:
+                return -y
+    return a * b
+
+
+def add(*terms: Entry) -> Entry:
+    """Sum, dropping exact Python-float zeros."""
+    kept = [t for t in terms if not (isinstance(t, float) and t == 0.0)]
+    if not kept:
+        return 0.0
+    total = kept[0]
+    for t in kept[1:]:
+        total = total + t
+    return total
+
+
+def dot(a: Vec3, b: Vec3) -> Entry:
+    return add(mul(a[0], b[0]), mul(a[1], b[1]), mul(a[2], b[2]))
+
+
+def cross(a: Vec3, b: Vec3) -> Vec3:
+    return (
+        add(mul(a[1], b[2]), -mul(a[2], b[1])),
+        add(mul(a[2], b[0]), -mul(a[0], b[2])),
+        add(mul(a[0], b[1]), -mul(a[1], b[0])),
+    )
+
+
+def scale(s: Entry, v: Vec3) -> Vec3:
+    return (mul(s, v[0]), mul(s, v[1]), mul(s, v[2]))
+
+
+def vadd(*vs: Vec3) -> Vec3:
+    return tuple(add(*(v[i] for v in vs)) for i in range(3))  # type: ignore[return-value]
+
+
+def column(R: Mat3, j: int) -> Vec3:
+    return (R[0][j], R[1][j], R[2][j])
+
+
+def rotate(R: Mat3, v: Vec3) -> Vec3:
+    """``R @ v``."""
+    return (dot(R[0], v), dot(R[1], v), dot(R[2], v))
+
+
+def matmul(A: Mat3, B: Mat3) -> Mat3:
+    cols = [column(B, j) for j in range(3)]
+    return tuple(tuple(dot(A[i], cols[j]) for j in range(3)) for i in range(3))  # type: ignore[return-value]
+
+
+def compose(A: Rigid, B: Rigid) -> Rigid:
+    """``A @ B``."""
+    return Rigid(matmul(A.R, B.R), vadd(rotate(A.R, B.p), A.p))
+
+
+def inverse(A: Rigid) -> Rigid:
+    Rt = tuple(column(A.R, j) for j in range(3))
+    return Rigid(Rt, scale(-1.0, rotate(Rt, A.p)))  # type: ignore[arg-type]
+
+
+IDENTITY = Rigid(((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), (0.0, 0.0, 0.0))
+
+
+def from_matrix(T) -> Rigid:
+    """Split a ``(..., 4, 4)`` pose into entries, folding it if it is a concrete constant."""
+    if is_concrete(T) and np.ndim(T) == 2:
+        return Rigid(
+            tuple(tuple(constant(T[i, j]) for j in range(3)) for i in range(3)),  # type: ignore[arg-type]
+            tuple(constant(T[i, 3]) for i in range(3)),  # type: ignore[arg-type]
+        )
+    T = jnp.asarray(T)
+    return Rigid(
+        tuple(tuple(T[..., i, j] for j in range(3)) for i in range(3)),  # type: ignore[arg-type]
+        tuple(T[..., i, 3] for i in range(3)),  # type: ignore[arg-type]
+    )
+
+
+def vector(x) -> Vec3:
+    """Split a ``(..., 3)`` vector into entries, folding it if it is a concrete constant."""
+    if is_concrete(x) and np.ndim(x) == 1:
+        return tuple(constant(x[i]) for i in range(3))  # type: ignore[return-value]
+    x = jnp.asarray(x)
+    return (x[..., 0], x[..., 1], x[..., 2])
+
+
+def stack(entries: list[Entry], shape: tuple[int, ...], dtype) -> jax.Array:
+    """Entries broadcast to ``shape`` and stacked on a new last axis."""
+    arrays = [jnp.broadcast_to(jnp.asarray(e, dtype=dtype), shape) for e in entries]
+    return jnp.stack(arrays, axis=-1)
+
+
+def to_matrix(A: Rigid, shape: tuple[int, ...], dtype) -> jax.Array:
+    """The ``shape + (4, 4)`` matrix of ``A``."""
+    rows = [list(A.R[i]) + [A.p[i]] for i in range(3)] + [[0.0, 0.0, 0.0, 1.0]]
+    flat = stack([e for row in rows for e in row], shape, dtype)
+    return flat.reshape(shape + (4, 4))
+
+
+def vectors_to_array(vs: list[Vec3], shape: tuple[int, ...], dtype) -> jax.Array:
+    """Stack 3-vectors into ``shape + (3, len(vs))`` (one column each)."""
+    cols = [stack(list(v), shape, dtype) for v in vs]
+    return jnp.stack(cols, axis=-1)
+
+
+def skew(w: Vec3) -> Mat3:
+    return ((0.0, -w[2], w[1]), (w[2], 0.0, -w[0]), (-w[1], w[0], 0.0))  # type: ignore[return-value]
+
+
+def screw_exp(v: Vec3, w: Vec3, theta: jax.Array) -> Rigid:
+    """``exp([S] theta)`` for the screw ``S = [v; w]``.
+
+    ``R = I + A [w] + B [w]^2`` and ``p = theta v + B [w] v + C [w]^2 v`` with
+    ``A = sin(n theta)/n``, ``B = (1 - cos(n theta))/n^2``, ``C = (n theta - sin(n theta))/n^3``
+    and ``n = |w|``. A concrete unit (or zero) ``w`` uses the exact closed form of a joint
+    screw; a traced ``w`` (gradients with respect to the screws) uses the general form with
+    Taylor expansions at ``n -> 0`` so that no derivative is NaN.
+    """
+    W = skew(w)
+    W2 = matmul(W, W)
+    Wv, W2v = rotate(W, v), rotate(W2, v)
+    if all(isinstance(x, float) for x in w):
+        n2 = sum(x * x for x in w)  # type: ignore[operator]
+        if n2 == 0.0:
+            return Rigid(IDENTITY.R, scale(theta, v))
+        if abs(n2 - 1.0) < _SNAP:
+            s, c = jnp.sin(theta), jnp.cos(theta)
+            A, B, C = s, 1.0 - c, theta - s
+        else:
+            A, B, C = _exp_coefficients(jnp.asarray(n2), theta)
+    else:
+        A, B, C = _exp_coefficients(dot(w, w), theta)
+    R = tuple(
+        tuple(add(1.0 if i == j else 0.0, mul(A, W[i][j]), mul(B, W2[i][j])) for j in range(3))
+        for i in range(3)
+    )
+    p = vadd(scale(theta, v), scale(B, Wv), scale(C, W2v))
+    return Rigid(R, p)  # type: ignore[arg-type]
+
+
+def _exp_coefficients(n2, theta):
+    """``A, B, C`` of :func:`screw_exp` for ``n^2 = |w|^2``, NaN-free at ``n = 0``."""
+    small = n2 < 1e-8
+    n = jnp.sqrt(jnp.where(small, 1.0, n2))
+    x = n * theta
+    s, c = jnp.sin(x), jnp.cos(x)
+    t2, t3 = theta * theta, theta * theta * theta
+    A = jnp.where(small, theta - n2 * t3 / 6.0, s / n)
+    B = jnp.where(small, t2 / 2.0 - n2 * t2 * t2 / 24.0, (1.0 - c) / jnp.where(small, 1.0, n2))
+    C = jnp.where(small, t3 / 6.0 - n2 * t3 * t2 / 120.0, (x - s) / (n * jnp.where(small, 1.0, n2)))
+    return A, B, C
+
+
+def batch_shape(*entries) -> tuple[int, ...]:
+    """Broadcast shape of the array entries (Python floats count as scalars)."""
+    shapes = [jnp.shape(e) for e in entries if not isinstance(e, float)]
+    return tuple(np.broadcast_shapes(*shapes)) if shapes else ()
+
+
+def leaves(A: Rigid) -> list[Entry]:
+    return [e for row in A.R for e in row] + list(A.p)
+
+
+class Frames(NamedTuple):
+    """One forward pass of a chain, as computed by each model's ``_frames``.
+
+    Attributes:
+        links: ``dof + 1`` poses in the base (world) frame: the base, then each moving link.
+        ee: end-effector pose in the base frame (tool included).
+        screws: per joint, its current screw axis ``(v, w)`` in the base frame (space twist).
+    """
+
+    links: list[Rigid]
+    ee: Rigid
+    screws: list[tuple[Vec3, Vec3]]
+
+
+def cos_sin(x: Entry) -> tuple[Entry, Entry]:
+    """``(cos x, sin x)``, as snapped Python floats for a constant angle."""
+    if isinstance(x, float):
+        return constant(np.cos(x)), constant(np.sin(x))
+    return jnp.cos(x), jnp.sin(x)
+
+
+def entries(x) -> list[Entry]:
+    """The entries of a ``(n,)`` model parameter: snapped floats if concrete, else traced slices."""
+    if is_concrete(x):
+        return [constant(v) for v in np.asarray(x, dtype=np.float64)]
+    return [x[..., i] for i in range(x.shape[-1])]

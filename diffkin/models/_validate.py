@@ -1,0 +1,74 @@
+"""Host-side checks shared by the model constructors: each error names the field and what was expected."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def float_array(value, name: str, shape: tuple[int, ...] | None = None, *, finite: bool = True) -> np.ndarray:
+    """``value`` as a float64 array of ``shape``, with finite entries unless ``finite=False``."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{name}: expected an array of numbers, got {type(value).__name__}") from err
+    if shape is not None and arr.shape != shape:
+        want = "(" + ", ".join(str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
+        raise ValueError(f"{name}: expected shape {want}, got {arr.shape}")
+    if finite and not np.all(np.isfinite(arr)):
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+        raise ValueError(f"{name}: expected finite numbers, got {arr[bad]} at index {bad}")
+    if np.any(np.isnan(arr)):
+        bad = tuple(int(i) for i in np.argwhere(np.isnan(arr))[0])
+        raise ValueError(f"{name}: expected numbers, got NaN at index {bad}")
+    return arr
+
+
+def joint_types(value, dof: int, name: str = "joint_types") -> str:
+    """A string of ``dof`` letters ``R`` (revolute) or ``P`` (prismatic)."""
+    if not isinstance(value, str):
+        raise TypeError(f"{name}: expected a string of 'R'/'P' letters, got {type(value).__name__}")
+    if len(value) != dof:
+        raise ValueError(f"{name}: expected {dof} letters (one per joint), got {len(value)} in {value!r}")
+    for i, letter in enumerate(value):
+        if letter not in "RP":
+            raise ValueError(f"{name}[{i}]: expected 'R' or 'P', got {letter!r}")
+    return value
+
+
+def limits(lower, upper, dof: int) -> tuple[np.ndarray, np.ndarray]:
+    """Joint limits ``(dof,)``; ``None`` means unlimited (``-inf`` / ``inf``)."""
+    lo = np.full(dof, -np.inf) if lower is None else float_array(lower, "lower", (dof,), finite=False)
+    hi = np.full(dof, np.inf) if upper is None else float_array(upper, "upper", (dof,), finite=False)
+    for i in range(dof):
+        if lo[i] > hi[i]:
+            raise ValueError(f"lower[{i}] = {lo[i]} > upper[{i}] = {hi[i]}: expected lower <= upper")
+        if lo[i] == np.inf or hi[i] == -np.inf:
+            raise ValueError(f"joint {i}: limits [{lo[i]}, {hi[i]}] leave no feasible value")
+    return lo, hi
+
+
+def rigid_transform(value, name: str, *, tol: float = 1e-6) -> np.ndarray:
+    """A ``(4, 4)`` homogeneous rigid transform (orthonormal rotation, det +1, last row 0 0 0 1)."""
+    T = float_array(value, name, (4, 4))
+    R = T[:3, :3]
+    if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=tol):
+        raise ValueError(f"{name}: expected last row [0, 0, 0, 1] of a rigid transform, got {T[3].tolist()}")
+    err = np.abs(R.T @ R - np.eye(3)).max()
+    if err > tol or np.linalg.det(R) < 0:
+        raise ValueError(
+            f"{name}: expected a rotation (R^T R = I, det R = +1) in the upper-left 3x3 block, "
+            f"got |R^T R - I| = {err:.3g}, det R = {np.linalg.det(R):.6g}"
+        )
+    return T
+
+
+def joint_names(value, dof: int) -> tuple[str, ...]:
+    """``dof`` distinct joint names; ``None`` gives ``joint1 ... jointN``."""
+    if value is None:
+        return tuple(f"joint{i + 1}" for i in range(dof))
+    names = tuple(value)
+    if len(names) != dof or not all(isinstance(n, str) for n in names):
+        raise ValueError(f"joint_names: expected {dof} strings, got {names!r}")
+    if len(set(names)) != dof:
+        raise ValueError(f"joint_names: expected distinct names, got {names!r}")
+    return names

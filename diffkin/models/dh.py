@@ -1,0 +1,137 @@
+"""Serial chains from Denavit-Hartenberg tables, standard (distal) and modified (Craig)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffkin import _rigid as rg
+from diffkin._pytree import pytree_dataclass, static
+from diffkin.models import _validate as check
+
+
+@pytree_dataclass
+class DHChain:
+    """A serial chain described by a Denavit-Hartenberg table.
+
+    Standard DH (``modified=False``): link ``i`` is ``Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``
+    and joint ``i`` moves about (or along) the z axis of frame ``i - 1``.
+    Modified DH (``modified=True``, Craig): row ``i`` holds ``a_{i-1}, alpha_{i-1}, d_i, theta_i``,
+    link ``i`` is ``Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i) Tz(d_i)`` and joint ``i`` moves about
+    the z axis of frame ``i``.
+    For a revolute joint ``theta_i = q_i + theta_offset_i``; for a prismatic one ``d_i`` grows by
+    ``q_i`` and ``theta_i = theta_offset_i``. The end-effector pose is ``base @ A_1 ... A_n @ tool``.
+
+    Attributes:
+        a: ``(dof,)`` link lengths, metres.
+        alpha: ``(dof,)`` link twists, radians.
+        d: ``(dof,)`` link offsets, metres.
+        theta_offset: ``(dof,)`` joint angle offsets, radians.
+        lower, upper: ``(dof,)`` joint limits (radians or metres; ``-inf``/``inf`` if unlimited).
+        base: ``(4, 4)`` pose of DH frame 0 in the world (base) frame.
+        tool: ``(4, 4)`` pose of the end effector in the last DH frame.
+        joint_types: static string of ``"R"``/``"P"``, one letter per joint.
+        modified: static; ``True`` for the modified (Craig) convention.
+        joint_names: static tuple of names.
+        name: static name of the robot (informational).
+    """
+
+    a: jax.Array
+    alpha: jax.Array
+    d: jax.Array
+    theta_offset: jax.Array
+    lower: jax.Array
+    upper: jax.Array
+    base: jax.Array
+    tool: jax.Array
+    joint_types: str = static()
+    modified: bool = static(default=False)
+    joint_names: tuple[str, ...] = static(default=())
+    name: str = static(default="")
+
+    @property
+    def dof(self) -> int:
+        return len(self.joint_types)
+
+    @classmethod
+    def from_table(
+        cls,
+        table,
+        joint_types: str | None = None,
+        *,
+        modified: bool = False,
+        lower=None,
+        upper=None,
+        base=None,
+        tool=None,
+        joint_names=None,
+        name: str = "",
+    ) -> DHChain:
+        """Build a chain from a ``(dof, 4)`` table with columns ``[a, alpha, d, theta_offset]``.
+
+        Args:
+            table: ``(dof, 4)`` DH parameters (metres, radians); for ``modified=True`` row ``i``
+                holds ``a_{i-1}, alpha_{i-1}, d_i, theta_i`` as in Craig's table.
+            joint_types: ``"R"``/``"P"`` per joint; default all revolute.
+            modified: use the modified (Craig) convention.
+            lower, upper: ``(dof,)`` joint limits; ``None`` means unlimited.
+            base: ``(4, 4)`` pose of frame 0 in the world; default identity.
+            tool: ``(4, 4)`` end-effector pose in the last frame; default identity.
+            joint_names: ``dof`` names; default ``joint1 ... jointN``.
+            name: robot name.
+
+        Raises:
+            ValueError: a table that is not ``(dof, 4)``, non-finite numbers, bad joint types,
+                ``lower > upper``, or a base/tool that is not a rigid transform.
+        """
+        arr = check.float_array(table, "table", finite=False)
+        if arr.ndim != 2 or arr.shape[1] != 4 or arr.shape[0] == 0:
+            raise ValueError(f"table: expected shape (dof, 4) with columns [a, alpha, d, theta_offset], got {arr.shape}")
+        arr = check.float_array(arr, "table")
+        dof = arr.shape[0]
+        types = check.joint_types("R" * dof if joint_types is None else joint_types, dof)
+        lo, hi = check.limits(lower, upper, dof)
+        base_T = np.eye(4) if base is None else check.rigid_transform(base, "base")
+        tool_T = np.eye(4) if tool is None else check.rigid_transform(tool, "tool")
+        f = jnp.asarray
+        return cls(
+            a=f(arr[:, 0]), alpha=f(arr[:, 1]), d=f(arr[:, 2]), theta_offset=f(arr[:, 3]),
+            lower=f(lo), upper=f(hi), base=f(base_T), tool=f(tool_T),
+            joint_types=types, modified=bool(modified),
+            joint_names=check.joint_names(joint_names, dof), name=name,
+        )
+
+    def _frames(self, q: list[jax.Array]) -> rg.Frames:
+        """Forward pass over the joint values ``q`` (one array per joint, any batch shape)."""
+        a, alpha, d, offset = (rg.entries(x) for x in (self.a, self.alpha, self.d, self.theta_offset))
+        T = rg.from_matrix(self.base)
+        links, screws = [T], []
+        for i, kind in enumerate(self.joint_types):
+            revolute = kind == "R"
+            theta = rg.add(q[i], offset[i]) if revolute else offset[i]
+            d_i = d[i] if revolute else rg.add(d[i], q[i])
+            ct, st = rg.cos_sin(theta)
+            ca, sa = rg.cos_sin(alpha[i])
+            if self.modified:
+                A = rg.Rigid(
+                    ((ct, -st, 0.0),
+                     (rg.mul(st, ca), rg.mul(ct, ca), -sa),
+                     (rg.mul(st, sa), rg.mul(ct, sa), ca)),
+                    (a[i], -rg.mul(sa, d_i), rg.mul(ca, d_i)),
+                )
+                T = rg.compose(T, A)
+                axis_frame = T  # joint i moves about z_i
+            else:
+                axis_frame = T  # joint i moves about z_{i-1}
+                A = rg.Rigid(
+                    ((ct, -rg.mul(st, ca), rg.mul(st, sa)),
+                     (st, rg.mul(ct, ca), -rg.mul(ct, sa)),
+                     (0.0, sa, ca)),
+                    (rg.mul(a[i], ct), rg.mul(a[i], st), d_i),
+                )
+                T = rg.compose(T, A)
+            z, origin = rg.column(axis_frame.R, 2), axis_frame.p
+            screws.append((rg.cross(origin, z), z) if revolute else (z, (0.0, 0.0, 0.0)))
+            links.append(T)
+        return rg.Frames(links, rg.compose(T, rg.from_matrix(self.tool)), screws)

@@ -1,0 +1,152 @@
+"""Serial chains in product-of-exponentials form, and the exact conversion from DH."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffkin import _rigid as rg
+from diffkin._pytree import pytree_dataclass, static
+from diffkin.models import _validate as check
+from diffkin.models.dh import DHChain
+
+
+@pytree_dataclass
+class PoEChain:
+    """A serial chain as a product of exponentials, ``T(q) = exp([S1] q1) ... exp([Sn] qn) M``.
+
+    Attributes:
+        screws: ``(dof, 6)`` space-frame screw axes ``[v; w]`` at ``q = 0``: revolute
+            ``[-w x p; w]`` (unit ``w`` through the point ``p``), prismatic ``[v; 0]`` (unit ``v``).
+        home: ``(4, 4)`` end-effector pose ``M`` in the base frame at ``q = 0``.
+        link_homes: ``(dof, 4, 4)`` pose of each moving link frame at ``q = 0``; link ``i`` moves
+            as ``exp([S1] q1) ... exp([Si] qi) link_homes[i]``.
+        lower, upper: ``(dof,)`` joint limits (``-inf``/``inf`` if unlimited).
+        joint_types: static string of ``"R"``/``"P"``.
+        joint_names: static tuple of names.
+        name: static name of the robot (informational).
+    """
+
+    screws: jax.Array
+    home: jax.Array
+    link_homes: jax.Array
+    lower: jax.Array
+    upper: jax.Array
+    joint_types: str = static()
+    joint_names: tuple[str, ...] = static(default=())
+    name: str = static(default="")
+
+    @property
+    def dof(self) -> int:
+        return len(self.joint_types)
+
+    @classmethod
+    def from_screws(
+        cls,
+        screws,
+        home,
+        joint_types: str | None = None,
+        *,
+        lower=None,
+        upper=None,
+        link_homes=None,
+        joint_names=None,
+        name: str = "",
+    ) -> PoEChain:
+        """Build a chain from space-frame screws.
+
+        Args:
+            screws: ``(dof, 6)`` unit screws ``[v; w]``: ``|w| = 1`` (revolute) or ``w = 0`` and
+                ``|v| = 1`` (prismatic).
+            home: ``(4, 4)`` end-effector pose at ``q = 0``.
+            joint_types: ``"R"``/``"P"`` per joint; default read from the screws.
+            lower, upper: ``(dof,)`` limits; ``None`` means unlimited.
+            link_homes: ``(dof, 4, 4)`` link poses at ``q = 0``; default each joint's point on its
+                axis (revolute) or the previous link frame (prismatic), with identity rotation.
+            joint_names: ``dof`` names; default ``joint1 ... jointN``.
+            name: robot name.
+
+        Raises:
+            ValueError: screws that are not unit screws, a joint type that contradicts its screw,
+                a home pose that is not rigid, non-finite numbers, ``lower > upper``.
+        """
+        S = check.float_array(screws, "screws", finite=False)
+        if S.ndim != 2 or S.shape[1] != 6 or S.shape[0] == 0:
+            raise ValueError(f"screws: expected shape (dof, 6) with rows [v; w], got {S.shape}")
+        S = check.float_array(S, "screws")
+        dof = S.shape[0]
+        inferred = ""
+        for i, (v, w) in enumerate(zip(S[:, :3], S[:, 3:])):
+            nw, nv = np.linalg.norm(w), np.linalg.norm(v)
+            if abs(nw - 1.0) < 1e-6:
+                inferred += "R"
+            elif nw < 1e-12 and abs(nv - 1.0) < 1e-6:
+                inferred += "P"
+            else:
+                raise ValueError(
+                    f"screws[{i}]: expected a unit screw (|w| = 1, or w = 0 and |v| = 1), "
+                    f"got |w| = {nw:.6g}, |v| = {nv:.6g}"
+                )
+        types = inferred if joint_types is None else check.joint_types(joint_types, dof)
+        for i, (given, seen) in enumerate(zip(types, inferred)):
+            if given != seen:
+                raise ValueError(f"joint_types[{i}]: {given!r} contradicts screws[{i}], which is {seen!r}")
+        M = check.rigid_transform(home, "home")
+        if link_homes is None:
+            L = np.tile(np.eye(4), (dof, 1, 1))
+            for i in range(dof):
+                w, v = S[i, 3:], S[i, :3]
+                L[i, :3, 3] = np.cross(w, v) if types[i] == "R" else (L[i - 1, :3, 3] if i else 0.0)
+        else:
+            L = check.float_array(link_homes, "link_homes", (dof, 4, 4))
+            for i in range(dof):
+                check.rigid_transform(L[i], f"link_homes[{i}]")
+        lo, hi = check.limits(lower, upper, dof)
+        f = jnp.asarray
+        return cls(
+            screws=f(S), home=f(M), link_homes=f(L), lower=f(lo), upper=f(hi),
+            joint_types=types, joint_names=check.joint_names(joint_names, dof), name=name,
+        )
+
+    def _frames(self, q: list[jax.Array]) -> rg.Frames:
+        """Forward pass over the joint values ``q`` (one array per joint, any batch shape)."""
+        if rg.is_concrete(self.screws):
+            S = np.asarray(self.screws, dtype=np.float64)
+            L = np.asarray(self.link_homes, dtype=np.float64)
+        else:
+            S, L = self.screws, self.link_homes
+        T = rg.IDENTITY
+        links, screws = [T], []
+        for i in range(self.dof):
+            v, w = rg.vector(S[i, :3]), rg.vector(S[i, 3:])
+            w_now = rg.rotate(T.R, w)
+            screws.append((rg.vadd(rg.rotate(T.R, v), rg.cross(T.p, w_now)), w_now))
+            T = rg.compose(T, rg.screw_exp(v, w, q[i]))
+            links.append(rg.compose(T, rg.from_matrix(L[i])))
+        return rg.Frames(links, rg.compose(T, rg.from_matrix(self.home)), screws)
+
+
+def to_poe(chain: DHChain) -> PoEChain:
+    """Exact, differentiable conversion of a :class:`DHChain` (either convention) to a :class:`PoEChain`.
+
+    The screws are the chain's joint axes at ``q = 0`` in the world frame, ``home`` its
+    end-effector pose at ``q = 0`` and ``link_homes`` its DH frames at ``q = 0``, all computed
+    with JAX operations on the chain's arrays (so gradients flow through the conversion).
+    The DH ``base`` is folded into the screws and poses: the PoE base frame is the world frame.
+    """
+    if not isinstance(chain, DHChain):
+        raise TypeError(f"chain: expected a DHChain, got {type(chain).__name__}")
+    dtype = jnp.result_type(chain.a)
+    frames = chain._frames([jnp.zeros((), dtype) for _ in range(chain.dof)])
+    screws = jnp.stack([rg.stack([*v, *w], (), dtype) for v, w in frames.screws])
+    return PoEChain(
+        screws=screws,
+        home=rg.to_matrix(frames.ee, (), dtype),
+        link_homes=jnp.stack([rg.to_matrix(T, (), dtype) for T in frames.links[1:]]),
+        lower=chain.lower,
+        upper=chain.upper,
+        joint_types=chain.joint_types,
+        joint_names=chain.joint_names,
+        name=chain.name,
+    )

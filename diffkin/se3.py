@@ -1,0 +1,87 @@
+"""Rotations and rigid transforms on ``(..., 3, 3)`` / ``(..., 4, 4)`` arrays.
+
+Twists are ``[v; w]`` (linear first). All functions broadcast over leading batch dimensions
+and have finite derivatives everywhere, including the identity and half-turns.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+
+def skew(w: jax.Array) -> jax.Array:
+    """``(..., 3) -> (..., 3, 3)``: the matrix ``[w]`` with ``[w] x = w x x``."""
+    w = jnp.asarray(w)
+    z = jnp.zeros_like(w[..., 0])
+    rows = [
+        jnp.stack([z, -w[..., 2], w[..., 1]], -1),
+        jnp.stack([w[..., 2], z, -w[..., 0]], -1),
+        jnp.stack([-w[..., 1], w[..., 0], z], -1),
+    ]
+    return jnp.stack(rows, -2)
+
+
+def vee(W: jax.Array) -> jax.Array:
+    """``(..., 3, 3) -> (..., 3)``: the vector of the skew part of ``W``."""
+    return 0.5 * jnp.stack(
+        [W[..., 2, 1] - W[..., 1, 2], W[..., 0, 2] - W[..., 2, 0], W[..., 1, 0] - W[..., 0, 1]],
+        -1,
+    )
+
+
+def inverse(T: jax.Array) -> jax.Array:
+    """Inverse of rigid transforms ``(..., 4, 4)``."""
+    R, p = T[..., :3, :3], T[..., :3, 3]
+    Rt = jnp.swapaxes(R, -1, -2)
+    top = jnp.concatenate([Rt, -(Rt @ p[..., None])], -1)
+    bottom = jnp.broadcast_to(jnp.array([0.0, 0.0, 0.0, 1.0], T.dtype), top.shape[:-2] + (1, 4))
+    return jnp.concatenate([top, bottom], -2)
+
+
+def adjoint(T: jax.Array) -> jax.Array:
+    """``(..., 4, 4) -> (..., 6, 6)``: ``Ad_T`` acting on twists ``[v; w]``: ``[[R, [p] R], [0, R]]``."""
+    R, p = T[..., :3, :3], T[..., :3, 3]
+    top = jnp.concatenate([R, skew(p) @ R], -1)
+    bottom = jnp.concatenate([jnp.zeros_like(R), R], -1)
+    return jnp.concatenate([top, bottom], -2)
+
+
+def _safe_norm(x: jax.Array) -> jax.Array:
+    """Euclidean norm over the last axis with a zero (not NaN) derivative at zero."""
+    sq = jnp.sum(x * x, -1)
+    nonzero = sq > 0
+    return jnp.where(nonzero, jnp.sqrt(jnp.where(nonzero, sq, 1.0)), 0.0)
+
+
+def rotation_angle(R: jax.Array) -> jax.Array:
+    """``(..., 3, 3) -> (...,)``: angle in ``[0, pi]`` of rotations, accurate near 0 and pi."""
+    sin_ = _safe_norm(vee(R))
+    cos_ = 0.5 * (jnp.trace(R, axis1=-2, axis2=-1) - 1.0)
+    return jnp.arctan2(sin_, cos_)
+
+
+def so3_log(R: jax.Array) -> jax.Array:
+    """``(..., 3, 3) -> (..., 3)``: rotation vector ``w`` with ``R = exp([w])``, ``|w| <= pi``.
+
+    Finite for every rotation: near the identity the series of ``theta / sin(theta)`` is used;
+    near a half-turn the axis comes from the symmetric part ``(R + R^T)/2 = I + (1 - cos) a a^T``.
+    """
+    w_sin = vee(R)  # sin(theta) * axis
+    sin_ = _safe_norm(w_sin)
+    cos_ = 0.5 * (jnp.trace(R, axis1=-2, axis2=-1) - 1.0)
+    theta = jnp.arctan2(sin_, cos_)
+    # Regular and small angles: w = theta / sin(theta) * vee(R).
+    small = theta < 1e-4
+    safe_sin = jnp.where(small, 1.0, sin_)
+    factor = jnp.where(small, 1.0 + theta * theta / 6.0, theta / safe_sin)
+    regular = factor[..., None] * w_sin
+    # Near pi: the axis from the largest diagonal column of (R + R^T)/2 - cos I.
+    S = 0.5 * (R + jnp.swapaxes(R, -1, -2)) - cos_[..., None, None] * jnp.eye(3, dtype=R.dtype)
+    k = jnp.argmax(jnp.diagonal(S, axis1=-2, axis2=-1), axis=-1)
+    col = jnp.take_along_axis(S, k[..., None, None], axis=-1)[..., 0]
+    axis = col / jnp.maximum(_safe_norm(col), 1e-30)[..., None]
+    # Orient the axis with the (small but informative) skew part.
+    sign = jnp.where(jnp.sum(axis * w_sin, -1) < 0, -1.0, 1.0)
+    near_pi = cos_ < -0.99
+    return jnp.where(near_pi[..., None], (sign * theta)[..., None] * axis, regular)
