@@ -13,13 +13,13 @@ gradients with respect to its parameters) takes the general path with the same r
 
 from __future__ import annotations
 
-from typing import NamedTuple, Union
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-Entry = Union[jax.Array, float]
+Entry = jax.Array | float
 Vec3 = tuple[Entry, Entry, Entry]
 Mat3 = tuple[Vec3, Vec3, Vec3]
 
@@ -123,6 +123,7 @@ IDENTITY = Rigid(((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), (0.0, 0.0,
 def from_matrix(T) -> Rigid:
     """Split a ``(..., 4, 4)`` pose into entries, folding it if it is a concrete constant."""
     if is_concrete(T) and np.ndim(T) == 2:
+        T = np.asarray(T, dtype=np.float64)  # index on the host: indexing a jax Array under jit stages it out
         return Rigid(
             tuple(tuple(constant(T[i, j]) for j in range(3)) for i in range(3)),  # type: ignore[arg-type]
             tuple(constant(T[i, 3]) for i in range(3)),  # type: ignore[arg-type]
@@ -137,6 +138,7 @@ def from_matrix(T) -> Rigid:
 def vector(x) -> Vec3:
     """Split a ``(..., 3)`` vector into entries, folding it if it is a concrete constant."""
     if is_concrete(x) and np.ndim(x) == 1:
+        x = np.asarray(x, dtype=np.float64)
         return tuple(constant(x[i]) for i in range(3))  # type: ignore[return-value]
     x = jnp.asarray(x)
     return (x[..., 0], x[..., 1], x[..., 2])

@@ -87,7 +87,9 @@ class DHChain:
         """
         arr = check.float_array(table, "table", finite=False)
         if arr.ndim != 2 or arr.shape[1] != 4 or arr.shape[0] == 0:
-            raise ValueError(f"table: expected shape (dof, 4) with columns [a, alpha, d, theta_offset], got {arr.shape}")
+            raise ValueError(
+                f"table: expected shape (dof, 4) with columns [a, alpha, d, theta_offset], got {arr.shape}"
+            )
         arr = check.float_array(arr, "table")
         dof = arr.shape[0]
         types = check.joint_types("R" * dof if joint_types is None else joint_types, dof)

@@ -77,7 +77,7 @@ class PoEChain:
         S = check.float_array(S, "screws")
         dof = S.shape[0]
         inferred = ""
-        for i, (v, w) in enumerate(zip(S[:, :3], S[:, 3:])):
+        for i, (v, w) in enumerate(zip(S[:, :3], S[:, 3:], strict=True)):
             nw, nv = np.linalg.norm(w), np.linalg.norm(v)
             if abs(nw - 1.0) < 1e-6:
                 inferred += "R"
@@ -89,7 +89,7 @@ class PoEChain:
                     f"got |w| = {nw:.6g}, |v| = {nv:.6g}"
                 )
         types = inferred if joint_types is None else check.joint_types(joint_types, dof)
-        for i, (given, seen) in enumerate(zip(types, inferred)):
+        for i, (given, seen) in enumerate(zip(types, inferred, strict=True)):
             if given != seen:
                 raise ValueError(f"joint_types[{i}]: {given!r} contradicts screws[{i}], which is {seen!r}")
         M = check.rigid_transform(home, "home")

@@ -148,7 +148,9 @@ def load_urdf(source, end_link: str | None = None, *, base_link: str | None = No
             if not children[link]:
                 leaves.append(link)
         if len(leaves) != 1:
-            raise ValueError(f"end_link: the URDF has several leaf links below {base_link!r}, choose one of {sorted(leaves)}")
+            raise ValueError(
+                f"end_link: the URDF has several leaf links below {base_link!r}, choose one of {sorted(leaves)}"
+            )
         end_link = leaves[0]
     elif end_link not in children:
         raise ValueError(f"end_link: unknown link {end_link!r}; available links: {sorted(links)}")
@@ -168,7 +170,9 @@ def load_urdf(source, end_link: str | None = None, *, base_link: str | None = No
         if j.kind in _UNSUPPORTED:
             raise ValueError(f"joint {j.name!r}: joint type {j.kind!r} is not supported")
         if j.kind != "fixed" and j.kind not in _MOVING:
-            raise ValueError(f"joint {j.name!r}: unknown joint type {j.kind!r}; expected revolute, continuous, prismatic or fixed")
+            raise ValueError(
+                f"joint {j.name!r}: unknown joint type {j.kind!r}; expected revolute, continuous, prismatic or fixed"
+            )
         if j.mimic:
             raise ValueError(f"joint {j.name!r}: mimic joints are not supported")
         T = T @ j.origin
@@ -176,7 +180,8 @@ def load_urdf(source, end_link: str | None = None, *, base_link: str | None = No
             continue
         w = T[:3, :3] @ j.axis
         kind = _MOVING[j.kind]
-        screws.append(np.concatenate([np.cross(T[:3, 3], w), w]) if kind == "R" else np.concatenate([w, np.zeros(3)]))
+        v = np.cross(T[:3, 3], w) if kind == "R" else w
+        screws.append(np.concatenate([v, w if kind == "R" else np.zeros(3)]))
         link_homes.append(T.copy())
         types += kind
         names.append(j.name)

@@ -78,7 +78,8 @@ def ur5() -> DHChain:
     alpha = [_PI2, 0.0, 0.0, _PI2, -_PI2, 0.0]
     table = np.stack([a, alpha, d, np.zeros(6)], axis=1)
     lim = np.full(6, 2 * np.pi)
-    names = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]
+    names = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint",
+             "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]
     return DHChain.from_table(table, lower=-lim, upper=lim, name="ur5", joint_names=names)
 
 

@@ -1,0 +1,35 @@
+"""Test settings: float64 enabled (float32 tests pass float32 arrays explicitly), strict promotion off,
+warnings are errors (pyproject), and shared robot fixtures."""
+
+import os
+
+import jax
+import numpy as np
+import pytest
+
+jax.config.update("jax_enable_x64", True)
+
+import diffkin as dk  # noqa: E402
+
+DATA = os.path.join(os.path.dirname(__file__), "data")
+
+# URDF robots of the validation: (name, path, end link); built once per session.
+URDF_ROBOTS = {
+    "iiwa7": (dk.robots.urdf_path("iiwa7"), "iiwa7_link_ee"),
+    "iiwa14": (dk.robots.urdf_path("iiwa14"), "iiwa14_link_ee"),
+    "panda": (os.path.join(DATA, "panda.urdf"), "panda_link8"),
+    "ur5": (os.path.join(DATA, "ur5.urdf"), "tool0"),
+}
+BUILTIN = ("iiwa7", "iiwa14", "panda", "ur5", "puma560")
+
+
+def random_q(chain, n, seed=0):
+    """``(n, dof)`` float64 configurations uniform within limits (unlimited joints over one turn)."""
+    lo = np.where(np.isfinite(chain.lower), chain.lower, -np.pi)
+    hi = np.where(np.isfinite(chain.upper), chain.upper, np.pi)
+    return np.random.default_rng(seed).uniform(lo, hi, (n, chain.dof))
+
+
+@pytest.fixture(scope="session")
+def urdf_chains():
+    return {name: dk.load_urdf(path, end) for name, (path, end) in URDF_ROBOTS.items()}

@@ -1,0 +1,263 @@
+"""Forward kinematics against Pinocchio, pytorch-kinematics, textbook closed forms and identities."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pinocchio as pin
+import pytest
+import pytorch_kinematics as pk
+import torch
+from conftest import BUILTIN, URDF_ROBOTS, random_q
+
+import diffkin as dk
+
+N = 200
+
+
+def _pin_model(name):
+    path, _ = URDF_ROBOTS[name]
+    with open(path) as fh:
+        model = pin.buildModelFromXML(fh.read())
+    return model, model.createData()
+
+
+def _pin_q(model, chain, q):
+    qp = np.zeros(model.nq)
+    for i, name in enumerate(chain.joint_names):
+        qp[model.joints[model.getJointId(name)].idx_q] = q[i]
+    return qp
+
+
+@pytest.mark.parametrize("name", list(URDF_ROBOTS))
+def test_fk_and_link_poses_match_pinocchio(name, urdf_chains):
+    chain = urdf_chains[name]
+    model, data = _pin_model(name)
+    end = model.getFrameId(URDF_ROBOTS[name][1])
+    joint_ids = [model.getJointId(n) for n in chain.joint_names]
+    q = random_q(chain, N, seed=1)
+    T = np.asarray(dk.fk(chain, q))
+    links = np.asarray(dk.link_poses(chain, q))
+    assert T.dtype == np.float64 and links.shape == (N, chain.dof + 1, 4, 4)
+    err_T = err_links = 0.0
+    for k in range(N):
+        pin.framesForwardKinematics(model, data, _pin_q(model, chain, q[k]))
+        err_T = max(err_T, np.abs(data.oMf[end].homogeneous - T[k]).max())
+        ref = np.stack([data.oMi[j].homogeneous for j in joint_ids])
+        err_links = max(err_links, np.abs(ref - links[k, 1:]).max())
+    np.testing.assert_allclose(links[:, 0], np.broadcast_to(np.eye(4), (N, 4, 4)), atol=0)
+    assert err_T < 1e-10 and err_links < 1e-10
+
+
+@pytest.mark.parametrize("name", list(URDF_ROBOTS))
+def test_fk_and_link_poses_match_pytorch_kinematics(name, urdf_chains):
+    path, end = URDF_ROBOTS[name]
+    with open(path, "rb") as fh:
+        ref_chain = pk.build_serial_chain_from_urdf(fh.read(), end).to(dtype=torch.float64)
+    chain = urdf_chains[name]
+    q = random_q(chain, N, seed=2)
+    ref = ref_chain.forward_kinematics(torch.tensor(q), end_only=False)
+    links = np.asarray(dk.link_poses(chain, q))
+    child_of = {j.name: j.child for j in _urdf_joints(path)}
+    for i, joint in enumerate(chain.joint_names):
+        np.testing.assert_allclose(links[:, i + 1], ref[child_of[joint]].get_matrix().numpy(), atol=1e-6)
+    np.testing.assert_allclose(np.asarray(dk.fk(chain, q)), ref[end].get_matrix().numpy(), atol=1e-6)
+
+
+def _urdf_joints(path):
+    import xml.etree.ElementTree as ET
+
+    class J:
+        def __init__(self, el):
+            self.name, self.child = el.get("name"), el.find("child").get("link")
+
+    return [J(el) for el in ET.parse(path).getroot().findall("joint")]
+
+
+@pytest.mark.parametrize("name", BUILTIN)
+def test_dh_product_equals_to_poe(name):
+    chain = getattr(dk.robots, name)()
+    poe = dk.to_poe(chain)
+    q = random_q(chain, N, seed=3)
+    np.testing.assert_allclose(dk.fk(poe, q), dk.fk(chain, q), atol=1e-12)
+    np.testing.assert_allclose(dk.link_poses(poe, q)[:, 1:], dk.link_poses(chain, q)[:, 1:], atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["iiwa7", "iiwa14"])
+def test_shipped_urdf_equals_dh_model(name):
+    chain = getattr(dk.robots, name)()
+    urdf = dk.load_urdf(dk.robots.urdf_path(name))
+    q = random_q(chain, N, seed=4)
+    np.testing.assert_allclose(dk.fk(urdf, q), dk.fk(chain, q), atol=1e-12)
+    np.testing.assert_array_equal(urdf.lower, chain.lower)
+    # URDF links 2, 4, 6 sit at the shoulder, elbow and wrist centres, as the DH frames 2, 4, 6 do.
+    for i in (2, 4, 6):
+        np.testing.assert_allclose(
+            dk.link_poses(urdf, q)[:, i, :3, 3], dk.link_poses(chain, q)[:, i, :3, 3], atol=1e-12
+        )
+
+
+def test_ur5_dh_equals_its_ros_urdf(urdf_chains):
+    """UR's DH base frame is the URDF's ``base`` link (``base_link`` turned by pi about z); the flange is ``tool0``."""
+    q = random_q(dk.robots.ur5(), N, seed=5)
+    Rz_pi = np.diag([-1.0, -1.0, 1.0, 1.0])
+    np.testing.assert_allclose(Rz_pi @ np.asarray(dk.fk(urdf_chains["ur5"], q)), dk.fk(dk.robots.ur5(), q), atol=1e-9)
+
+
+def test_panda_dh_equals_franka_urdf(urdf_chains):
+    q = random_q(dk.robots.panda(), N, seed=6)
+    np.testing.assert_allclose(dk.fk(urdf_chains["panda"], q), dk.fk(dk.robots.panda(), q), atol=1e-12)
+
+
+def test_iiwa_published_positions():
+    q = np.full(7, 0.5)
+    np.testing.assert_allclose(dk.fk(dk.robots.iiwa14(), q)[:3, 3], [0.264615, 0.065211, 1.234181], atol=1e-6)
+    np.testing.assert_allclose(dk.fk(dk.robots.iiwa7(), q)[:3, 3], [0.256201, 0.060614, 1.196629], atol=1e-6)
+
+
+def _rz(t):
+    c, s = np.cos(t), np.sin(t)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def test_planar_2r_textbook():
+    a1, a2 = 0.7, 0.4
+    q = random_q(dk.robots.planar([a1, a2]), N, seed=7)
+    T = np.asarray(dk.fk(dk.robots.planar([a1, a2]), q))
+    t1, t2 = q[:, 0], q[:, 1]
+    np.testing.assert_allclose(T[:, 0, 3], a1 * np.cos(t1) + a2 * np.cos(t1 + t2), atol=1e-14)
+    np.testing.assert_allclose(T[:, 1, 3], a1 * np.sin(t1) + a2 * np.sin(t1 + t2), atol=1e-14)
+    np.testing.assert_allclose(T[:, 2, 3], 0.0, atol=0)
+    np.testing.assert_allclose(T[:, :3, :3], np.stack([_rz(t) for t in t1 + t2]), atol=1e-14)
+
+
+def test_rpr_arm_with_a_prismatic_joint():
+    h, L = 0.5, 0.3
+    chain = dk.DHChain.from_table(
+        [[0, np.pi / 2, h, 0], [0, 0, 0.0, 0], [L, 0, 0, 0]], "RPR", lower=[-3, 0.1, -3], upper=[3, 0.9, 3]
+    )
+    q = random_q(chain, N, seed=8)
+    q1, q2, q3 = q.T
+    expected = (
+        np.array([0, 0, h])[None]
+        + q2[:, None] * np.stack([np.sin(q1), -np.cos(q1), 0 * q1], 1)
+        + L * np.cos(q3)[:, None] * np.stack([np.cos(q1), np.sin(q1), 0 * q1], 1)
+        + L * np.sin(q3)[:, None] * np.array([0, 0, 1.0])[None]
+    )
+    np.testing.assert_allclose(np.asarray(dk.fk(chain, q))[:, :3, 3], expected, atol=1e-14)
+
+
+def test_scara_rrrp():
+    a1, a2, h = 0.4, 0.3, 0.6
+    chain = dk.DHChain.from_table(
+        [[a1, 0, h, 0], [a2, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0]],
+        "RRRP",
+        lower=[-2, -2, -3, -0.2],
+        upper=[2, 2, 3, 0.0],
+    )
+    q = random_q(chain, N, seed=9)
+    T = np.asarray(dk.fk(chain, q))
+    t1, t2, t3, d4 = q.T
+    np.testing.assert_allclose(T[:, 0, 3], a1 * np.cos(t1) + a2 * np.cos(t1 + t2), atol=1e-14)
+    np.testing.assert_allclose(T[:, 1, 3], a1 * np.sin(t1) + a2 * np.sin(t1 + t2), atol=1e-14)
+    np.testing.assert_allclose(T[:, 2, 3], h + d4, atol=1e-14)
+    np.testing.assert_allclose(T[:, :3, :3], np.stack([_rz(t) for t in t1 + t2 + t3]), atol=1e-14)
+
+
+def _modified_equivalent(chain):
+    """The modified-DH description of a standard-DH chain (Tx(a) Rx(alpha) shifted to the next row)."""
+    a, alpha = np.asarray(chain.a), np.asarray(chain.alpha)
+    table = np.stack([np.r_[0.0, a[:-1]], np.r_[0.0, alpha[:-1]], chain.d, chain.theta_offset], 1)
+    c, s = np.cos(alpha[-1]), np.sin(alpha[-1])
+    last = np.array([[1, 0, 0, a[-1]], [0, c, -s, 0], [0, s, c, 0], [0, 0, 0, 1.0]])
+    return dk.DHChain.from_table(
+        table, chain.joint_types, modified=True, base=chain.base, tool=last @ np.asarray(chain.tool)
+    )
+
+
+@pytest.mark.parametrize("name", ["iiwa14", "ur5", "puma560"])
+def test_modified_and_standard_descriptions_agree(name):
+    chain = getattr(dk.robots, name)()
+    q = random_q(chain, N, seed=10)
+    np.testing.assert_allclose(dk.fk(_modified_equivalent(chain), q), dk.fk(chain, q), atol=1e-12)
+
+
+def test_planar_3r_in_both_conventions():
+    a = [0.5, 0.4, 0.2]
+    standard = dk.robots.planar(a)
+    tool = np.eye(4)
+    tool[0, 3] = a[2]
+    modified = dk.DHChain.from_table([[0, 0, 0, 0], [a[0], 0, 0, 0], [a[1], 0, 0, 0]], modified=True, tool=tool)
+    q = random_q(standard, N, seed=11)
+    np.testing.assert_allclose(dk.fk(modified, q), dk.fk(standard, q), atol=1e-14)
+
+
+def test_base_and_tool_transforms_apply():
+    chain = dk.robots.iiwa14()
+    base, tool = np.eye(4), np.eye(4)
+    base[:3, :3], base[:3, 3] = _rz(0.3), [0.1, -0.2, 0.3]
+    tool[:3, :3], tool[:3, 3] = _rz(-1.1).T, [0.0, 0.05, 0.1]
+    moved = chain.replace(base=jnp.asarray(base), tool=jnp.asarray(tool))
+    q = random_q(chain, 20, seed=12)
+    np.testing.assert_allclose(dk.fk(moved, q), base @ np.asarray(dk.fk(chain, q)) @ tool, atol=1e-14)
+
+
+# --- batching, transformations, dtypes -------------------------------------------------------
+
+_CHAINS = {"dh": dk.robots.panda(), "poe": dk.load_urdf(*URDF_ROBOTS["ur5"])}
+
+
+@pytest.mark.parametrize("kind", list(_CHAINS))
+@pytest.mark.parametrize("shape", [(), (5,), (2, 3)])
+def test_batch_shapes(kind, shape):
+    chain = _CHAINS[kind]
+    q = random_q(chain, int(np.prod(shape)), seed=13).reshape(shape + (chain.dof,))
+    T = dk.fk(chain, q)
+    assert T.shape == shape + (4, 4)
+    assert dk.link_poses(chain, q).shape == shape + (chain.dof + 1, 4, 4)
+    flat = np.stack([np.asarray(dk.fk(chain, qi)) for qi in q.reshape(-1, chain.dof)])
+    np.testing.assert_allclose(np.asarray(T).reshape(-1, 4, 4), flat, atol=1e-15)
+
+
+@pytest.mark.parametrize("kind", list(_CHAINS))
+def test_jit_vmap_grad_match_eager(kind):
+    chain = _CHAINS[kind]
+    q = jnp.asarray(random_q(chain, 8, seed=14))
+    eager = dk.fk(chain, q)
+    np.testing.assert_allclose(jax.jit(lambda x: dk.fk(chain, x))(q), eager, atol=1e-15)
+    np.testing.assert_allclose(jax.jit(dk.fk)(chain, q), eager, atol=1e-14)  # traced chain: general path
+    np.testing.assert_allclose(jax.vmap(lambda x: dk.fk(chain, x))(q), eager, atol=1e-15)
+    np.testing.assert_allclose(jax.vmap(dk.link_poses, (None, 0))(chain, q), dk.link_poses(chain, q), atol=1e-15)
+
+    def per_row(x):
+        return jnp.sum(dk.fk(chain, x)[..., :3, 3] ** 2, -1)
+
+    def loss(x):
+        return jnp.sum(per_row(x))
+
+    g, g_jit = jax.grad(loss)(q), jax.jit(jax.grad(loss))(q)
+    np.testing.assert_allclose(g_jit, g, atol=1e-13)
+    h = 1e-6  # rows are independent: a shift of column i gives each row's partial derivative
+    fd = np.stack([(per_row(q.at[:, i].add(h)) - per_row(q.at[:, i].add(-h))) / (2 * h) for i in range(chain.dof)], -1)
+    np.testing.assert_allclose(g, fd, atol=1e-7)
+    jf = jax.jacfwd(lambda x: dk.fk(chain, x))(q[0])
+    assert jf.shape == (4, 4, chain.dof) and np.all(np.isfinite(jf))
+
+
+@pytest.mark.parametrize("kind", list(_CHAINS))
+def test_float32_close_to_float64(kind):
+    chain = _CHAINS[kind]
+    q = random_q(chain, 100, seed=15)
+    T32 = jax.jit(lambda x: dk.fk(chain, x))(jnp.asarray(q, jnp.float32))
+    assert T32.dtype == jnp.float32
+    np.testing.assert_allclose(np.asarray(T32, np.float64), dk.fk(chain, q), atol=1e-5)
+
+
+def test_fk_at_zero_angle_is_exact_and_gradient_finite():
+    chain = dk.load_urdf(*URDF_ROBOTS["iiwa14"])
+    q0 = jnp.zeros(7)
+    # exp(0) = I exactly: the traced (unfolded) product returns M bit for bit; the folded one snaps
+    # constants within 1e-12 of 0 or 1 to exact values.
+    np.testing.assert_array_equal(jax.jit(dk.fk)(chain, q0), chain.home)
+    np.testing.assert_allclose(dk.fk(chain, q0), chain.home, atol=1e-15)
+    g = jax.grad(lambda c: jnp.sum(dk.fk(c, q0)))(chain)
+    assert all(np.all(np.isfinite(leaf)) for leaf in jax.tree_util.tree_leaves(g))

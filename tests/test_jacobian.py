@@ -1,0 +1,214 @@
+"""Jacobians in three frames, manipulability, and gradients with respect to model parameters."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pinocchio as pin
+import pytest
+import pytorch_kinematics as pk
+import torch
+from conftest import BUILTIN, URDF_ROBOTS, random_q
+
+import diffkin as dk
+from diffkin import se3
+
+FRAMES = ("world", "space", "body")
+PIN_FRAME = {"world": pin.LOCAL_WORLD_ALIGNED, "space": pin.WORLD, "body": pin.LOCAL}
+N = 100
+
+
+@pytest.mark.parametrize("name", list(URDF_ROBOTS))
+def test_jacobians_match_pinocchio(name, urdf_chains):
+    chain = urdf_chains[name]
+    path, end = URDF_ROBOTS[name]
+    with open(path) as fh:
+        model = pin.buildModelFromXML(fh.read())
+    data, fid = model.createData(), model.getFrameId(end)
+    idx_q = [model.joints[model.getJointId(n)].idx_q for n in chain.joint_names]
+    idx_v = [model.joints[model.getJointId(n)].idx_v for n in chain.joint_names]
+    q = random_q(chain, N, seed=20)
+    ours = {f: np.asarray(dk.jacobian(chain, q, f)) for f in FRAMES}
+    worst = dict.fromkeys(FRAMES, 0.0)
+    for k in range(N):
+        qp = np.zeros(model.nq)
+        qp[idx_q] = q[k]
+        pin.computeJointJacobians(model, data, qp)
+        pin.updateFramePlacements(model, data)
+        for f in FRAMES:
+            ref = pin.getFrameJacobian(model, data, fid, PIN_FRAME[f])[:, idx_v]
+            worst[f] = max(worst[f], np.abs(ref - ours[f][k]).max())
+    assert max(worst.values()) < 1e-10, worst
+
+
+@pytest.mark.parametrize("name", list(URDF_ROBOTS))
+def test_world_jacobian_matches_pytorch_kinematics(name, urdf_chains):
+    path, end = URDF_ROBOTS[name]
+    with open(path, "rb") as fh:
+        ref_chain = pk.build_serial_chain_from_urdf(fh.read(), end).to(dtype=torch.float64)
+    q = random_q(urdf_chains[name], N, seed=21)
+    ref = ref_chain.jacobian(torch.tensor(q)).numpy()
+    np.testing.assert_allclose(dk.jacobian(urdf_chains[name], q), ref, atol=1e-6)
+
+
+def _models():
+    prismatic = dk.DHChain.from_table(
+        [[0.1, np.pi / 2, 0.3, 0.2], [0.2, -0.4, 0.1, 0], [0.3, 0.7, 0.2, 0.1]],
+        "RPR",
+        lower=[-2, -0.5, -2],
+        upper=[2, 0.5, 2],
+    )
+    models = {name: getattr(dk.robots, name)() for name in BUILTIN}
+    models["rpr"] = prismatic
+    models["rpr_poe"] = dk.to_poe(prismatic)
+    models["iiwa14_urdf"] = dk.load_urdf(*URDF_ROBOTS["iiwa14"])
+    return models
+
+
+MODELS = _models()
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_analytic_equals_autodiff_and_frames_are_consistent(name):
+    chain = MODELS[name]
+    q = random_q(chain, 50, seed=22)
+    J = {f: np.asarray(dk.jacobian(chain, q, f)) for f in FRAMES}
+    for f in FRAMES:
+        np.testing.assert_allclose(dk.jacobian(chain, q, f, method="analytic"), J[f], atol=1e-13)
+    T = np.asarray(dk.fk(chain, q))
+    np.testing.assert_allclose(se3.adjoint(T) @ J["body"], J["space"], atol=1e-13)  # J_s = Ad(T) J_b
+    v, w = J["space"][:, :3], J["space"][:, 3:]
+    p = np.broadcast_to(T[:, :3, 3, None], v.shape)
+    np.testing.assert_allclose(J["world"][:, :3], v + np.cross(w, p, axis=1), atol=1e-13)
+    np.testing.assert_allclose(J["world"][:, 3:], w, atol=0)
+
+
+@pytest.mark.parametrize("name", ["iiwa14", "panda", "rpr_poe"])
+def test_world_jacobian_columns_against_finite_differences(name):
+    chain = MODELS[name]
+    q = random_q(chain, 30, seed=23)
+    J = np.asarray(dk.jacobian(chain, q, "world"))
+    T = np.asarray(dk.fk(chain, q))
+    h = 1e-6
+    for i in range(chain.dof):
+        dq = np.zeros(chain.dof)
+        dq[i] = h
+        Tp, Tm = np.asarray(dk.fk(chain, q + dq)), np.asarray(dk.fk(chain, q - dq))
+        dT = (Tp - Tm) / (2 * h)
+        w_fd = se3.vee(dT[:, :3, :3] @ np.swapaxes(T[:, :3, :3], 1, 2))
+        np.testing.assert_allclose(J[:, :3, i], dT[:, :3, 3], atol=1e-8)
+        np.testing.assert_allclose(J[:, 3:, i], w_fd, atol=1e-8)
+
+
+def test_planar_2r_textbook_jacobian_and_singularity():
+    a1, a2 = 0.7, 0.4
+    chain = dk.robots.planar([a1, a2])
+    q = random_q(chain, 50, seed=24)
+    q[:2, 1] = [0.0, np.pi]  # the singular configurations
+    J = np.asarray(dk.jacobian(chain, q))
+    t1, t2 = q[:, 0], q[:, 1]
+    s1, c1, s12, c12 = np.sin(t1), np.cos(t1), np.sin(t1 + t2), np.cos(t1 + t2)
+    expected = np.stack(
+        [np.stack([-a1 * s1 - a2 * s12, -a2 * s12], -1), np.stack([a1 * c1 + a2 * c12, a2 * c12], -1)], 1
+    )
+    np.testing.assert_allclose(J[:, :2], expected, atol=1e-14)
+    np.testing.assert_allclose(J[:, 2:5], 0.0, atol=0)
+    np.testing.assert_allclose(J[:, 5], 1.0, atol=0)
+    np.testing.assert_allclose(np.linalg.det(J[:, :2]), a1 * a2 * np.sin(t2), atol=1e-14)
+    assert np.abs(np.linalg.det(J[:2, :2])).max() < 1e-15
+    # manipulability of a planar arm: sqrt(det(J^T J)) = |a1 a2 sin t2| (with the unit w rows included: see below)
+    m = np.asarray(dk.manipulability(chain, q))
+    np.testing.assert_allclose(m, np.sqrt(np.linalg.det(np.swapaxes(J, 1, 2) @ J)), atol=1e-13)
+
+
+@pytest.mark.parametrize("name", ["iiwa14", "panda", "ur5"])
+def test_manipulability_against_numpy(name):
+    chain = MODELS[name]
+    q = random_q(chain, 50, seed=25)
+    J = np.asarray(dk.jacobian(chain, q))
+    expected = np.sqrt(np.linalg.det(J @ np.swapaxes(J, 1, 2)))
+    np.testing.assert_allclose(dk.manipulability(chain, q), expected, rtol=1e-10)
+    np.testing.assert_allclose(dk.manipulability(chain, q), np.prod(np.linalg.svd(J, compute_uv=False), -1), rtol=1e-9)
+
+
+def test_manipulability_finite_at_the_stretched_iiwa():
+    chain = dk.robots.iiwa14()
+    q0 = jnp.zeros(7)
+    m = dk.manipulability(chain, q0)
+    assert m == 0.0
+    g = jax.grad(lambda q: dk.manipulability(chain, q))(q0)
+    assert np.all(np.isfinite(g))
+    # near the elbow singularity (theta4 -> 0, shoulder and wrist bent) it shrinks linearly, gradient finite
+    near = jnp.array([0.0, 0.5, 0.0, 1e-4, 0.0, 0.5, 0.0])
+    m_near, m_ten = dk.manipulability(chain, near), dk.manipulability(chain, near.at[3].set(1e-3))
+    assert 0 < m_near and abs(m_ten / m_near - 10) < 1e-2
+    assert np.all(np.isfinite(jax.grad(lambda q: dk.manipulability(chain, q))(near)))
+
+
+@pytest.mark.parametrize("shape", [(), (4,), (2, 3)])
+def test_jacobian_batch_shapes(shape):
+    chain = MODELS["panda"]
+    q = random_q(chain, int(np.prod(shape)), seed=26).reshape(shape + (7,))
+    flat = np.stack([np.asarray(dk.jacobian(chain, qi, "body")) for qi in q.reshape(-1, 7)])
+    for method in ("autodiff", "analytic"):
+        J = dk.jacobian(chain, q, "body", method=method)
+        assert J.shape == shape + (6, 7)
+        np.testing.assert_allclose(np.asarray(J).reshape(-1, 6, 7), flat, atol=1e-14)
+    assert dk.manipulability(chain, q).shape == shape
+
+
+@pytest.mark.parametrize("method", ["autodiff", "analytic"])
+def test_jacobian_jit_vmap_and_float32(method):
+    chain = MODELS["panda"]
+    q = random_q(chain, 6, seed=26)
+    ref = dk.jacobian(chain, q, "body", method=method)
+    fn = jax.jit(lambda x: dk.jacobian(chain, x, "body", method=method))
+    np.testing.assert_allclose(fn(q), ref, atol=1e-14)
+    np.testing.assert_allclose(jax.vmap(dk.jacobian, (None, 0, None))(chain, q, "body"), ref, atol=1e-14)
+    J32 = fn(jnp.asarray(q, jnp.float32))
+    assert J32.dtype == jnp.float32
+    np.testing.assert_allclose(np.asarray(J32, np.float64), ref, atol=1e-5)
+
+
+# --- gradients with respect to model parameters ----------------------------------------------
+
+
+def _fd_check(chain, field, q, seed, h=1e-6, atol=1e-7):
+    """``jax.grad`` of a random linear function of ``fk(chain.replace(field=x), q)`` vs central differences."""
+    W = np.random.default_rng(seed).normal(size=q.shape[:-1] + (4, 4))
+
+    def loss(x):
+        return jnp.sum(W * dk.fk(chain.replace(**{field: x}), q))
+
+    x0 = np.asarray(getattr(chain, field), dtype=np.float64)
+    g = np.asarray(jax.jit(jax.grad(loss))(jnp.asarray(x0)))
+    assert np.all(np.isfinite(g))
+    steps = h * np.eye(x0.size).reshape((x0.size,) + x0.shape)  # one perturbation per entry
+    values = np.asarray(jax.jit(jax.vmap(loss))(np.concatenate([x0 + steps, x0 - steps])))
+    fd = (values[: x0.size] - values[x0.size :]).reshape(x0.shape) / (2 * h)
+    np.testing.assert_allclose(g, fd, atol=atol)
+
+
+@pytest.mark.parametrize("field", ["a", "alpha", "d", "theta_offset", "base", "tool"])
+@pytest.mark.parametrize("name", ["iiwa14", "panda"])
+def test_dh_parameter_gradients(name, field):
+    chain = MODELS[name]
+    _fd_check(chain, field, random_q(chain, 5, seed=27), seed=28)
+
+
+@pytest.mark.parametrize("name, field", [("rpr_poe", "screws"), ("rpr_poe", "home"), ("iiwa14_urdf", "home")])
+def test_poe_and_urdf_parameter_gradients(name, field):
+    chain = MODELS[name]
+    _fd_check(chain, field, random_q(chain, 5, seed=29), seed=30)
+
+
+def test_to_poe_is_differentiable():
+    chain = MODELS["iiwa14"]
+    q = random_q(chain, 5, seed=31)
+
+    def via_poe(d):
+        return jnp.sum(dk.fk(dk.to_poe(chain.replace(d=d)), q)[..., :3, 3])
+
+    def direct(d):
+        return jnp.sum(dk.fk(chain.replace(d=d), q)[..., :3, 3])
+
+    np.testing.assert_allclose(jax.grad(via_poe)(chain.d), jax.grad(direct)(chain.d), atol=1e-12)

@@ -1,0 +1,210 @@
+"""Model construction: pytree behaviour, and every bad input rejected on the host with a clear message."""
+
+import re
+
+import jax
+import numpy as np
+import pytest
+from conftest import URDF_ROBOTS
+
+import diffkin as dk
+
+IIWA_URDF = dk.robots.urdf_path("iiwa14")
+
+
+def _urdf(joints: str) -> str:
+    links = dict.fromkeys(re.findall(r'link="(\w+)"', joints))
+    body = "".join(f'<link name="{name}"/>' for name in links if name != "zz")
+    return f'<robot name="r">{body}{joints}</robot>'
+
+
+def _joint(name, kind, parent, child, extra=""):
+    limit = '<limit lower="-1" upper="1"/>' if kind in ("revolute", "prismatic") else ""
+    return f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>{limit}{extra}</joint>'
+
+
+def test_models_are_pytrees_with_static_structure():
+    chain = dk.robots.iiwa14()
+    leaves, treedef = jax.tree_util.tree_flatten(chain)
+    assert all(isinstance(x, jax.Array) for x in leaves)
+    assert chain.dof == 7 and chain.joint_types == "RRRRRRR" and len(chain.joint_names) == 7
+    again = jax.tree_util.tree_unflatten(treedef, leaves)
+    assert again.joint_types == chain.joint_types and again.modified == chain.modified
+    moved = chain.replace(a=chain.a + 0.01)
+    assert np.allclose(moved.a, 0.01) and np.allclose(chain.a, 0.0)
+    with pytest.raises(AttributeError):
+        chain.a = chain.a  # frozen
+    poe = dk.load_urdf(IIWA_URDF)
+    assert poe.dof == 7 and poe.screws.shape == (7, 6) and poe.link_homes.shape == (7, 4, 4)
+
+
+def test_from_table_defaults_and_limits():
+    chain = dk.DHChain.from_table(np.zeros((3, 4)))
+    assert chain.joint_types == "RRR" and chain.joint_names == ("joint1", "joint2", "joint3")
+    assert np.all(np.isneginf(chain.lower)) and np.all(np.isposinf(chain.upper))
+    np.testing.assert_array_equal(chain.base, np.eye(4))
+
+
+def test_from_screws_infers_joint_types():
+    screws = [[0, 0, 0, 0, 0, 1], [1, 0, 0, 0, 0, 0]]
+    chain = dk.PoEChain.from_screws(screws, np.eye(4))
+    assert chain.joint_types == "RP"
+    q = np.array([0.3, 0.2])
+    T = np.asarray(dk.fk(chain, q))
+    np.testing.assert_allclose(T[:3, 3], [np.cos(0.3) * 0.2, np.sin(0.3) * 0.2, 0.0], atol=1e-15)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(table=np.zeros((3, 3))), r"table: expected shape \(dof, 4\)"),
+        (dict(table=np.zeros((0, 4))), r"table: expected shape \(dof, 4\)"),
+        (dict(table=[[0, np.nan, 0, 0]]), r"table: expected numbers, got NaN at index \(0, 1\)"),
+        (dict(table=[[0, 0, np.inf, 0]]), r"table: expected finite"),
+        (dict(table=np.zeros((2, 4)), joint_types="R"), r"joint_types: expected 2 letters"),
+        (dict(table=np.zeros((2, 4)), joint_types="RX"), r"joint_types\[1\]: expected 'R' or 'P', got 'X'"),
+        (dict(table=np.zeros((2, 4)), lower=[0, 1], upper=[1, 0]), r"lower\[1\] = 1.0 > upper\[1\] = 0.0"),
+        (dict(table=np.zeros((2, 4)), lower=[0, np.nan]), r"lower: expected numbers, got NaN at index \(1,\)"),
+        (dict(table=np.zeros((2, 4)), upper=[1, 2, 3]), r"upper: expected shape \(2,\), got \(3,\)"),
+        (dict(table=np.zeros((2, 4)), base=np.zeros((4, 4))), r"base: expected last row"),
+        (dict(table=np.zeros((2, 4)), tool=np.diag([1, 1, -1, 1.0])), r"tool: expected a rotation"),
+        (dict(table=np.zeros((2, 4)), base=np.eye(3)), r"base: expected shape \(4, 4\)"),
+        (dict(table=np.zeros((2, 4)), joint_names=["a"]), r"joint_names: expected 2 strings"),
+    ],
+)
+def test_from_table_rejects(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        dk.DHChain.from_table(**kwargs)
+
+
+def test_from_table_type_errors():
+    with pytest.raises(TypeError, match="joint_types: expected a string"):
+        dk.DHChain.from_table(np.zeros((2, 4)), ["R", "R"])
+    with pytest.raises(TypeError, match="table: expected an array of numbers"):
+        dk.DHChain.from_table([["a", "b", "c", "d"]])
+
+
+@pytest.mark.parametrize(
+    "screws, home, kwargs, match",
+    [
+        ([[0, 0, 0, 0, 0, 2.0]], np.eye(4), {}, r"screws\[0\]: expected a unit screw .* \|w\| = 2"),
+        ([[0, 0, 0.5, 0, 0, 0]], np.eye(4), {}, r"screws\[0\]: expected a unit screw .* \|v\| = 0.5"),
+        ([[0, 0, 0, 0, 0, 1]], np.eye(4), dict(joint_types="P"), r"joint_types\[0\]: 'P' contradicts screws\[0\]"),
+        (np.zeros((2, 5)), np.eye(4), {}, r"screws: expected shape \(dof, 6\)"),
+        ([[0, 0, 0, 0, 0, 1]], 2 * np.eye(4), {}, r"home: expected"),
+        ([[0, 0, 0, 0, 0, 1]], np.eye(4), dict(link_homes=np.zeros((1, 4, 4))), r"link_homes\[0\]: expected"),
+        ([[0, 0, np.inf, 0, 0, 1]], np.eye(4), {}, r"screws: expected finite"),
+    ],
+)
+def test_from_screws_rejects(screws, home, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        dk.PoEChain.from_screws(screws, home, **kwargs)
+
+
+@pytest.mark.parametrize("chain", [dk.robots.iiwa14(), dk.load_urdf(IIWA_URDF)], ids=["dh", "poe"])
+def test_q_of_the_wrong_size_is_rejected(chain):
+    for fn in (dk.fk, dk.link_poses, dk.jacobian, dk.manipulability):
+        with pytest.raises(ValueError, match=r"q: expected shape \(\.\.\., 7\) for a 7-joint chain, got \(3, 6\)"):
+            fn(chain, np.zeros((3, 6)))
+        with pytest.raises(ValueError, match=r"q: expected shape \(\.\.\., 7\)"):
+            fn(chain, 0.0)
+    with pytest.raises(TypeError, match="chain: expected a DHChain or PoEChain, got str"):
+        dk.fk("iiwa", np.zeros(7))
+    with pytest.raises(ValueError, match="frame: expected one of"):
+        dk.jacobian(chain, np.zeros(7), frame="tool")
+    with pytest.raises(ValueError, match="method: expected one of"):
+        dk.jacobian(chain, np.zeros(7), method="numeric")
+
+
+def test_urdf_root_and_leaf_defaults():
+    chain = dk.load_urdf(IIWA_URDF)
+    assert chain.joint_names == tuple(f"iiwa14_joint_{i}" for i in range(1, 8)) and chain.name == "iiwa14"
+    short = dk.load_urdf(IIWA_URDF, "iiwa14_link_4", base_link="iiwa14_link_1")
+    assert short.dof == 3
+    full = np.asarray(dk.link_poses(chain, np.full(7, 0.3)))
+    rel = np.linalg.inv(full[1]) @ full[4]
+    np.testing.assert_allclose(dk.fk(short, np.full(3, 0.3)), rel, atol=1e-14)
+
+
+def test_urdf_continuous_prismatic_and_any_axis():
+    xml = _urdf(
+        _joint("j1", "continuous", "a", "b", '<origin xyz="0 0 1"/><axis xyz="0 0 2"/>')
+        + _joint("j2", "prismatic", "b", "c", '<origin xyz="1 0 0" rpy="0 0 1.5707963267948966"/><axis xyz="1 1 0"/>')
+    )
+    chain = dk.load_urdf(xml)
+    assert chain.joint_types == "RP" and np.isinf(chain.upper[0]) and chain.upper[1] == 1.0
+    q1, q2 = 0.4, 0.3
+    T = np.asarray(dk.fk(chain, np.array([q1, q2])))
+    # joint 2 frame sits at (1,0,1) of link b, turned +90 deg; its axis (1,1)/sqrt2 is (-1,1)/sqrt2 in b.
+    p_b = np.array([1.0, 0, 0]) + q2 * np.array([-1.0, 1.0, 0]) / np.sqrt(2)
+    c, s = np.cos(q1), np.sin(q1)
+    expected = np.array([c * p_b[0] - s * p_b[1], s * p_b[0] + c * p_b[1], 1.0])
+    np.testing.assert_allclose(T[:3, 3], expected, atol=1e-14)
+
+
+@pytest.mark.parametrize(
+    "source, kwargs, match",
+    [
+        ("<robot><link name='a'/>", {}, r"malformed URDF XML"),
+        ("/nonexistent/robot.urdf", {}, r"URDF file not found: '/nonexistent/robot.urdf'"),
+        ("<model/>", {}, r"expected a <robot> root element, got <model>"),
+        (IIWA_URDF, dict(end_link="flange"), r"end_link: unknown link 'flange'; available links: \['iiwa14_link_0'"),
+        (IIWA_URDF, dict(base_link="world"), r"base_link: unknown link 'world'; available links"),
+        (IIWA_URDF, dict(end_link="iiwa14_link_1", base_link="iiwa14_link_3"), r"is not below base_link"),
+        (URDF_ROBOTS["panda"][0], {}, r"several leaf links below 'panda_link0', choose one of \[.*'panda_hand_tcp'"),
+        (
+            _urdf(_joint("j", "floating", "a", "b")),
+            dict(end_link="b"),
+            r"joint 'j': joint type 'floating' is not supported",
+        ),
+        (_urdf(_joint("j", "planar", "a", "b")), dict(end_link="b"), r"joint type 'planar' is not supported"),
+        (_urdf(_joint("j", "ball", "a", "b")), dict(end_link="b"), r"unknown joint type 'ball'"),
+        (
+            _urdf(_joint("j", "revolute", "a", "b") + _joint("k", "revolute", "b", "c", '<mimic joint="j"/>')),
+            dict(end_link="c"),
+            r"joint 'k': mimic joints are not supported",
+        ),
+        (
+            _urdf('<joint name="j" type="revolute"><parent link="a"/><child link="b"/></joint>'),
+            dict(end_link="b"),
+            r"joint 'j': a revolute joint needs <limit",
+        ),
+        (
+            _urdf(_joint("j", "revolute", "a", "b", '<axis xyz="0 0 0"/>')),
+            dict(end_link="b"),
+            r"<axis>: expected a nonzero",
+        ),
+        (
+            _urdf(_joint("j", "revolute", "a", "b", '<origin xyz="0 0"/>')),
+            dict(end_link="b"),
+            r"joint 'j' <origin> xyz: expected 3 finite numbers, got '0 0'",
+        ),
+        (
+            _urdf(_joint("j", "revolute", "a", "b", '<origin rpy="0 x 0"/>')),
+            dict(end_link="b"),
+            r"rpy: expected 3 finite",
+        ),
+        (_urdf(_joint("j", "revolute", "a", "zz")), dict(end_link="b"), r"link 'zz' is not defined"),
+        (_urdf(_joint("j", "fixed", "a", "b")), dict(end_link="b"), r"no moving joint between 'a' and 'b'"),
+        (
+            _urdf(_joint("j", "revolute", "a", "b").replace('lower="-1"', 'lower="2"')),
+            dict(end_link="b"),
+            r"<limit>: expected lower <= upper",
+        ),
+    ],
+)
+def test_load_urdf_rejects(source, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        dk.load_urdf(source, **kwargs)
+
+
+def test_load_urdf_type_error():
+    with pytest.raises(TypeError, match="source: expected a URDF path or XML string, got int"):
+        dk.load_urdf(3)
+
+
+def test_planar_rejects_bad_lengths():
+    with pytest.raises(ValueError, match="lengths: expected a non-empty list of positive link lengths"):
+        dk.robots.planar([1.0, -1.0])
+    with pytest.raises(ValueError, match="name: expected one of"):
+        dk.robots.urdf_path("ur5")
