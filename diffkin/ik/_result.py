@@ -1,0 +1,30 @@
+"""The result of an inverse-kinematics solve."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+
+
+class IKResult(NamedTuple):
+    """Solutions of a batch of inverse-kinematics problems (a pytree).
+
+    Every field has the batch shape ``...`` of the targets.
+
+    Attributes:
+        q: ``(..., dof)`` best configuration found per target (radians / metres); within
+            ``[lower, upper]`` when solved with ``respect_limits=True``. Differentiable with
+            respect to the target and the chain's parameters (implicit function theorem).
+        success: ``(...,)`` bool, ``pos_err <= pos_tol`` and ``rot_err <= rot_tol``.
+        pos_err: ``(...,)`` distance in metres between the reached and the target position.
+        rot_err: ``(...,)`` angle in radians of the residual rotation ``R_target R(q)^T``
+            (0 for position-only targets).
+        iters: ``(...,)`` int32 number of solver iterations the returned seed ran.
+    """
+
+    q: jax.Array
+    success: jax.Array
+    pos_err: jax.Array
+    rot_err: jax.Array
+    iters: jax.Array

@@ -1,0 +1,305 @@
+"""``solve``: argument checks, seeding, the shared iteration loop and the choice of seed."""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from diffkin.ik import _lm, _optax
+from diffkin.ik._implicit import implicit_q
+from diffkin.ik._problem import Eval, Problem, evaluate
+from diffkin.ik._result import IKResult
+from diffkin.models.dh import DHChain
+from diffkin.models.poe import PoEChain
+
+_METHODS = ("lm", "optax")
+_DEFAULT_ITERS = {"lm": 60, "optax": 1000}
+_FIRST_ROUND = 15  # LM iterations of every seed; then only the best _KEEP seeds of each target go on
+_KEEP = 3
+
+
+class _Seeds(NamedTuple):
+    """Iteration state of every seed, flat over ``P = num_seeds x targets``."""
+
+    q: jax.Array  # (P, dof)
+    ev: Eval
+    aux: object  # method state: LM damping or optax state
+    success: jax.Array  # (P,) bool, sticky
+    stalled: jax.Array  # (P,) bool
+    iters: jax.Array  # (P,) int32
+
+
+def _detach(tree):
+    """``stop_gradient`` on traced leaves only (concrete model constants stay foldable)."""
+    return jax.tree.map(lambda x: jax.lax.stop_gradient(x) if isinstance(x, jax.core.Tracer) else x, tree)
+
+
+def _cast(tree, dtype):
+    """Traced floating leaves to ``dtype``; concrete ones are folded as Python floats by the model."""
+    def cast(x):
+        if isinstance(x, jax.core.Tracer) and jnp.issubdtype(x.dtype, jnp.floating):
+            return x.astype(dtype)
+        return x
+    return jax.tree.map(cast, tree)
+
+
+def _where(mask, new, old):
+    """Per-problem select over a pytree whose leaves all lead with the ``(P,)`` axis."""
+    def pick(a, b):
+        return jnp.where(mask.reshape(mask.shape + (1,) * (jnp.ndim(a) - 1)), a, b)
+    return jax.tree.map(pick, new, old)
+
+
+def _inward(limit, dtype, side: int) -> jax.Array:
+    """``limit`` in ``dtype``, rounded towards the inside of the range (``side`` -1: lower, +1: upper)."""
+    limit = jnp.asarray(limit)
+    rounded = limit.astype(dtype)
+    outside = side * (rounded.astype(limit.dtype) - limit) > 0
+    return jnp.where(outside, jnp.nextafter(rounded, jnp.asarray(-side * jnp.inf, dtype)), rounded)
+
+
+def _seed_configs(key, lower, upper, num_seeds: int, num_targets: int, dtype) -> jax.Array:
+    """``(num_seeds, num_targets, dof)`` uniform within the limits (one turn / one metre if unlimited).
+
+    Target ``b`` draws from ``fold_in(key, b)``, so its seeds do not depend on the batch size.
+    """
+    lo = jnp.where(jnp.isfinite(lower), lower, -np.pi)
+    hi = jnp.where(jnp.isfinite(upper), upper, np.pi)
+    keys = jax.vmap(lambda b: jax.random.fold_in(key, b))(jnp.arange(num_targets))
+    u = jax.vmap(lambda k: jax.random.uniform(k, (num_seeds, lower.shape[0]), dtype))(keys)
+    return jnp.swapaxes(lo + u * (hi - lo), 0, 1)
+
+
+def _start(problem: Problem, q: jax.Array, aux, pos_tol: float, rot_tol: float) -> _Seeds:
+    """Seeds at ``q`` ``(P, dof)``, evaluated (one forward pass)."""
+    ev = evaluate(problem, q)
+    zeros = jnp.zeros(q.shape[0], bool)
+    return _Seeds(q, ev, aux, _succeeded(ev, pos_tol, rot_tol), zeros, jnp.zeros(q.shape[0], jnp.int32))
+
+
+def _succeeded(ev: Eval, pos_tol: float, rot_tol: float) -> jax.Array:
+    return (ev.pos_err <= pos_tol) & (ev.rot_err <= rot_tol)
+
+
+def _run(problem: Problem, seeds: _Seeds, step_fn, *, num_targets: int, has_q0: bool, max_iters: int,
+         pos_tol: float, rot_tol: float) -> _Seeds:
+    """Iterate every seed until its target is done or ``max_iters``; finished targets are frozen.
+
+    A target is done once one of its seeds succeeded (with a warm start: once the ``q0`` seed,
+    seed 0, also succeeded or stalled), or all its seeds stalled. Seeds of done targets and
+    successful seeds no longer move, so each target's result does not depend on the others in
+    the batch; the loop exits as soon as every target is done.
+    """
+    def active(s: _Seeds):
+        success = s.success.reshape(-1, num_targets)
+        finished = success | s.stalled.reshape(-1, num_targets)
+        done = jnp.any(success, axis=0) & (finished[0] if has_q0 else True)
+        done = done | jnp.all(finished, axis=0)
+        return (~done[None] & ~finished).reshape(-1)
+
+    def body(carry):
+        i, s = carry
+        move = active(s)
+        q_new, ev_new, aux_new, accept, stalled = step_fn(problem, s.q, s.ev, s.aux)
+        take = move & accept
+        new = _Seeds(
+            q=_where(take, q_new, s.q),
+            ev=_where(take, ev_new, s.ev),
+            aux=_where(move, aux_new, s.aux),
+            success=s.success | (take & _succeeded(ev_new, pos_tol, rot_tol)),
+            stalled=s.stalled | (move & stalled),
+            iters=s.iters + move.astype(jnp.int32),
+        )
+        return i + 1, new
+
+    def cond(carry):
+        i, s = carry
+        return (i < max_iters) & jnp.any(active(s))
+
+    return jax.lax.while_loop(cond, body, (jnp.asarray(0), seeds))[1]
+
+
+def _ranked(s: _Seeds, num_targets: int, keep: int, q0) -> _Seeds:
+    """The ``keep`` best seeds of every target, best first, flat as ``(keep * num_targets,)``.
+
+    Successful seeds come first, ordered by distance to ``q0`` when given (else by residual),
+    then the others by residual.
+    """
+    def per_target(x):
+        return x.reshape((-1, num_targets) + x.shape[1:])
+
+    success, cost = per_target(s.success), per_target(s.ev.cost)
+    rank = cost if q0 is None else jnp.sum((per_target(s.q) - q0[None]) ** 2, axis=-1)
+    order = jnp.lexsort((jnp.where(success, rank, cost), ~success), axis=0)[:keep]
+
+    def take(x):
+        x = per_target(x)
+        x = jnp.take_along_axis(x, order.reshape(order.shape + (1,) * (x.ndim - 2)), axis=0)
+        return x.reshape((-1,) + x.shape[2:])
+
+    return jax.tree.map(take, s)
+
+
+def _check_args(chain, target, q0, num_seeds, method, max_iters, pos_tol, rot_tol, optimizer):
+    """Host-side checks; returns the target array and its kind (``True`` for position targets)."""
+    if not isinstance(chain, (DHChain, PoEChain)):
+        raise TypeError(f"chain: expected a DHChain or PoEChain, got {type(chain).__name__}")
+    if method not in _METHODS:
+        raise ValueError(f"method: expected one of {_METHODS}, got {method!r}")
+    for name, value, low in (("num_seeds", num_seeds, 1), ("max_iters", max_iters, 0)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+            raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
+    for name, value in (("pos_tol", pos_tol), ("rot_tol", rot_tol)):
+        if not isinstance(value, (int, float, np.floating, np.integer)) or not value >= 0:
+            raise ValueError(f"{name}: expected a non-negative number, got {value!r}")
+    if optimizer is not None:
+        if method != "optax":
+            raise ValueError(f"optimizer: only used with method='optax', got method={method!r}")
+        if not isinstance(optimizer, optax.GradientTransformation):
+            raise TypeError(f"optimizer: expected an optax.GradientTransformation, got {type(optimizer).__name__}")
+    target = jnp.asarray(target)
+    if not jnp.issubdtype(target.dtype, jnp.floating):
+        target = target.astype(jnp.result_type(float))
+    if target.ndim >= 2 and target.shape[-2:] == (4, 4):
+        position_only = False
+    elif target.ndim >= 1 and target.shape[-1] == 3:
+        position_only = True
+    else:
+        raise ValueError(f"target: expected shape (..., 4, 4) for poses or (..., 3) for positions, got {target.shape}")
+    batch = target.shape[:-1] if position_only else target.shape[:-2]
+    if q0 is not None:
+        q0_shape = jnp.shape(q0)
+        if len(q0_shape) == 0 or q0_shape[-1] != chain.dof:
+            raise ValueError(f"q0: expected shape (..., {chain.dof}) for a {chain.dof}-joint chain, got {q0_shape}")
+        try:
+            fits = np.broadcast_shapes(q0_shape[:-1], batch) == batch
+        except ValueError:
+            fits = False
+        if not fits:
+            raise ValueError(f"q0: batch shape {q0_shape[:-1]} does not broadcast to the targets' {batch}")
+    return target, position_only, batch
+
+
+def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str = "lm", max_iters: int | None = None,
+          pos_tol: float = 1e-5, rot_tol: float = 1e-4, respect_limits: bool = True, optimizer=None) -> IKResult:
+    """Inverse kinematics for a batch of targets, from random seeds (and an optional warm start).
+
+    Every target is solved from ``num_seeds`` configurations drawn uniformly within the
+    limits (plus ``q0`` when given); all seeds of all targets iterate together in one
+    fixed-size ``lax.while_loop`` that exits when every target is done. Pure and traceable:
+    works under ``jit``/``vmap``/``grad``; ``num_seeds``, ``method``, ``max_iters``,
+    ``respect_limits`` and ``optimizer`` are static. Nothing raises inside ``jit``: a target
+    that cannot be reached (or holds NaN) gives ``success=False`` and finite values.
+
+    The residual is ``[p_t - p; 0.2 m/rad * log(R_t R^T)]`` (world frame). ``method="lm"``
+    takes Levenberg-Marquardt steps ``dq = J^T (J J^T + lam I)^-1 r`` (or the ``dof x dof``
+    form, whichever is smaller) with error-proportional damping ``lam = mu |r|^2`` adapted by
+    accepting only steps that lower ``|r|^2``. ``method="optax"`` follows the exact gradient of
+    ``|r|^2 / 2`` with an optax transformation; it needs far more iterations than LM for the
+    same accuracy and is meant for combining with costs of your own. Iterates are projected:
+    unlimited revolute joints wrap to ``[-pi, pi)`` and, with ``respect_limits``, every joint is
+    clipped to ``[lower, upper]``.
+
+    The returned ``q`` is differentiable with respect to ``target`` and the chain's parameters
+    through the implicit function theorem (``dq = J^+ dx``, see :func:`implicit_q`), not through
+    the iterations; the derivative is that of a successful, non-singular solution off the limits.
+
+    Args:
+        chain: a :class:`~diffkin.DHChain` or :class:`~diffkin.PoEChain`.
+        target: ``(..., 4, 4)`` end-effector poses ``T_base_ee`` or ``(..., 3)`` positions in the
+            base frame (metres; orientation free). The solver runs in this dtype (float32 default).
+        key: PRNG key for the seeds; default ``jax.random.key(0)``. Target ``b`` of the flattened
+            batch uses ``fold_in(key, b)``.
+        q0: optional ``(..., dof)`` warm start broadcastable to the targets' batch; it is an extra
+            seed and, among successful seeds, the solution nearest to ``q0`` is returned.
+        num_seeds: random seeds per target (static, >= 1).
+        method: ``"lm"`` (default) or ``"optax"``.
+        max_iters: iteration cap (static); default 60 for LM, 1000 for optax. Each iteration is
+            one forward pass.
+        pos_tol: success tolerance on the position error, metres.
+        rot_tol: success tolerance on the rotation angle error, radians.
+        respect_limits: keep every iterate (and the result) within ``[chain.lower, chain.upper]``.
+        optimizer: an ``optax.GradientTransformation`` for ``method="optax"``; default
+            ``optax.adam(1e-2)``.
+
+    Returns:
+        :class:`IKResult`, each field with the batch shape of ``target``. Without a success the
+        seed of least residual is returned. Non-finite targets give ``success=False``, ``q`` of
+        that seed and errors ``finfo(dtype).max``.
+
+    Raises:
+        ValueError: a bad target shape, ``q0`` of the wrong length or batch, an unknown method,
+            ``num_seeds < 1``, ``max_iters < 0``, negative tolerances, ``optimizer`` without
+            ``method="optax"``.
+        TypeError: a chain that is not a chain model, an optimizer that is not an optax
+            ``GradientTransformation``.
+    """
+    max_iters = _DEFAULT_ITERS[method] if max_iters is None and method in _METHODS else max_iters
+    target, position_only, batch = _check_args(
+        chain, target, q0, num_seeds, method, max_iters, pos_tol, rot_tol, optimizer)
+    return _solve(chain, target, jax.random.key(0) if key is None else key, q0, num_seeds=num_seeds, method=method,
+                  max_iters=int(max_iters), pos_tol=float(pos_tol), rot_tol=float(rot_tol),
+                  respect_limits=bool(respect_limits), optimizer=optimizer, position_only=position_only, batch=batch)
+
+
+def _solve(chain, target, key, q0, *, num_seeds, method, max_iters, pos_tol, rot_tol, respect_limits, optimizer,
+           position_only, batch) -> IKResult:
+    dtype = target.dtype
+    dof = chain.dof
+    n = int(np.prod(batch, dtype=np.int64))
+    flat = target.reshape((n,) + target.shape[len(batch):])
+    valid = jnp.all(jnp.isfinite(flat.reshape(n, -1)), axis=-1)
+    safe = jnp.where(valid.reshape((n,) + (1,) * (flat.ndim - 1)), flat, jnp.eye(4, dtype=dtype)[:3, 3]
+                     if position_only else jnp.eye(4, dtype=dtype))
+    model = _cast(_detach(chain), dtype)
+    lower, upper = _inward(_detach(chain.lower), dtype, -1), _inward(_detach(chain.upper), dtype, 1)
+    wrap = jnp.asarray([t == "R" for t in chain.joint_types]) & ~jnp.isfinite(lower) & ~jnp.isfinite(upper)
+    q_seeds = _seed_configs(key, lower, upper, num_seeds, n, dtype)
+    if q0 is not None:
+        q0_flat = jnp.broadcast_to(jnp.asarray(q0, dtype), batch + (dof,)).reshape(n, dof)
+        q0_flat = jnp.where(jnp.isfinite(q0_flat), _detach(q0_flat), 0.0)
+        q_seeds = jnp.concatenate([q0_flat[None], q_seeds], axis=0)
+    num_all = q_seeds.shape[0]
+    fixed = _detach(safe)
+
+    def problem_for(copies: int) -> Problem:
+        def tile(x):
+            return jnp.broadcast_to(x, (copies,) + x.shape).reshape((-1,) + x.shape[1:])
+
+        if position_only:
+            p, R = tuple(tile(fixed[:, i]) for i in range(3)), None
+        else:
+            p = tuple(tile(fixed[:, i, 3]) for i in range(3))
+            R = tuple(tuple(tile(fixed[:, i, j]) for j in range(3)) for i in range(3))
+        return Problem(model, p, R, lower, upper, wrap, respect_limits)
+
+    problem = problem_for(num_all)
+    q = problem.project(q_seeds.reshape(-1, dof))
+    if method == "lm":
+        aux, step_fn = _lm.init(q), _lm.step
+    else:
+        opt = _optax.default_optimizer() if optimizer is None else optimizer
+        aux, step_fn = _optax.init(opt, q), functools.partial(_optax.step, opt)
+    q0_rank = None if q0 is None else q0_flat
+    run = functools.partial(_run, step_fn=step_fn, num_targets=n, pos_tol=pos_tol, rot_tol=rot_tol)
+    first = min(max_iters, _FIRST_ROUND) if method == "lm" and num_all > _KEEP else max_iters
+    seeds = run(problem, _start(problem, q, aux, pos_tol, rot_tol), has_q0=q0 is not None, max_iters=first)
+    if first < max_iters:
+        seeds = _ranked(seeds, n, _KEEP, q0_rank)
+        seeds = run(problem_for(_KEEP), seeds, has_q0=False, max_iters=max_iters - first)
+    best = _ranked(seeds, n, 1, q0_rank)
+    q_best, success, pos_err, rot_err, iters = best.q, best.success, best.ev.pos_err, best.ev.rot_err, best.iters
+    big = jnp.finfo(dtype).max
+    q_best = implicit_q(chain, safe, q_best)
+    return IKResult(
+        q=q_best.reshape(batch + (dof,)),
+        success=(success & valid).reshape(batch),
+        pos_err=jnp.where(valid, pos_err, big).reshape(batch),
+        rot_err=jnp.where(valid, rot_err, big).reshape(batch),
+        iters=iters.reshape(batch),
+    )
