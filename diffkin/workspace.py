@@ -1,0 +1,459 @@
+"""Workspace analysis: reachability, manipulability and dexterity maps over millions of samples.
+
+Configurations are drawn uniformly within the joint limits, chunk by chunk; each chunk is run
+through forward kinematics, its end-effector positions are binned on a voxel grid and reduced
+into per-voxel sample counts, best manipulability and the set of orientation bins reached.
+Memory is ``O(chunk + grid)`` whatever the number of samples. Chunks are spread over devices
+with a :class:`jax.sharding.Mesh` and ``shard_map``; every device keeps a partial map and the
+partial maps are reduced at the end with integer sums, float maxima and logical ors, which
+do not depend on the order of reduction, so the map is identical for any number of devices.
+
+Orientation bins are a fixed partition of SO(3) into ``orientation_bins = 6 * n_roll`` cells
+of equal measure: the tool z axis picks a face of the cube (its largest component and that
+component's sign), and the rotation about the tool z axis picks one of ``n_roll`` sectors of
+the roll angle ``atan2(-R[u, 1], R[u, 0])``, where ``u = (a + 1) % 3`` for the face axis
+``a``: the angle of the tool x axis from the projection of the base axis ``u`` on the plane
+orthogonal to the tool z axis (never degenerate, since that axis is at most 54.8 degrees from
+``a``). For a planar arm (rotation about the base z axis by ``phi``) the bin is the sector of
+``phi``, so different planar angles land in different bins.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import itertools
+import math
+import sys
+from collections.abc import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
+
+from diffkin import _rigid as rg
+from diffkin import kinematics
+from diffkin.models.dh import DHChain
+from diffkin.models.poe import PoEChain, to_poe
+
+_AXIS = "devices"
+_INT32_MAX = 2**31 - 1
+_QUANTITIES = ("count", "manipulability", "dexterity")
+_AXES = ("x", "y", "z")
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ReachabilityMap:
+    """Per-voxel statistics of the end-effector positions of sampled configurations.
+
+    Voxel ``(i, j, k)`` is the box ``origin + voxel_size * ([i, i+1) x [j, j+1) x [k, k+1))`` in
+    the chain's base frame; a sample whose end-effector position ``p`` (metres, base frame) has
+    ``floor((p - origin) / voxel_size) == (i, j, k)`` counts in that voxel. Samples outside the
+    grid count in no voxel: ``counts.sum() + n_outside == n_samples``.
+
+    Attributes:
+        counts: ``(nx, ny, nz)`` int64, number of samples per voxel.
+        manipulability: ``(nx, ny, nz)`` float, best Yoshikawa manipulability of the samples in
+            the voxel (as :func:`diffkin.manipulability`), 0 where there are none.
+        dexterity: ``(nx, ny, nz)`` int32, number of distinct orientation bins (of
+            ``orientation_bins``, see the module docstring) reached in the voxel.
+        origin: ``(3,)`` float64, corner of voxel ``(0, 0, 0)``, metres, base frame.
+        voxel_size: edge of the cubic voxels, metres.
+        n_samples: number of sampled configurations.
+        n_outside: number of samples whose end effector fell outside the grid.
+        orientation_bins: number of cells of the SO(3) partition.
+        chain_name: name of the chain (informational).
+    """
+
+    counts: np.ndarray
+    manipulability: np.ndarray
+    dexterity: np.ndarray
+    origin: np.ndarray
+    voxel_size: float
+    n_samples: int
+    n_outside: int
+    orientation_bins: int
+    chain_name: str = ""
+
+    def save(self, path) -> None:
+        """Write the map to ``path`` as a ``.npz`` archive (numpy appends ``.npz`` if missing)."""
+        np.savez_compressed(path, **{f.name: np.asarray(getattr(self, f.name)) for f in dataclasses.fields(self)})
+
+    @classmethod
+    def load(cls, path) -> ReachabilityMap:
+        """Read a map written by :meth:`save`."""
+        with np.load(path) as data:
+            return cls(
+                counts=data["counts"], manipulability=data["manipulability"], dexterity=data["dexterity"],
+                origin=data["origin"], voxel_size=float(data["voxel_size"]), n_samples=int(data["n_samples"]),
+                n_outside=int(data["n_outside"]), orientation_bins=int(data["orientation_bins"]),
+                chain_name=str(data["chain_name"]),
+            )
+
+
+def _positive_int(value, name: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name}: expected a positive int, got {type(value).__name__}")
+    if value < 1:
+        raise ValueError(f"{name}: expected a positive int, got {value}")
+    return int(value)
+
+
+def _check_chain(chain) -> None:
+    if not isinstance(chain, (DHChain, PoEChain)):
+        raise TypeError(f"chain: expected a DHChain or PoEChain, got {type(chain).__name__}")
+
+
+def _joint_ranges(chain) -> tuple[np.ndarray, np.ndarray]:
+    """``(lo, hi)`` sampling ranges: the limits, one turn ``[-pi, pi)`` for unlimited revolute joints."""
+    _check_chain(chain)
+    lo, hi = np.asarray(chain.lower, np.float64), np.asarray(chain.upper, np.float64)
+    for i, kind in enumerate(chain.joint_types):
+        if kind == "P" and not (np.isfinite(lo[i]) and np.isfinite(hi[i])):
+            raise ValueError(f"chain.lower/upper[{i}]: expected finite limits for prismatic joint {i}, "
+                             f"got [{lo[i]}, {hi[i]}]")
+    return np.where(np.isfinite(lo), lo, -np.pi), np.where(np.isfinite(hi), hi, np.pi)
+
+
+def _uniform(key, lo: np.ndarray, hi: np.ndarray, n: int, dtype) -> jax.Array:
+    """``(dof, n)`` uniform joint values, one row per joint (the layout the kernel consumes)."""
+    u = jax.random.uniform(key, (lo.size, n), dtype)
+    return jnp.asarray(lo[:, None], dtype) + u * jnp.asarray((hi - lo)[:, None], dtype)
+
+
+def sample_configs(chain, n: int, key, *, dtype=None) -> jax.Array:
+    """Configurations uniform within the joint limits.
+
+    Unlimited revolute joints are sampled over one turn ``[-pi, pi)``; a prismatic joint needs
+    finite limits. Chunk ``c`` of :func:`reachability` is ``sample_configs(chain, chunk,
+    jax.random.fold_in(key, c))``.
+
+    Args:
+        chain: a :class:`DHChain` or :class:`PoEChain`.
+        n: number of configurations.
+        key: a JAX PRNG key.
+        dtype: float dtype; default the default float (float32, or float64 with x64).
+
+    Returns:
+        ``(n, dof)`` joint values, radians (revolute) or metres (prismatic).
+    """
+    lo, hi = _joint_ranges(chain)
+    n = _positive_int(n, "n")
+    return _uniform(key, lo, hi, n, jnp.dtype(dtype or jnp.result_type(float))).T
+
+
+def _reach(chain) -> float:
+    """Upper bound on ``|p_ee|`` over all configurations, metres.
+
+    A revolute joint keeps the distances from its axis to everything after it, so
+    ``|p| <= |c_1| + sum |c_{i+1} - c_i| + |p_home - c_n|`` for any points ``c_i`` on the revolute
+    axes at ``q = 0`` (each taken as the projection of the previous one, which keeps the bound
+    tight); each prismatic joint adds its largest travel.
+    """
+    poe = to_poe(chain) if isinstance(chain, DHChain) else chain
+    screws, home = np.asarray(poe.screws, np.float64), np.asarray(poe.home, np.float64)
+    lo, hi = _joint_ranges(chain)
+    points, reach = [np.zeros(3)], 0.0
+    for i, kind in enumerate(chain.joint_types):
+        v, w = screws[i, :3], screws[i, 3:]
+        if kind == "R":
+            c = np.cross(w, v)  # a point on the axis
+            points.append(c + np.dot(points[-1] - c, w) * w)
+        else:
+            reach += max(abs(lo[i]), abs(hi[i]))
+    points.append(home[:3, 3])
+    return reach + float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
+
+
+def _grid(chain, voxel_size, bounds) -> tuple[np.ndarray, float, tuple[int, int, int]]:
+    """``(origin (3,), voxel_size, shape)`` of the voxel grid, validated."""
+    if isinstance(voxel_size, bool) or not isinstance(voxel_size, (int, float, np.integer, np.floating)):
+        raise TypeError(f"voxel_size: expected a positive number of metres, got {type(voxel_size).__name__}")
+    voxel_size = float(voxel_size)
+    if not (math.isfinite(voxel_size) and voxel_size > 0):
+        raise ValueError(f"voxel_size: expected a positive number of metres, got {voxel_size}")
+    if bounds is None:
+        m = math.ceil(_reach(chain) / voxel_size)
+        origin, shape = np.full(3, -(m + 0.5) * voxel_size), (2 * m + 1,) * 3
+    else:
+        try:
+            b = np.asarray(bounds, dtype=np.float64)
+        except (TypeError, ValueError):
+            b = np.full(0, np.nan)
+        if b.shape != (2, 3) or not np.all(np.isfinite(b)) or np.any(b[1] <= b[0]):
+            raise ValueError(f"bounds: expected [[xmin, ymin, zmin], [xmax, ymax, zmax]] (metres) with min < max, "
+                             f"got {bounds!r}")
+        origin, shape = b[0], tuple(int(max(1, math.ceil(s))) for s in (b[1] - b[0]) / voxel_size)
+    return origin, voxel_size, shape
+
+
+def _orientation_bin(R: rg.Mat3, n_roll: int) -> jax.Array:
+    """Orientation bin in ``[0, 6 n_roll)`` of rotations given by entries (see the module docstring)."""
+    z = [jnp.abs(R[i][2]) for i in range(3)]
+    a = jnp.where((z[0] >= z[1]) & (z[0] >= z[2]), 0, jnp.where(z[1] >= z[2], 1, 2))
+    z_a = jnp.where(a == 0, R[0][2], jnp.where(a == 1, R[1][2], R[2][2]))
+    x_u = jnp.where(a == 0, R[1][0], jnp.where(a == 1, R[2][0], R[0][0]))
+    y_u = jnp.where(a == 0, R[1][1], jnp.where(a == 1, R[2][1], R[0][1]))
+    roll = jnp.arctan2(-y_u, x_u)  # [-pi, pi]
+    sector = jnp.clip(jnp.floor((roll + jnp.pi) * (n_roll / (2 * jnp.pi))), 0, n_roll - 1).astype(jnp.int32)
+    return (2 * a + (z_a < 0)) * n_roll + sector
+
+
+def _manipulability(frames: rg.Frames, dof: int) -> jax.Array:
+    """Yoshikawa's measure from one forward pass, by the Cauchy-Binet formula.
+
+    ``det(J J^T)`` (or ``det(J^T J)`` for fewer than 6 joints) is the sum of the squares of the
+    maximal minors of the ``(6, dof)`` world Jacobian ``J``. The minors are built row by row by
+    Laplace expansion, with products and sums only: no division or pivoting, exactly 0 at a
+    singularity, and a single fused XLA kernel (a division with several users would make XLA
+    materialise it and recompute the forward kinematics in a kernel of its own).
+    """
+    columns = kinematics._world_from_space(frames.screws, frames.ee.p)
+    J = [[columns[i][r // 3][r % 3] for i in range(dof)] for r in range(6)]  # J[row][column]
+    rows = J if dof >= 6 else [[J[r][i] for r in range(6)] for i in range(dof)]  # short side first
+    minors = {(): 1.0}  # column subset -> minor over the first len(subset) rows
+    for k, row in enumerate(rows):
+        minors = {
+            subset: rg.add(*(rg.mul((-1.0) ** (k + j), rg.mul(row[c], minors[subset[:j] + subset[j + 1:]]))
+                             for j, c in enumerate(subset)))
+            for subset in itertools.combinations(range(len(row)), k + 1)
+        }
+    det = rg.add(*(rg.mul(m, m) for m in minors.values()))
+    return jnp.sqrt(det)
+
+
+def _flat_index(p: rg.Vec3, origin, voxel_size, shape) -> tuple[jax.Array, jax.Array]:
+    """Flat voxel index of positions given by entries, and whether they are inside the grid."""
+    flat, inside = 0, True
+    for i, n in enumerate(shape):
+        cell = jnp.floor((p[i] - origin[i]) / voxel_size)  # the division has one use: XLA fuses it once
+        inside = inside & (cell >= 0) & (cell < n)
+        flat = flat * n + jnp.where(inside, cell, 0).astype(jnp.int32)
+    return flat, inside
+
+
+class _ChainKey:
+    """A chain hashed by its structure and numbers, so that compiled steps are reused across calls."""
+
+    def __init__(self, chain):
+        leaves, treedef = jax.tree_util.tree_flatten(chain)
+        self.chain = chain
+        self._key = (treedef, tuple((np.asarray(x).dtype.str, np.shape(x), np.asarray(x).tobytes()) for x in leaves))
+
+    def __hash__(self):
+        return hash(self._key)
+
+    def __eq__(self, other):
+        return isinstance(other, _ChainKey) and self._key == other._key
+
+
+@functools.lru_cache(maxsize=16)
+def _compiled(chain_key: _ChainKey, shape: tuple[int, int, int], n_bins: int, chunk: int, dtype, mesh: Mesh):
+    """Jitted ``(zeros, step, reduce)`` of one map: compiled once per chain, grid shape, chunk and mesh.
+
+    The state is, per device, ``counts (nvox,)`` int32, ``best (nvox,)`` manipulability and
+    ``seen (nvox * n_bins,)`` uint8 flags of the orientation bins reached, stacked on a leading
+    device axis sharded over the mesh. Step ``s`` runs chunk ``s * n_devices + d`` on device ``d``.
+    """
+    chain = chain_key.chain
+    lo, hi = _joint_ranges(chain)
+    n_dev, nvox = mesh.devices.size, math.prod(shape)
+    sharded, replicated = NamedSharding(mesh, P(_AXIS)), NamedSharding(mesh, P())
+
+    def zeros():
+        return (jnp.zeros((n_dev, nvox), jnp.int32), jnp.zeros((n_dev, nvox), dtype),
+                jnp.zeros((n_dev, nvox * n_bins), jnp.uint8))
+
+    def local_step(counts, best, seen, key, step, n_full, n_last, origin, voxel_size, n_slots):
+        c = step * n_dev + jax.lax.axis_index(_AXIS)
+        n_valid = jnp.where(c < n_full, chunk, jnp.where(c == n_full, n_last, 0))
+        q = _uniform(jax.random.fold_in(key, c), lo, hi, chunk, dtype)
+        frames = chain._frames(list(q))
+        p = [jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in frames.ee.p]
+        R = tuple(tuple(jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in row) for row in frames.ee.R)
+        flat, inside = _flat_index(p, origin, voxel_size, shape)
+        slot = jnp.where(inside & (jnp.arange(chunk) < n_valid), flat * n_bins + _orientation_bin(R, n_bins // 6),
+                         n_slots)  # out of range: dropped by the scatters
+        # An identity (slot <= n_slots) by a runtime value, which XLA neither folds nor duplicates
+        # into its consumers: the forward kinematics is evaluated once for the three scatters
+        # instead of once per coordinate and per index array.
+        slot = jax.lax.rem(slot, n_slots + 1)
+        m = _manipulability(frames, chain.dof).astype(dtype)
+        counts = counts.reshape(-1).at[slot // n_bins].add(1, mode="drop").reshape(counts.shape)
+        best = best.reshape(-1).at[slot // n_bins].max(m, mode="drop").reshape(best.shape)
+        seen = seen.reshape(-1).at[slot].set(1, mode="drop").reshape(seen.shape)
+        return counts, best, seen, jnp.sum(n_valid)
+
+    step = jax.jit(
+        jax.shard_map(local_step, mesh=mesh, in_specs=(P(_AXIS),) * 3 + (P(),) * 7,
+                      out_specs=(P(_AXIS),) * 3 + (P(),), check_vma=False),
+        donate_argnums=(0, 1, 2),
+    )
+
+    def reduce(counts, best, seen):
+        dexterity = jnp.max(seen, axis=0).reshape(nvox, n_bins).sum(axis=1, dtype=jnp.int32)
+        return counts.sum(axis=0), best.max(axis=0), dexterity
+
+    return (jax.jit(zeros, out_shardings=(sharded,) * 3), step,
+            jax.jit(reduce, out_shardings=(replicated,) * 3))
+
+
+def _host(x: jax.Array) -> np.ndarray:
+    """A replicated array as numpy (one local copy; works on every process of a multi-host run)."""
+    return np.asarray(x.addressable_data(0))
+
+
+def _progress(total: int, show: bool | None):
+    """A tqdm bar over chunks, or ``None``: ``show=None`` shows it on a terminal on process 0."""
+    if show is False or jax.process_index() != 0:
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    if show is None and not sys.stderr.isatty():
+        return None
+    return tqdm(total=total, unit="sample", unit_scale=True, desc="reachability")
+
+
+def reachability(
+    chain,
+    n_samples: int,
+    *,
+    key,
+    voxel_size: float,
+    bounds=None,
+    chunk: int = 1 << 16,
+    devices: Sequence[jax.Device] | None = None,
+    orientation_bins: int = 48,
+    dtype=None,
+    progress: bool | None = None,
+) -> ReachabilityMap:
+    """Reachability, best manipulability and dexterity of ``chain`` on a voxel grid.
+
+    ``n_samples`` configurations uniform within the joint limits (see :func:`sample_configs`)
+    are drawn in ``ceil(n_samples / chunk)`` chunks, chunk ``c`` from
+    ``jax.random.fold_in(key, c)`` (the last one masked to the remaining samples), and reduced
+    chunk by chunk, so memory is ``O(chunk + grid)`` per device. Chunks are spread over
+    ``devices``; the map is identical for any number of devices. Each step is one jitted call,
+    compiled once per chain, grid shape, chunk, orientation bins, dtype and device set.
+
+    Args:
+        chain: a :class:`DHChain` or :class:`PoEChain` with concrete (not traced) numbers.
+        n_samples: number of configurations.
+        key: a JAX PRNG key.
+        voxel_size: voxel edge, metres.
+        bounds: ``(2, 3)`` ``[[xmin, ymin, zmin], [xmax, ymax, zmax]]`` box in the base frame,
+            metres; the grid starts at the min corner and has ``ceil((max - min) / voxel_size)``
+            voxels per axis. Default: a cube centred on the base origin (at a voxel centre) that
+            holds every reachable point, from an upper bound on the reach (the sum of the
+            distances between consecutive joint axes, plus prismatic travel).
+        chunk: samples per device per step.
+        devices: devices to use (all processes' devices in a multi-host run); default
+            ``jax.devices()``.
+        orientation_bins: cells of the SO(3) partition, a multiple of 6 (6 cube faces of the
+            tool z axis times ``orientation_bins / 6`` roll sectors).
+        dtype: float dtype of the computation; default the default float (float32, or float64
+            with x64).
+        progress: show a tqdm progress bar; ``None`` (default): only on a terminal.
+
+    Returns:
+        The :class:`ReachabilityMap`.
+
+    Raises:
+        ValueError, TypeError: bad arguments (named in the message).
+    """
+    _check_chain(chain)
+    n_samples = _positive_int(n_samples, "n_samples")
+    chunk = _positive_int(chunk, "chunk")
+    orientation_bins = _positive_int(orientation_bins, "orientation_bins")
+    if orientation_bins % 6:
+        raise ValueError(f"orientation_bins: expected a multiple of 6 (6 cube faces x roll sectors), "
+                         f"got {orientation_bins}")
+    origin, voxel_size, shape = _grid(chain, voxel_size, bounds)
+    n_slots = math.prod(shape) * orientation_bins
+    if n_slots >= _INT32_MAX:
+        raise ValueError(f"voxel_size: grid of {shape} voxels x {orientation_bins} orientation bins exceeds 2**31 "
+                         f"cells; expected a coarser voxel_size, smaller bounds or fewer orientation_bins")
+    devices = list(jax.devices() if devices is None else devices)
+    if not devices or not all(isinstance(d, jax.Device) for d in devices):
+        raise TypeError(f"devices: expected a non-empty sequence of jax.Device, got {devices!r}")
+    dtype = jnp.dtype(dtype or jnp.result_type(float))
+    mesh = Mesh(np.array(devices), (_AXIS,))
+    zeros, step, reduce = _compiled(_ChainKey(chain), shape, orientation_bins, chunk, dtype, mesh)
+
+    n_full, n_last = divmod(n_samples, chunk)
+    n_steps = -(-(n_full + (n_last > 0)) // len(devices))
+    steps_per_flush = max(1, _INT32_MAX // (chunk * len(devices)))  # int32 device counts cannot overflow
+    args = (jnp.asarray(n_full, jnp.int32), jnp.asarray(n_last, jnp.int32),
+            jnp.asarray(origin, dtype), jnp.asarray(voxel_size, dtype), jnp.asarray(n_slots, jnp.int32))
+    state, counts, bar, done = zeros(), np.zeros(shape, np.int64), _progress(n_samples, progress), None
+    for s in range(n_steps):
+        *state, n_step = step(*state, key, s, *args)
+        if bar is not None:
+            if done is not None:
+                bar.update(int(done))  # waits for the previous step only: one step stays in flight
+            done = n_step
+        if (s + 1) % steps_per_flush == 0 or s + 1 == n_steps:
+            counts_s, best, dexterity = reduce(*state)
+            counts += _host(counts_s).reshape(shape)
+            if s + 1 < n_steps:
+                state = [zeros()[0], *state[1:]]
+    if bar is not None:
+        bar.update(int(done))
+        bar.close()
+    return ReachabilityMap(
+        counts=counts, manipulability=_host(best).reshape(shape), dexterity=_host(dexterity).reshape(shape),
+        origin=origin, voxel_size=voxel_size, n_samples=n_samples, n_outside=n_samples - int(counts.sum()),
+        orientation_bins=orientation_bins, chain_name=chain.name,
+    )
+
+
+def plot_slice(map: ReachabilityMap, axis: str = "y", value: float = 0.0, quantity: str = "count", *, path=None,
+               ax=None):
+    """Heatmap of one quantity on the voxel layer that contains the plane ``axis = value``.
+
+    Needs matplotlib (the ``plot`` extra), imported here only.
+
+    Args:
+        map: the :class:`ReachabilityMap`.
+        axis: ``"x"``, ``"y"`` or ``"z"``, the normal of the slicing plane (base frame).
+        value: position of the plane along ``axis``, metres; it must cross the grid.
+        quantity: ``"count"``, ``"manipulability"`` or ``"dexterity"``.
+        path: if given, the figure is written there as a PNG.
+        ax: a matplotlib axes to draw into; default a new figure.
+
+    Returns:
+        The matplotlib axes.
+    """
+    if axis not in _AXES:
+        raise ValueError(f"axis: expected one of {_AXES}, got {axis!r}")
+    if quantity not in _QUANTITIES:
+        raise ValueError(f"quantity: expected one of {_QUANTITIES}, got {quantity!r}")
+    a = _AXES.index(axis)
+    layer = math.floor((float(value) - map.origin[a]) / map.voxel_size)
+    if not 0 <= layer < map.counts.shape[a]:
+        lo, hi = map.origin[a], map.origin[a] + map.voxel_size * map.counts.shape[a]
+        raise ValueError(f"value: expected {axis} in [{lo:.4g}, {hi:.4g}) (the grid), got {value}")
+    if ax is None:
+        from matplotlib.figure import Figure  # no pyplot: no global figure state, no GUI backend
+
+        ax = Figure(figsize=(6, 5)).add_subplot()
+    data = {"count": map.counts, "manipulability": map.manipulability, "dexterity": map.dexterity}[quantity]
+    plane = np.take(data, layer, axis=a).astype(np.float64)
+    plane[np.take(map.counts, layer, axis=a) == 0] = np.nan  # unreached voxels blank
+    u, v = (i for i in range(3) if i != a)
+    extent = [map.origin[u], map.origin[u] + map.voxel_size * data.shape[u],
+              map.origin[v], map.origin[v] + map.voxel_size * data.shape[v]]
+    image = ax.imshow(plane.T, origin="lower", extent=extent, interpolation="nearest")
+    ax.figure.colorbar(image, ax=ax, label=quantity)
+    ax.set(xlabel=f"{_AXES[u]} (m)", ylabel=f"{_AXES[v]} (m)", aspect="equal",
+           title=f"{map.chain_name} {quantity}, {axis} = {value:g} m")
+    if path is not None:
+        ax.figure.savefig(path, dpi=120)
+    return ax
+
+
+__all__ = ["ReachabilityMap", "plot_slice", "reachability", "sample_configs"]

@@ -1,0 +1,240 @@
+"""Workspace maps against the textbook 2R annulus, a plain-numpy recomputation on the same samples,
+direct forward kinematics, and across device counts (in a subprocess with 4 host devices)."""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import diffkin as dk
+from diffkin import workspace as ws
+
+KEY = jax.random.key(7)
+
+
+def _planar_reference(lengths, q, origin, voxel_size, shape, n_roll):
+    """Counts, best manipulability and dexterity of a planar 2R arm by closed forms in numpy."""
+    (a1, a2), (t1, t2) = lengths, (q[:, 0], q[:, 1])
+    x, y = a1 * np.cos(t1) + a2 * np.cos(t1 + t2), a1 * np.sin(t1) + a2 * np.sin(t1 + t2)
+    p = np.stack([x, y, np.zeros_like(x)], axis=1)
+    # J = [[dx/dt1, dx/dt2], [dy/dt1, dy/dt2], 0, 0, 0, [1, 1]]: det(J^T J) of the 6x2 world Jacobian.
+    j1, j2 = np.stack([-y, x], 1), np.stack([-a2 * np.sin(t1 + t2), a2 * np.cos(t1 + t2)], 1)
+    gram = np.stack([[(j1 * j1).sum(1) + 1, (j1 * j2).sum(1) + 1], [(j1 * j2).sum(1) + 1, (j2 * j2).sum(1) + 1]])
+    manip = np.sqrt(np.maximum(gram[0, 0] * gram[1, 1] - gram[0, 1] ** 2, 0))
+    phi = np.arctan2(np.sin(t1 + t2), np.cos(t1 + t2))  # tool z = base z: cube face 4 (+z), roll = phi
+    bins = 4 * n_roll + np.minimum(np.floor((phi + np.pi) / (2 * np.pi / n_roll)), n_roll - 1).astype(int)
+    cell = np.floor((p - origin) / voxel_size).astype(int)
+    inside = np.all((cell >= 0) & (cell < shape), axis=1)
+    flat = np.ravel_multi_index(cell[inside].T, shape)
+    counts, best = np.zeros(np.prod(shape), int), np.zeros(np.prod(shape))
+    np.add.at(counts, flat, 1)
+    np.maximum.at(best, flat, manip[inside])
+    dexterity = np.bincount(np.unique(flat * 6 * n_roll + bins[inside]) // (6 * n_roll), minlength=np.prod(shape))
+    return counts.reshape(shape), best.reshape(shape), dexterity.reshape(shape), int((~inside).sum())
+
+
+def test_sample_configs_within_limits_and_uniform():
+    chain = dk.robots.panda()
+    q = np.asarray(ws.sample_configs(chain, 40_000, KEY))
+    lo, hi = np.asarray(chain.lower), np.asarray(chain.upper)
+    assert q.shape == (40_000, 7) and np.all(q >= lo) and np.all(q <= hi)
+    u = (q - lo) / (hi - lo)  # uniform on [0, 1]: each decile holds 10 % (binomial sd 0.15 %)
+    deciles = np.stack([np.histogram(u[:, i], bins=10, range=(0, 1))[0] for i in range(7)]) / 40_000
+    np.testing.assert_allclose(deciles, 0.1, atol=0.008)
+    planar = np.asarray(ws.sample_configs(dk.robots.planar([1.0, 1.0]), 1000, KEY))
+    assert np.all(planar >= -np.pi) and np.all(planar < np.pi) and planar.std() > 1.5  # one turn
+
+
+def test_manipulability_matches_core():
+    for chain in (dk.robots.iiwa14(), dk.robots.ur5(), dk.robots.planar([1.0, 0.5, 0.3])):  # 7, 6 and 3 joints
+        q = ws.sample_configs(chain, 500, KEY)
+        ours = jax.jit(lambda q, chain=chain: ws._manipulability(chain._frames(list(q.T)), chain.dof))(q)
+        np.testing.assert_allclose(ours, dk.manipulability(chain, q), rtol=1e-9, atol=1e-12)
+
+
+def test_orientation_bins_partition_so3_evenly():
+    n = 96_000
+    quat = np.random.default_rng(0).normal(size=(n, 4))  # Haar-uniform rotations
+    w, x, y, z = (quat / np.linalg.norm(quat, axis=1, keepdims=True)).T
+    R = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
+    bins = np.asarray(ws._orientation_bin([[jnp.asarray(e) for e in row] for row in R], 8))
+    counts = np.bincount(bins, minlength=48)
+    assert counts.size == 48  # every bin in [0, 48)
+    assert np.all(np.abs(counts - n / 48) < 5.5 * np.sqrt(n / 48))  # equal measure (binomial, 5.5 sd)
+    phi = jnp.asarray(-np.pi + (np.arange(8) + 0.5) * np.pi / 4)  # rotations about z by each sector's centre
+    c, s, zero, one = jnp.cos(phi), jnp.sin(phi), jnp.zeros(8), jnp.ones(8)
+    planar = np.asarray(ws._orientation_bin([[c, -s, zero], [s, c, zero], [zero, zero, one]], 8))
+    np.testing.assert_array_equal(planar, 32 + np.arange(8))  # distinct planar angles, distinct bins
+
+
+def test_map_matches_numpy_on_the_same_samples():
+    lengths, chunk, n = (1.0, 0.5), 3000, 20_000  # 7 chunks, the last one partial
+    chain = dk.robots.planar(list(lengths))
+    bounds = [[-1.0, -1.6, -0.05], [1.6, 1.6, 0.05]]  # cuts the annulus: some samples outside
+    m = ws.reachability(chain, n, key=KEY, voxel_size=0.1, bounds=bounds, chunk=chunk)
+    q = np.concatenate([np.asarray(ws.sample_configs(chain, chunk, jax.random.fold_in(KEY, c))) for c in range(7)])[:n]
+    counts, best, dexterity, outside = _planar_reference(lengths, q, m.origin, 0.1, m.counts.shape, 8)
+    assert m.counts.shape == (26, 32, 1) and m.n_samples == n
+    np.testing.assert_array_equal(m.counts, counts)
+    assert m.n_outside == outside > 0 and m.counts.sum() + m.n_outside == n
+    np.testing.assert_allclose(m.manipulability, best, rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(m.dexterity, dexterity)
+
+
+def _radii(m):
+    """Nearest and farthest distance from the base z axis of each voxel column of a map, (nx, ny)."""
+    edges = [m.origin[i] + m.voxel_size * np.arange(m.counts.shape[i] + 1) for i in range(2)]
+    lo, hi = np.meshgrid(edges[0][:-1], edges[1][:-1], indexing="ij"), np.meshgrid(edges[0][1:], edges[1][1:],
+                                                                                  indexing="ij")
+    near = [np.where(a > 0, a, np.where(b < 0, -b, 0.0)) for a, b in zip(lo, hi, strict=True)]
+    far = [np.maximum(np.abs(a), np.abs(b)) for a, b in zip(lo, hi, strict=True)]
+    return np.hypot(*near), np.hypot(*far)
+
+
+def test_planar_2r_fills_the_textbook_annulus():
+    a1, a2, h = 1.0, 0.4, 0.1
+    m = ws.reachability(dk.robots.planar([a1, a2]), 200_000, key=KEY, voxel_size=h,
+                        bounds=[[-1.5, -1.5, -h / 2], [1.5, 1.5, h / 2]], chunk=1 << 14)
+    occupied = m.counts[:, :, 0] > 0
+    near, far = _radii(m)
+    eps = 1e-9  # rounding of the FK only
+    meets = (far >= a1 - a2 - eps) & (near <= a1 + a2 + eps)  # voxel meets |a1 - a2| <= r <= a1 + a2
+    within = (near >= a1 - a2) & (far <= a1 + a2)  # voxel inside the annulus: >= 40 samples expected
+    assert np.all(meets[occupied]) and np.all(occupied[within])
+    assert within.sum() > 300 and m.n_outside == 0
+
+
+def test_folded_arm_reaches_every_planar_orientation_at_the_origin():
+    m = ws.reachability(dk.robots.planar([0.5, 0.5]), 100_000, key=KEY, voxel_size=0.1, chunk=1 << 14)
+    assert m.counts.shape == (21, 21, 21)  # default bounds: reach 1 m, the base origin at voxel (10, 10, 10)
+    near, _ = _radii(m)
+    rim = (near >= 0.9) & (m.counts[:, :, 10] > 0)
+    assert m.dexterity[10, 10, 10] == 8  # every planar bin (6 faces x 8 roll sectors; planar: face +z only)
+    assert rim.sum() > 20 and m.dexterity[:, :, 10][rim].max() <= 3  # elbow within 52 degrees of straight
+
+
+def test_samples_from_an_independent_stream_land_in_occupied_voxels():
+    chain = dk.robots.iiwa14()
+    m = ws.reachability(chain, 300_000, key=KEY, voxel_size=0.2, chunk=1 << 15)
+    assert m.counts.sum() == 300_000 and m.n_outside == 0  # the default box holds the whole reach
+    p = np.asarray(dk.fk(chain, ws.sample_configs(chain, 20_000, jax.random.key(123)))[:, :3, 3])
+    cell = np.floor((p - m.origin) / m.voxel_size).astype(int)
+    hit = m.counts[tuple(cell.T)] > 0
+    assert hit.mean() >= 0.999  # only voxels of tiny reachable volume can be missed by 300k samples
+    assert np.all(m.manipulability[m.counts > 0] > 0) and m.dexterity.max() > 24
+
+
+def test_compiled_once_per_chain_grid_and_chunk():
+    ws._compiled.cache_clear()
+    kwargs = dict(voxel_size=0.25, chunk=512)
+    ws.reachability(dk.robots.planar([1.0, 0.5]), 1000, key=KEY, **kwargs)
+    ws.reachability(dk.robots.planar([1.0, 0.5]), 5000, key=jax.random.key(1), **kwargs)  # equal chain, new n
+    assert (ws._compiled.cache_info().hits, ws._compiled.cache_info().misses) == (1, 1)
+    mesh = jax.sharding.Mesh(np.array(jax.devices()), ("devices",))
+    _, step, _ = ws._compiled(ws._ChainKey(dk.robots.planar([1.0, 0.5])), (13, 13, 13), 48, 512,
+                              jnp.dtype(jnp.float64), mesh)
+    assert step._cache_size() == 1  # 2 + 10 steps, one compilation
+
+
+def test_save_load_and_plot_slice(tmp_path):
+    m = ws.reachability(dk.robots.planar([1.0, 0.5]), 4000, key=KEY, voxel_size=0.25, chunk=1000)
+    m.save(tmp_path / "map.npz")
+    back = ws.ReachabilityMap.load(tmp_path / "map.npz")
+    for name in ("counts", "manipulability", "dexterity", "origin"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(m, name))
+    assert (back.voxel_size, back.n_samples, back.n_outside, back.orientation_bins, back.chain_name) == (
+        m.voxel_size, m.n_samples, m.n_outside, m.orientation_bins, "planar2R")
+    for quantity in ("count", "manipulability", "dexterity"):
+        path = tmp_path / f"{quantity}.png"
+        ws.plot_slice(m, axis="z", value=0.0, quantity=quantity, path=path)
+        assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 5000
+    with pytest.raises(ValueError, match="quantity"):
+        ws.plot_slice(m, quantity="volume")
+    with pytest.raises(ValueError, match="axis"):
+        ws.plot_slice(m, axis="w")
+    with pytest.raises(ValueError, match="value"):
+        ws.plot_slice(m, axis="z", value=5.0)
+
+
+@pytest.mark.parametrize("kwargs, error, match", [
+    (dict(n_samples=0), ValueError, "n_samples"),
+    (dict(n_samples=1.5), TypeError, "n_samples"),
+    (dict(voxel_size=0.0), ValueError, "voxel_size"),
+    (dict(voxel_size=float("nan")), ValueError, "voxel_size"),
+    (dict(voxel_size="1"), TypeError, "voxel_size"),
+    (dict(bounds=[[0, 0, 0], [1, 1]]), ValueError, "bounds"),
+    (dict(bounds=[[0, 0, 0], [1, -1, 1]]), ValueError, "bounds"),
+    (dict(chunk=0), ValueError, "chunk"),
+    (dict(orientation_bins=50), ValueError, "orientation_bins"),
+    (dict(devices=[]), TypeError, "devices"),
+    (dict(voxel_size=1e-4), ValueError, "voxel_size"),
+])
+def test_bad_arguments_raise(kwargs, error, match):
+    args = dict(n_samples=100, key=KEY, voxel_size=0.1) | kwargs
+    with pytest.raises(error, match=match):
+        ws.reachability(dk.robots.planar([1.0, 0.5]), args.pop("n_samples"), **args)
+
+
+def test_bad_chain_and_unbounded_prismatic_joint():
+    with pytest.raises(TypeError, match="chain"):
+        ws.sample_configs("iiwa", 10, KEY)
+    slider = dk.DHChain.from_table([[0.0, 0.0, 0.0, 0.0]], "P")
+    with pytest.raises(ValueError, match=r"lower/upper\[0\]"):
+        ws.sample_configs(slider, 10, KEY)
+
+
+def _run(script: str, env: dict) -> dict:
+    out = subprocess.run([sys.executable, "-c", textwrap.dedent(script)], capture_output=True, text=True,
+                         env={**os.environ, **env}, timeout=240, check=False)
+    assert out.returncode == 0, out.stderr[-3000:]
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_identical_maps_on_1_3_and_4_devices(tmp_path):
+    script = f"""
+        import json, jax, numpy as np
+        import diffkin as dk
+        from diffkin import workspace as ws
+        chain, devices = dk.robots.panda(), jax.devices()
+        maps = [ws.reachability(chain, 10_123, key=jax.random.key(7), voxel_size=0.15, chunk=1000,
+                                devices=devices[:k], dtype="float32") for k in (1, 3, 4)]
+        maps[2].save({str(tmp_path / "four.npz")!r})
+        same = [all(np.array_equal(getattr(a, f), getattr(maps[0], f)) for f in ("counts", "manipulability",
+                "dexterity")) for a in maps]
+        print(json.dumps(dict(n_devices=len(devices), same=same, total=[int(a.counts.sum()) for a in maps])))
+    """
+    result = _run(script, {"XLA_FLAGS": "--xla_force_host_platform_device_count=4", "JAX_PLATFORMS": "cpu"})
+    assert result == dict(n_devices=4, same=[True, True, True], total=[10_123] * 3)
+    four = ws.ReachabilityMap.load(tmp_path / "four.npz")
+    here = ws.reachability(dk.robots.panda(), 10_123, key=KEY, voxel_size=0.15, chunk=1000, dtype=jnp.float32)
+    # This process (x64 mode, float32 computation) draws the same samples: the same voxels and
+    # bins; the float32 manipulability may differ in the last bits as XLA compiles it differently.
+    np.testing.assert_array_equal(here.counts, four.counts)
+    np.testing.assert_array_equal(here.dexterity, four.dexterity)
+    np.testing.assert_allclose(here.manipulability, four.manipulability, rtol=1e-5, atol=0)
+
+
+def test_memory_does_not_grow_with_the_number_of_samples():
+    script = """
+        import json, resource, jax
+        import diffkin as dk
+        from diffkin import workspace as ws
+        chain, chunk = dk.robots.planar([1.0, 0.5]), 1 << 17
+        run = lambda n: ws.reachability(chain, n, key=jax.random.key(0), voxel_size=0.05, chunk=chunk)
+        run(2 * chunk)
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        m = run(50 * chunk)
+        after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        print(json.dumps(dict(growth_kib=after - before, total=int(m.counts.sum()))))
+    """
+    result = _run(script, {"JAX_PLATFORMS": "cpu"})
+    # Holding the 50 chunks' joint values and positions at once would take 50 * 2**17 * 5 * 4 B = 125 MiB.
+    assert result["total"] == 50 * (1 << 17) and result["growth_kib"] < 12 * 1024
