@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytorch_kinematics as pk
 import torch
+from _bench import median_seconds
 
 import diffkin as dk
 import diffkin.ik as ik
@@ -26,13 +27,8 @@ TIGHT_TOL = (1e-5, 1e-4)
 
 
 def median_time(fn, *args, repeats=5):
-    jax.block_until_ready(fn(*args))
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        jax.block_until_ready(fn(*args))
-        times.append(time.perf_counter() - t)
-    return float(np.median(times)), fn(*args)
+    """Median warm time of ``fn(*args)`` and its result."""
+    return median_seconds(fn, *args, repeats=repeats, warmup=1), fn(*args)
 
 
 def main():
