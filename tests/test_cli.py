@@ -1,0 +1,182 @@
+"""The ``diffkin`` command line, run in-process through ``diffkin.cli.main`` (and once as ``python -m diffkin``).
+
+The IK, self-motion and reachability tests reuse the shapes of the quick demo, so each jitted
+function compiles once per session.
+"""
+
+import json
+import os
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import diffkin as dk
+from diffkin import cli
+
+DATA = os.path.join(os.path.dirname(__file__), "data")
+
+
+def run(capsys, *argv):
+    """``(exit status, stdout, stderr)`` of ``diffkin ARGV``."""
+    code = cli.main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def assert_user_error(capsys, *argv, match=""):
+    code, out, err = run(capsys, *argv)
+    assert code == 2, (out, err)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("diffkin: error: "), err
+    assert "Traceback" not in err
+    assert match in lines[0], lines[0]
+    return lines[0]
+
+
+def test_help_subprocess():
+    res = subprocess.run([sys.executable, "-m", "diffkin", "--help"], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+    for command in ("demo", "info", "fk", "ik", "workspace", "bench"):
+        assert command in res.stdout
+
+
+@pytest.mark.parametrize("command", ["demo", "info", "fk", "ik", "workspace", "bench"])
+def test_subcommand_help(capsys, command):
+    code, out, _ = run(capsys, command, "--help")
+    assert code == 0 and "usage: diffkin " + command in out
+
+
+def test_demo_quick(capsys, tmp_path):
+    code, out, err = run(capsys, "demo", "--quick", "--out", tmp_path / "demo")
+    assert code == 0, err
+    assert "FK check" in out and ": OK" in out
+    assert re.search(r"IK .* success \d+\.\d% \(\d+/50\)", out)
+    assert "valid samples" in out and "psi in [" in out
+    for name in ("reachability_count_y0.png", "reachability_manipulability_y0.png", "self_motion.png"):
+        path = tmp_path / "demo" / name
+        assert path.is_file() and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert str((tmp_path / "demo").resolve()) in out.strip().splitlines()[-1]
+
+
+def test_dh_fk_numpy_matches_modified_and_prismatic():
+    for chain in (dk.robots.panda(), dk.DHChain.from_table([[0.1, 0.3, 0.2, 0.1], [0.2, -0.5, 0.1, 0.0]], "RP",
+                                                           modified=True)):
+        q = np.random.default_rng(0).uniform(-1, 1, (5, chain.dof))
+        np.testing.assert_allclose(cli.dh_fk_numpy(chain, q), np.asarray(dk.fk(chain, q)), atol=1e-12)
+
+
+def test_quaternion_round_trip():
+    rng = np.random.default_rng(1)
+    for quat in [*rng.normal(size=(20, 4)), [0, 1, 0, 0], [0, 0, 0, 1], [0, 0, 1, 0]]:
+        quat = np.asarray(quat) / np.linalg.norm(quat)
+        quat = -quat if quat[0] < 0 else quat
+        T = cli.pose_from_quaternion([1, 2, 3], quat)
+        np.testing.assert_allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-12)
+        np.testing.assert_allclose(cli.quaternion(T[:3, :3]), quat, atol=1e-12)
+
+
+def test_info(capsys):
+    code, out, _ = run(capsys, "info", "iiwa14")
+    assert code == 0
+    assert "DHChain, standard DH, 7 joints" in out and "iiwa14_joint_7" in out and "-170.0 .. +170.0 deg" in out
+    assert "home pose (q = 0): position [ 0  0  1.306]" in out
+    code, out, _ = run(capsys, "info", os.path.join(DATA, "ur5.urdf"), "--end-link", "tool0")
+    assert code == 0 and "PoEChain" in out and "screw table" in out and "6 joints" in out
+
+
+def test_fk_text_json_npy(capsys, tmp_path):
+    chain = dk.robots.iiwa14()
+    q = [0.1, -0.2, 0.3, 0.4, 0.5, 0.6, 0.7]
+    T = np.asarray(dk.fk(chain, np.asarray(q)))
+    code, out, _ = run(capsys, "fk", "iiwa14", *q)
+    assert code == 0 and f"{T[0, 3]:.6f}"[:7] in out and "quaternion" in out
+    code, out, _ = run(capsys, "fk", "iiwa14", *q, "--format", "json")
+    doc = json.loads(out)
+    np.testing.assert_allclose(doc["poses"][0]["T"], T, atol=1e-12)
+    qs = np.random.default_rng(0).uniform(chain.lower, chain.upper, (4, 7))
+    np.save(tmp_path / "q.npy", qs)
+    code, out, _ = run(capsys, "fk", "iiwa14", "--q-file", tmp_path / "q.npy", "--format", "npy",
+                       "--output", tmp_path / "T.npy")
+    assert code == 0
+    np.testing.assert_allclose(np.load(tmp_path / "T.npy"), cli.dh_fk_numpy(chain, qs), atol=1e-12)
+
+
+def test_ik_pose(capsys):
+    chain = dk.robots.iiwa14()
+    T = cli.pose_from_quaternion([0.5, 0.1, 0.6], [0, 1, 0, 0])
+    code, out, _ = run(capsys, "ik", "iiwa14", "--pose", 0.5, 0.1, 0.6, 0, 1, 0, 0)
+    assert code == 0 and "success  True" in out
+    q = np.array([float(v) for v in out.split("q", 1)[1].split("[")[1].split("]")[0].split()])
+    pos, rot = cli._pose_errors(cli.dh_fk_numpy(chain, q), T)
+    assert pos < 2e-5 and rot < 2e-4
+    code, out, _ = run(capsys, "ik", "iiwa14", "--pose", 5, 0, 0, 1, 0, 0, 0)  # out of reach
+    assert code == 1 and "success  False" in out
+
+
+def test_ik_all(capsys):
+    T = cli.pose_from_quaternion([0.5, 0.1, 0.6], [0, 1, 0, 0])
+    code, out, _ = run(capsys, "ik", "iiwa14", "--pose", 0.5, 0.1, 0.6, 0, 1, 0, 0, "--all", "--samples", 200)
+    assert code == 0 and "200 of 200 valid" in out
+    rows = [line for line in out.splitlines() if " yes " in line]
+    q = np.array([[float(v) for v in r.split("[")[1].split("]")[0].split()] for r in rows])
+    assert cli._pose_errors(cli.dh_fk_numpy(dk.robots.iiwa14(), q), T)[0] < 1e-5  # printed to 6 digits
+    code, out, _ = run(capsys, "ik", "iiwa14", "--pose", 0.5, 0.1, 0.6, 0, 1, 0, 0, "--all", "--psi", 0.3,
+                       "--gc", 1, -1, 1)
+    assert code == 0 and "1 of 1 valid" in out and "+1 -1 +1" in out
+
+
+def test_workspace(capsys, tmp_path):
+    code, out, err = run(capsys, "workspace", "iiwa14", "--samples", 20_000, "--voxel", 0.2,
+                         "--out", tmp_path / "map.npz", "--plot", tmp_path / "slice.png")
+    assert code == 0, err
+    wmap = dk.workspace.ReachabilityMap.load(tmp_path / "map.npz")
+    assert wmap.n_samples == 20_000 and wmap.counts.sum() + wmap.n_outside == 20_000
+    assert (tmp_path / "slice.png").is_file() and "reached" in out
+
+
+def test_bench_needs_source_checkout(capsys, monkeypatch, tmp_path):
+    monkeypatch.setattr(cli, "experiments_dir", lambda: tmp_path)
+    assert_user_error(capsys, "bench", match="source checkout")
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["info", "nosuchrobot"], "unknown robot 'nosuchrobot'"),
+    (["info", "iiwa14", "--end-link", "x"], "URDF files only"),
+    (["fk", "iiwa14", "0.1", "0.2"], "7 joint values"),
+    (["fk", "iiwa14", "0.1", "zero", "0", "0", "0", "0", "0"], "invalid number: 'zero'"),
+    (["fk", "iiwa14", "nan", "0", "0", "0", "0", "0", "0"], "finite"),
+    (["fk", "iiwa14"], "either on the command line or with --q-file"),
+    (["fk", "iiwa14", "--q-file", "/nonexistent/q.npy"], "no such file"),
+    (["fk", "iiwa14", "0", "0", "0", "0", "0", "0", "0", "--format", "npy"], "--output"),
+    (["ik", "iiwa14"], "one of the arguments --pose --position is required"),
+    (["ik", "iiwa14", "--pose", "0", "0", "0.5", "0", "0", "0", "0"], "quaternion"),
+    (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--seeds", "0"], "positive integer"),
+    (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--q0", "0", "0"], "--q0"),
+    (["ik", "panda", "--pose", "0.5", "0", "0.5", "1", "0", "0", "0", "--all"], "iiwa7 or iiwa14"),
+    (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--all"], "full --pose"),
+    (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--psi", "0.1"], "go with --all"),
+    (["ik", "iiwa14", "--pose", "0.5", "0", "0.5", "1", "0", "0", "0", "--all", "--gc", "1", "0", "1"], "+1 or -1"),
+    (["workspace", "iiwa14", "--samples", "10", "--voxel", "-1", "--out", "m.npz"], "positive number"),
+    (["workspace", "iiwa14", "--out", "/nonexistent/dir/m.npz"], "no such directory"),
+    (["frobnicate"], "invalid choice"),
+    ([], "required"),
+])
+def test_user_errors(capsys, argv, match):
+    assert_user_error(capsys, *argv, match=match)
+
+
+def test_user_errors_from_files_and_diffkin(capsys, tmp_path):
+    bad = tmp_path / "bad.urdf"
+    bad.write_text("<robot name='x'><link name='a'/>")  # malformed XML: a ValueError of load_urdf
+    assert_user_error(capsys, "info", bad)
+    assert_user_error(capsys, "info", os.path.join(DATA, "ur5.urdf"), "--end-link", "nolink", match="nolink")
+    (tmp_path / "q.npy").write_bytes(b"not an npy file")
+    assert_user_error(capsys, "fk", "iiwa14", "--q-file", tmp_path / "q.npy", match="cannot read")
+    np.save(tmp_path / "q6.npy", np.zeros((3, 6)))
+    assert_user_error(capsys, "fk", "iiwa14", "--q-file", tmp_path / "q6.npy", match="7 joint values")
+    # a ValueError raised by diffkin itself: the slice plane outside the grid
+    assert_user_error(capsys, "workspace", "iiwa14", "--samples", 100, "--voxel", 0.2, "--out", tmp_path / "m.npz",
+                      "--plot", tmp_path / "s.png", "--value", 9, "--no-progress", match="value")
