@@ -15,8 +15,8 @@ _FRAMES = ("world", "space", "body")
 _METHODS = ("autodiff", "analytic")
 
 
-def _frames(chain: Chain, q) -> tuple[rg.Frames, tuple[int, ...], jnp.dtype]:
-    """Check ``q`` against ``chain`` and run the model's forward pass."""
+def _joint_values(chain: Chain, q) -> jax.Array:
+    """``q`` as a float array of shape ``(..., dof)``; raises on a bad chain or shape."""
     if not isinstance(chain, (DHChain, PoEChain)):
         raise TypeError(f"chain: expected a DHChain or PoEChain, got {type(chain).__name__}")
     q = jnp.asarray(q)
@@ -24,6 +24,12 @@ def _frames(chain: Chain, q) -> tuple[rg.Frames, tuple[int, ...], jnp.dtype]:
         q = q.astype(jnp.result_type(float))
     if q.ndim == 0 or q.shape[-1] != chain.dof:
         raise ValueError(f"q: expected shape (..., {chain.dof}) for a {chain.dof}-joint chain, got {q.shape}")
+    return q
+
+
+def _frames(chain: Chain, q) -> tuple[rg.Frames, tuple[int, ...], jnp.dtype]:
+    """Check ``q`` against ``chain`` and run the model's forward pass."""
+    q = _joint_values(chain, q)
     frames = chain._frames([q[..., i] for i in range(chain.dof)])
     arrays = [e for e in rg.leaves(frames.ee) if not isinstance(e, float)]
     shape = jnp.broadcast_shapes(q.shape[:-1], *(jnp.shape(e) for e in arrays))
@@ -79,9 +85,7 @@ def _analytic(chain: Chain, q, frame: str) -> jax.Array:
 
 
 def _autodiff(chain: Chain, q, frame: str) -> jax.Array:
-    q = jnp.asarray(q)
-    if not jnp.issubdtype(q.dtype, jnp.floating):
-        q = q.astype(jnp.result_type(float))
+    q = _joint_values(chain, q)
     T, tangent = jax.linearize(lambda x: fk(chain, x), q)
     basis = jnp.eye(chain.dof, dtype=q.dtype)
     dT = jax.vmap(lambda e: tangent(jnp.broadcast_to(e, q.shape)))(basis)  # (dof, ..., 4, 4)

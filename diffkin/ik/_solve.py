@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from diffkin._rigid import is_concrete
 from diffkin.ik import _lm, _optax
 from diffkin.ik._implicit import implicit_q
 from diffkin.ik._problem import Eval, Problem, evaluate
@@ -36,13 +37,13 @@ class _Seeds(NamedTuple):
 
 def _detach(tree):
     """``stop_gradient`` on traced leaves only (concrete model constants stay foldable)."""
-    return jax.tree.map(lambda x: jax.lax.stop_gradient(x) if isinstance(x, jax.core.Tracer) else x, tree)
+    return jax.tree.map(lambda x: x if is_concrete(x) else jax.lax.stop_gradient(x), tree)
 
 
 def _cast(tree, dtype):
     """Traced floating leaves to ``dtype``; concrete ones are folded as Python floats by the model."""
     def cast(x):
-        if isinstance(x, jax.core.Tracer) and jnp.issubdtype(x.dtype, jnp.floating):
+        if not is_concrete(x) and jnp.issubdtype(x.dtype, jnp.floating):
             return x.astype(dtype)
         return x
     return jax.tree.map(cast, tree)
