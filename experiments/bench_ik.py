@@ -52,6 +52,7 @@ def main():
     print(f"# IK benchmark: iiwa14, {N} targets, float32, CPU ({platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} cores), jax {jax.__version__}, torch {torch.__version__}\n")
 
+    torch.manual_seed(0)  # pk draws its retries from torch's RNG: make its run reproducible
     limits = torch.tensor(np.stack([chain.lower, chain.upper], -1), dtype=torch.float32)
     solver = pk.PseudoInverseIK(pk_chain, max_iterations=30, num_retries=10, joint_limits=limits,
                                 early_stopping_any_converged=True, pos_tolerance=PK_TOL[0], rot_tolerance=PK_TOL[1])
