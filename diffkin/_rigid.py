@@ -19,6 +19,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffkin._trig import sincos
+
 Entry = jax.Array | float
 Vec3 = tuple[Entry, Entry, Entry]
 Mat3 = tuple[Vec3, Vec3, Vec3]
@@ -157,12 +159,6 @@ def to_matrix(A: Rigid, shape: tuple[int, ...], dtype) -> jax.Array:
     return flat.reshape(shape + (4, 4))
 
 
-def vectors_to_array(vs: list[Vec3], shape: tuple[int, ...], dtype) -> jax.Array:
-    """Stack 3-vectors into ``shape + (3, len(vs))`` (one column each)."""
-    cols = [stack(list(v), shape, dtype) for v in vs]
-    return jnp.stack(cols, axis=-1)
-
-
 def skew(w: Vec3) -> Mat3:
     return ((0.0, -w[2], w[1]), (w[2], 0.0, -w[0]), (-w[1], w[0], 0.0))  # type: ignore[return-value]
 
@@ -184,7 +180,7 @@ def screw_exp(v: Vec3, w: Vec3, theta: jax.Array) -> Rigid:
         if n2 == 0.0:
             return Rigid(IDENTITY.R, scale(theta, v))
         if abs(n2 - 1.0) < _SNAP:
-            s, c = jnp.sin(theta), jnp.cos(theta)
+            s, c = sincos(theta)
             A, B, C = s, 1.0 - c, theta - s
         else:
             A, B, C = _exp_coefficients(jnp.asarray(n2), theta)
@@ -203,7 +199,7 @@ def _exp_coefficients(n2, theta):
     small = n2 < 1e-8
     n = jnp.sqrt(jnp.where(small, 1.0, n2))
     x = n * theta
-    s, c = jnp.sin(x), jnp.cos(x)
+    s, c = sincos(x)
     t2, t3 = theta * theta, theta * theta * theta
     A = jnp.where(small, theta - n2 * t3 / 6.0, s / n)
     B = jnp.where(small, t2 / 2.0 - n2 * t2 * t2 / 24.0, (1.0 - c) / jnp.where(small, 1.0, n2))
@@ -239,7 +235,8 @@ def cos_sin(x: Entry) -> tuple[Entry, Entry]:
     """``(cos x, sin x)``, as snapped Python floats for a constant angle."""
     if isinstance(x, float):
         return constant(np.cos(x)), constant(np.sin(x))
-    return jnp.cos(x), jnp.sin(x)
+    s, c = sincos(x)
+    return c, s
 
 
 def entries(x) -> list[Entry]:

@@ -6,7 +6,6 @@ import jax
 import jax.numpy as jnp
 
 from diffkin import _rigid as rg
-from diffkin import se3
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain
 
@@ -79,33 +78,42 @@ def _analytic(chain: Chain, q, frame: str) -> jax.Array:
     if frame == "body":
         Rt = tuple(rg.column(frames.ee.R, j) for j in range(3))
         columns = [(rg.rotate(Rt, v), rg.rotate(Rt, w)) for v, w in columns]
-    v = rg.vectors_to_array([c[0] for c in columns], shape, dtype)
-    w = rg.vectors_to_array([c[1] for c in columns], shape, dtype)
-    return jnp.concatenate([v, w], axis=-2)
+    rows = [column[part][i] for part in (0, 1) for i in range(3) for column in columns]
+    return rg.stack(rows, shape, dtype).reshape(shape + (6, chain.dof))
 
 
 def _autodiff(chain: Chain, q, frame: str) -> jax.Array:
+    """Columns from forward-mode derivatives of the end-effector pose, one joint at a time."""
     q = _joint_values(chain, q)
-    T, tangent = jax.linearize(lambda x: fk(chain, x), q)
-    basis = jnp.eye(chain.dof, dtype=q.dtype)
-    dT = jax.vmap(lambda e: tangent(jnp.broadcast_to(e, q.shape)))(basis)  # (dof, ..., 4, 4)
-    dT = jnp.moveaxis(dT, 0, -1)  # (..., 4, 4, dof)
-    R, p = T[..., :3, :3, None], T[..., :3, 3, None]
-    dR, dp = dT[..., :3, :3, :], dT[..., :3, 3, :]
-    Rt = jnp.swapaxes(T[..., :3, :3], -1, -2)[..., None]
-    mm = lambda A, B: jnp.einsum("...ijk,...jlk->...ilk", A, B)  # noqa: E731 (matrix product per column)
-    if frame == "body":
-        w = _vee_columns(mm(Rt, dR))
-        v = jnp.einsum("...ijk,...jk->...ik", Rt, dp)
-    else:
-        w = _vee_columns(mm(dR, jnp.swapaxes(R, -2, -3)))
-        v = dp if frame == "world" else dp + jnp.cross(p, w, axis=-2)
-    return jnp.concatenate([v, w], axis=-2)
+    qs = [q[..., i] for i in range(chain.dof)]
+
+    def pose(i, x):
+        ee = chain._frames(qs[:i] + [x] + qs[i + 1:]).ee
+        return tuple(jnp.asarray(e, q.dtype) for e in rg.leaves(ee))
+
+    columns = []
+    for i in range(chain.dof):
+        T, dT = jax.jvp(lambda x, i=i: pose(i, x), (qs[i],), (jnp.ones_like(qs[i]),))
+        R, p, dR, dp = _split(T), T[9:], _split(dT), dT[9:]
+        if frame == "body":  # [R^T dp; vee(R^T dR)]
+            Rt, dRt = [rg.column(R, j) for j in range(3)], [rg.column(dR, j) for j in range(3)]
+            columns.append((rg.rotate(Rt, dp), _vee_of_product(Rt, dRt)))
+        else:
+            w = _vee_of_product(dR, R)  # vee(dR R^T)
+            columns.append((dp if frame == "world" else rg.vadd(dp, rg.cross(p, w)), w))
+    rows = [column[part][i] for part in (0, 1) for i in range(3) for column in columns]
+    return rg.stack(rows, q.shape[:-1], q.dtype).reshape(q.shape[:-1] + (6, chain.dof))
 
 
-def _vee_columns(W: jax.Array) -> jax.Array:
-    """``(..., 3, 3, n) -> (..., 3, n)``: ``vee`` of each column's skew part."""
-    return se3.vee(jnp.moveaxis(W, -1, -3)).swapaxes(-1, -2)
+def _split(entries) -> rg.Mat3:
+    """The rotation of a pose's :func:`rg.leaves`."""
+    return tuple(tuple(entries[3 * i: 3 * i + 3]) for i in range(3))  # type: ignore[return-value]
+
+
+def _vee_of_product(A: rg.Mat3, B: rg.Mat3) -> rg.Vec3:
+    """``vee`` of the skew part of ``A B^T`` (only its off-diagonal entries are formed)."""
+    W = lambda a, b: rg.dot(A[a], B[b])  # noqa: E731
+    return tuple(0.5 * (W(a, b) - W(b, a)) for a, b in ((2, 1), (0, 2), (1, 0)))  # type: ignore[return-value]
 
 
 def jacobian(chain: Chain, q: jax.Array, frame: str = "world", *, method: str = "autodiff") -> jax.Array:
