@@ -1,15 +1,45 @@
 """diffkin: differentiable robot kinematics in JAX.
 
 The public names of the API contract: models, forward kinematics, Jacobians, and the
-``robots``, ``ik``, ``srs`` and ``workspace`` modules.
+``robots``, ``ik``, ``srs`` and ``workspace`` modules. They are imported on first use
+(``dk.fk``, ``from diffkin import fk``), so that ``import diffkin`` alone does not import JAX and
+the ``diffkin`` command answers ``--help`` and usage errors at once.
 """
 
-from diffkin import ik, robots, srs, workspace
-from diffkin.kinematics import fk, jacobian, link_poses, manipulability
-from diffkin.models import DHChain, PoEChain, load_urdf, to_poe
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
+    from diffkin import ik, robots, srs, workspace
+    from diffkin.kinematics import fk, jacobian, link_poses, manipulability
+    from diffkin.models import DHChain, PoEChain, load_urdf, to_poe
+
+_HOMES = {
+    "ik": None, "robots": None, "srs": None, "workspace": None,  # submodules
+    "fk": "diffkin.kinematics", "jacobian": "diffkin.kinematics", "link_poses": "diffkin.kinematics",
+    "manipulability": "diffkin.kinematics",
+    "DHChain": "diffkin.models", "PoEChain": "diffkin.models", "load_urdf": "diffkin.models",
+    "to_poe": "diffkin.models",
+}
 
 __all__ = [
     "DHChain", "PoEChain", "fk", "jacobian", "link_poses", "load_urdf", "manipulability",
     "ik", "robots", "srs", "to_poe", "workspace",
 ]
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str):
+    """Import a public name on first use (PEP 562) and keep it as a module attribute."""
+    if name not in _HOMES:
+        raise AttributeError(f"module 'diffkin' has no attribute {name!r}")
+    home = _HOMES[name]
+    value = importlib.import_module(f"diffkin.{name}") if home is None else getattr(importlib.import_module(home), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -1,11 +1,11 @@
-"""The ``diffkin`` command line: demo, robot info, FK, IK, workspace maps and the FK benchmark.
+"""The ``diffkin`` command line: demo, robot info, FK, IK, workspace maps and the benchmark suite.
 
     diffkin demo [--out DIR] [--quick]
     diffkin info ROBOT_OR_URDF [--end-link L] [--base-link B]
     diffkin fk ROBOT_OR_URDF q1 ... qn | --q-file configs.npy [--format text|json|npy] [--output FILE]
     diffkin ik ROBOT_OR_URDF --pose x y z qw qx qy qz | --position x y z [--seeds N] [--q0 ...] [--all ...]
     diffkin workspace ROBOT_OR_URDF --samples N --voxel V --out map.npz [--plot slice.png]
-    diffkin bench [--batches ...] [--repeats R]
+    diffkin bench [--quick] [--only fk,jacobian,ik,srs,workspace] [--write | --out PATH]
 
 ``ROBOT_OR_URDF`` is a built-in robot (``iiwa7``, ``iiwa14``, ``panda``, ``ur5``, ``puma560``) or a
 URDF file. Every computation runs in float64 (``jax_enable_x64`` is switched on by :func:`main`).
@@ -73,6 +73,14 @@ def _positive_float(text: str) -> float:
     if value <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
     return value
+
+
+def _parts(text: str) -> tuple[str, ...]:
+    """argparse type: a comma-separated list of names (``fk,ik``)."""
+    parts = tuple(part.strip() for part in text.split(",") if part.strip())
+    if not parts:
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list of names, got {text!r}")
+    return parts
 
 
 def _sign(text: str) -> float:
@@ -309,11 +317,48 @@ def _timed(fn, *args):
     return out, time.perf_counter() - start
 
 
+def _plot_self_motion(name: str, q: np.ndarray, path: Path) -> None:
+    """Plot the self-motion through ``q`` of the iiwa ``name``: its joints along the arm angle.
+
+    One panel for the global configuration of ``q``: each joint as a fraction of its range
+    (-1 lower, +1 upper limit, drawn) against the arm angle ``psi``, the arm angles whose solution
+    is within every limit shaded, ``q``'s own arm angle dotted.
+
+    Args:
+        name: ``iiwa7`` or ``iiwa14``.
+        q: ``(7,)`` configuration (rad) whose flange pose and global configuration are shown.
+        path: the PNG to write.
+    """
+    from matplotlib.figure import Figure
+
+    arm, _, srs_ik, arm_angle = _srs_fns(name)
+    psi0, gc = (np.asarray(x) for x in arm_angle(q))
+    psi = np.linspace(-np.pi, np.pi, 721)
+    qs, valid = (np.asarray(x) for x in srs_ik(dh_fk_numpy(arm.chain(), q), psi, gc))
+    lower, upper = np.asarray(arm.lower), np.asarray(arm.upper)
+    frac = (2 * qs - (lower + upper)) / (upper - lower)
+    frac[1:][np.abs(np.diff(frac, axis=0)) > 1] = np.nan  # do not draw the +-pi wraps of a joint
+    fig = Figure(figsize=(9, 5), layout="constrained")
+    ax = fig.add_subplot()
+    ax.fill_between(psi, -1, 1, where=valid, color="tab:green", alpha=0.15, lw=0, label="within all limits")
+    for j in range(7):
+        ax.plot(psi, frac[:, j], lw=1.5, label=f"joint {j + 1}")
+    for limit in (-1, 1):
+        ax.axhline(limit, color="k", ls="--", lw=1)
+    ax.axvline(psi0, color="k", ls=":", lw=1, label="arm angle of q")
+    signs = ", ".join(f"{int(g):+d}" for g in gc)
+    ax.set(xlim=(-np.pi, np.pi), ylim=(-1.6, 1.6), xlabel="arm angle psi (rad)",
+           ylabel="joint position in its range (-1 lower, +1 upper limit)",
+           title=f"{name} self-motion of one pose, global configuration ({signs}): "
+           f"{valid.mean():.0%} of arm angles feasible")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=5, fontsize="small")
+    fig.savefig(path, dpi=120)
+
+
 def cmd_demo(args) -> int:
     """The main job on the built-in iiwa14: FK and its check, batched IK, self-motion, reachability, plots."""
     jax = _jax()
     import jax.numpy as jnp
-    from matplotlib.figure import Figure
 
     import diffkin as dk
 
@@ -389,15 +434,7 @@ def cmd_demo(args) -> int:
         path = out / f"reachability_{quantity}_y0.png"
         dk.workspace.plot_slice(wmap, "y", 0.0, quantity, path=path)
         pngs.append(path.name)
-    fig = Figure(figsize=(8, 5))
-    ax = fig.add_subplot()
-    order = np.argsort(psi_v)
-    for j in range(chain.dof):
-        ax.plot(psi_v[order], qs_v[order, j], ".", ms=3, label=f"q{j + 1}")
-    ax.set(xlabel="arm angle psi (rad)", ylabel="joint angle (rad)",
-           title=f"iiwa14 self-motion of one pose ({len(psi_v)} exact solutions, all global configurations)")
-    ax.legend(loc="upper right", ncol=7, fontsize="small")
-    fig.savefig(out / "self_motion.png", dpi=120)
+    _plot_self_motion("iiwa14", np.asarray(q_t[0]), out / "self_motion.png")
     pngs.append("self_motion.png")
 
     lines.append(f"Plots   {', '.join(pngs)}")
@@ -602,23 +639,37 @@ def experiments_dir() -> Path:
     return Path(__file__).resolve().parent.parent / "experiments"
 
 
-def cmd_bench(args) -> int:
-    """``experiments/bench_fk.py``'s ``run()``: diffkin vs pytorch-kinematics FK and Jacobian timings."""
+def _load_bench():
+    """``experiments/bench.py`` of the source checkout, as a module.
+
+    Raises:
+        CLIError: not a source checkout (a pip-installed diffkin has no ``experiments/``).
+    """
     exp = experiments_dir()
-    missing = [m for m in ("torch", "pytorch_kinematics") if importlib.util.find_spec(m) is None]
-    if not (exp / "bench_fk.py").is_file() or missing:
-        raise CLIError("bench needs the source checkout (experiments/bench_fk.py next to the diffkin package) and "
-                       "pytorch-kinematics (pip install -e '.[validate]')")
-    _jax()
-    sys.path.insert(0, str(exp))
+    if not (exp / "bench.py").is_file():
+        raise CLIError("bench needs the source checkout (experiments/bench.py next to the diffkin package): "
+                       "git clone the repository and pip install -e '.[test]'")
+    sys.path.insert(0, str(exp))  # for its ``from _bench import ...``
     try:
-        spec = importlib.util.spec_from_file_location("_diffkin_bench_fk", exp / "bench_fk.py")
+        spec = importlib.util.spec_from_file_location("_diffkin_bench", exp / "bench.py")
         module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module  # dataclasses look their module up there
         spec.loader.exec_module(module)
     finally:
         sys.path.remove(str(exp))
-    print(module.run(tuple(args.batches), args.repeats))
-    return 0
+    return module
+
+
+def cmd_bench(args) -> int:
+    """The benchmark suite ``experiments/bench.py``: diffkin vs pytorch-kinematics, one markdown table."""
+    bench = _load_bench()
+    unknown = [part for part in args.only or () if part not in bench.PARTS]
+    if unknown:
+        raise CLIError(f"--only: unknown part {unknown[0]!r}: expected a comma-separated list of "
+                       f"{', '.join(bench.PARTS)}")
+    if args.out and not Path(args.out).parent.is_dir():
+        raise CLIError(f"--out: no such directory {str(Path(args.out).parent)!r}")
+    return bench.main(args)
 
 
 # --------------------------------------------------------------------------------------------- parser, main
@@ -700,11 +751,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_workspace)
 
-    p = sub.add_parser("bench", help="FK/Jacobian benchmark vs pytorch-kinematics (source checkout)",
-                       description="Runs experiments/bench_fk.py's run(); needs the source checkout and "
-                       "pytorch-kinematics.")
-    p.add_argument("--batches", nargs="+", type=_positive_int, default=[1, 1000, 100_000], metavar="B")
-    p.add_argument("--repeats", type=_positive_int, default=7, metavar="R")
+    p = sub.add_parser("bench", help="benchmark suite vs pytorch-kinematics (source checkout)",
+                       description="The benchmark suite experiments/bench.py (source checkout only): FK, Jacobians, "
+                       "IK, the iiwa closed form, self-motion sampling and reachability maps of the iiwa14, timed for "
+                       "diffkin and, where installed and where it has the feature, pytorch-kinematics; prints one "
+                       "markdown table. The full run takes a few minutes on a CPU.")
+    p.add_argument("--quick", action="store_true", help="small batches and fewer rows")
+    p.add_argument("--only", type=_parts, metavar="PARTS",
+                   help="comma-separated parts to run: fk,jacobian,ik,srs,workspace (default all)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--write", action="store_true", help="also write the table to experiments/results/<machine>.md")
+    where.add_argument("--out", metavar="PATH", help="also write the table to PATH")
     p.set_defaults(func=cmd_bench)
     return parser
 

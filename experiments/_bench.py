@@ -1,21 +1,39 @@
-"""Shared helpers of the benchmark scripts: timing, machine description, markdown tables."""
+"""Shared helpers of the benchmark scripts: timing, machine description, markdown tables, and the
+pytorch-kinematics side (optional: ``pk`` and ``torch`` are ``None`` where it is not installed)."""
 
 from __future__ import annotations
 
+import importlib.metadata
 import os
 import platform
+import re
 import statistics
 import time
 
 import jax
+import numpy as np
+
+import diffkin as dk
+
+try:
+    import pytorch_kinematics as pk
+    import torch
+except ImportError:
+    pk = torch = None
+
+PK_IK_TOL = (1e-3, 1e-2)  # pytorch-kinematics' default IK tolerances: 1 mm, 0.01 rad
 
 
-def median_seconds(fn, *args, repeats: int = 7, warmup: int = 2) -> float:
-    """Median wall time of ``fn(*args)`` (outputs blocked on), after ``warmup`` untimed calls."""
+def median_seconds(fn, *args, repeats: int = 5, warmup: int = 2, min_time: float = 0.3) -> float:
+    """Median wall time of ``fn(*args)`` (outputs blocked on), after ``warmup`` untimed calls.
+
+    Times at least ``repeats`` calls and keeps going until ``min_time`` seconds have been timed, so
+    that microsecond calls get thousands of samples and a stable median.
+    """
     for _ in range(warmup):
         jax.block_until_ready(fn(*args))
     times = []
-    for _ in range(repeats):
+    while len(times) < repeats or sum(times) < min_time:
         start = time.perf_counter()
         jax.block_until_ready(fn(*args))
         times.append(time.perf_counter() - start)
@@ -23,6 +41,7 @@ def median_seconds(fn, *args, repeats: int = 7, warmup: int = 2) -> float:
 
 
 def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``, else what :mod:`platform` knows)."""
     try:
         with open("/proc/cpuinfo") as fh:
             for line in fh:
@@ -33,17 +52,41 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
-def machine_line() -> str:
-    """One line naming the machine and software versions."""
-    parts = [f"CPU: {cpu_model()} ({os.cpu_count()} cores)", f"jax {jax.__version__}",
-             f"device: {jax.devices()[0].device_kind} x{len(jax.devices())}"]
-    try:
-        import torch
+def cpu_cores() -> int:
+    """CPU cores this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
 
-        parts.append(f"torch {torch.__version__}")
-    except ImportError:
-        pass
+
+def _accelerator() -> str | None:
+    """``"<device kind> x<count>"`` of JAX's default devices when they are not the CPU."""
+    devices = jax.devices()
+    return None if devices[0].platform == "cpu" else f"{devices[0].device_kind} x{len(devices)}"
+
+
+def machine_line() -> str:
+    """One line naming the machine, the JAX devices and the software versions."""
+    devices = jax.devices()
+    parts = [f"CPU: {cpu_model()} ({cpu_cores()} cores)", f"jax {jax.__version__}",
+             f"jax devices: {devices[0].device_kind} x{len(devices)}"]
+    if pk is not None:
+        parts += [f"torch {torch.__version__} on {torch_device()}",
+                  f"pytorch-kinematics {importlib.metadata.version('pytorch-kinematics')}"]
     return ", ".join(parts)
+
+
+def busy_note() -> str:
+    """A warning when other processes load the CPU (1-minute load average above half the cores), else ``""``."""
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else 0.0
+    if load <= cpu_cores() / 2:
+        return ""
+    return (f"**The machine was busy** (1-minute load average {load:.1f} on {cpu_cores()} cores before the run): "
+            "these timings are unreliable.")
+
+
+def machine_slug() -> str:
+    """A file name for this machine: the accelerator, else the CPU model and core count (``amd-epyc-2-cores``)."""
+    name = _accelerator() or f"{cpu_model()} {cpu_cores()} cores"
+    return re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
 
 
 def table(header: list[str], rows: list[list[str]]) -> str:
@@ -56,4 +99,61 @@ def table(header: list[str], rows: list[list[str]]) -> str:
 def rate(n: int, seconds: float) -> str:
     """Throughput ``n / seconds`` in a readable unit."""
     per_s = n / seconds
-    return f"{per_s / 1e6:.2f} M/s" if per_s >= 1e5 else f"{per_s / 1e3:.1f} k/s"
+    if per_s >= 1e5:
+        return f"{per_s / 1e6:.2f} M/s"
+    return f"{per_s / 1e3:.1f} k/s" if per_s >= 1e3 else f"{per_s:.0f}/s"
+
+
+def duration(seconds: float) -> str:
+    """A time in s, ms or us with three significant digits."""
+    if seconds >= 1:
+        return f"{seconds:.3g} s"
+    return f"{seconds * 1e3:.3g} ms" if seconds >= 1e-3 else f"{seconds * 1e6:.3g} us"
+
+
+def random_configs(chain, n: int, dtype, seed: int = 0) -> np.ndarray:
+    """``(n, dof)`` configurations uniform within the joint limits of ``chain``."""
+    return np.random.default_rng(seed).uniform(chain.lower, chain.upper, (n, chain.dof)).astype(dtype)
+
+
+# --------------------------------------------------------------------------------------------- pytorch-kinematics
+
+
+def torch_device() -> str:
+    """``"cuda"`` where torch sees a GPU, else ``"cpu"``."""
+    return "cuda" if torch.cuda.is_available() else "cpu"
+
+
+def torch_synced(fn):
+    """``fn`` followed by waiting for the GPU (torch runs CUDA kernels asynchronously), for timing."""
+    if torch_device() == "cpu":
+        return fn
+
+    def synced(*args):
+        out = fn(*args)
+        torch.cuda.synchronize()
+        return out
+
+    return synced
+
+
+def to_torch(x: np.ndarray):
+    """A numpy array as a torch tensor on :func:`torch_device`."""
+    return torch.as_tensor(x, device=torch_device())
+
+
+def pk_chain(name: str, end_link: str, dtype: str):
+    """pytorch-kinematics' serial chain of diffkin's shipped URDF ``name``, in ``dtype``, on :func:`torch_device`."""
+    with open(dk.robots.urdf_path(name), "rb") as fh:
+        chain = pk.build_serial_chain_from_urdf(fh.read(), end_link)
+    return chain.to(dtype=getattr(torch, dtype), device=torch_device())  # .to() rebinds this fresh chain
+
+
+def pk_ik_solver(chain, lower, upper, *, iterations: int = 30, retries: int = 10, tol=PK_IK_TOL):
+    """pytorch-kinematics' ``PseudoInverseIK`` of ``chain`` within ``[lower, upper]`` (float32).
+
+    Its retries are drawn from torch's global RNG: seed it (``torch.manual_seed``) for a reproducible run.
+    """
+    limits = to_torch(np.stack([lower, upper], -1).astype(np.float32))
+    return pk.PseudoInverseIK(chain, max_iterations=iterations, num_retries=retries, joint_limits=limits,
+                              early_stopping_any_converged=True, pos_tolerance=tol[0], rot_tolerance=tol[1])

@@ -137,6 +137,34 @@ def test_workspace(capsys, tmp_path):
     assert (tmp_path / "slice.png").is_file() and "reached" in out
 
 
+def test_cli_does_not_import_jax():
+    """``diffkin --help`` and usage errors stay fast: the package and the CLI import JAX only when used."""
+    code = "import sys, diffkin.cli; assert 'jax' not in sys.modules, 'jax imported'; print(diffkin.fk.__name__)"
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0 and res.stdout.strip() == "fk", res.stderr
+
+
+def test_bench_quick(capsys, tmp_path):
+    code, out, err = run(capsys, "bench", "--quick", "--only", "fk", "--out", tmp_path / "bench.md")
+    assert code == 0, err
+    assert "| work | batch | dtype | diffkin | pytorch-kinematics | pk / diffkin | notes |" in out
+    rows = [line for line in out.splitlines() if line.startswith("| FK |")]
+    assert [r.split(" | ")[1:3] for r in rows] == [[b, d] for b in ("1", "1,000") for d in ("float32", "float64")]
+    assert all(re.search(r"\| \*\*[\d.]+x\*\* \|", r) for r in rows), rows
+    assert (tmp_path / "bench.md").read_text().strip() in out
+
+
+def test_bench_without_pytorch_kinematics(capsys, monkeypatch):
+    monkeypatch.syspath_prepend(str(cli.experiments_dir()))
+    import _bench
+
+    monkeypatch.setattr(_bench, "pk", None)
+    code, out, err = run(capsys, "bench", "--quick", "--only", "fk")
+    assert code == 0, err
+    rows = [line for line in out.splitlines() if line.startswith("| FK |")]
+    assert len(rows) == 4 and all("| n/a | n/a |" in r for r in rows), rows
+
+
 def test_bench_needs_source_checkout(capsys, monkeypatch, tmp_path):
     monkeypatch.setattr(cli, "experiments_dir", lambda: tmp_path)
     assert_user_error(capsys, "bench", match="source checkout")
@@ -161,6 +189,9 @@ def test_bench_needs_source_checkout(capsys, monkeypatch, tmp_path):
     (["ik", "iiwa14", "--pose", "0.5", "0", "0.5", "1", "0", "0", "0", "--all", "--gc", "1", "0", "1"], "+1 or -1"),
     (["workspace", "iiwa14", "--samples", "10", "--voxel", "-1", "--out", "m.npz"], "positive number"),
     (["workspace", "iiwa14", "--out", "/nonexistent/dir/m.npz"], "no such directory"),
+    (["bench", "--only", "fk,nope"], "unknown part 'nope'"),
+    (["bench", "--write", "--out", "x.md"], "not allowed with"),
+    (["bench", "--out", "/nonexistent/dir/b.md"], "no such directory"),
     (["frobnicate"], "invalid choice"),
     ([], "required"),
 ])

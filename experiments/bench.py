@@ -1,0 +1,237 @@
+"""The benchmark suite: diffkin and pytorch-kinematics side by side, one markdown table.
+
+    python experiments/bench.py [--quick] [--only fk,jacobian,ik,srs,workspace] [--write | --out PATH]
+    diffkin bench ...                     (the same, from a source checkout)
+
+Times forward kinematics, world Jacobians, batched IK, the iiwa closed form, self-motion sampling
+and reachability maps of the KUKA iiwa14: diffkin's built-in DH model, and pytorch-kinematics on
+diffkin's shipped URDF (the same kinematics) where it has the feature and is installed. Everything
+is warmed up (JIT compiled, first call done) before timing; each figure is a median (at least 5
+runs and 0.3 s of runs). On a GPU machine both libraries run there (JAX's default device, torch
+CUDA). ``--write`` saves the table as ``experiments/results/<machine>.md``.
+"""
+
+from __future__ import annotations
+
+import datetime
+import functools
+import inspect
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from _bench import (
+    busy_note,
+    duration,
+    machine_line,
+    machine_slug,
+    median_seconds,
+    pk,
+    pk_chain,
+    pk_ik_solver,
+    random_configs,
+    rate,
+    table,
+    to_torch,
+    torch,
+    torch_synced,
+)
+
+import diffkin as dk
+
+DTYPES = ("float32", "float64")
+PK_EE = "iiwa14_link_ee"  # the flange link of the shipped iiwa14 URDF
+
+
+@dataclass(frozen=True)
+class Sizes:
+    """Batch sizes of each part of the suite."""
+
+    fk: tuple[int, ...]  # FK batches, each in float32 and float64
+    jacobian: tuple[tuple[int, str], ...]  # (batch, dtype) of the Jacobian rows
+    ik: int  # IK targets
+    srs: int  # closed-form solutions, in float32 and float64
+    self_motion: int  # self-motion samples of one pose
+    workspace: int  # reachability-map samples
+
+
+FULL = Sizes(fk=(1, 1000, 100_000), jacobian=((1000, "float32"), (100_000, "float32"), (100_000, "float64")),
+             ik=1000, srs=100_000, self_motion=2000, workspace=4_000_000)
+QUICK = Sizes(fk=(1, 1000), jacobian=((1000, "float32"),), ik=100, srs=10_000, self_motion=200, workspace=200_000)
+
+
+@dataclass(frozen=True)
+class Row:
+    """One timed piece of work: diffkin's and (where it has it) pytorch-kinematics' median seconds."""
+
+    work: str
+    batch: int
+    dtype: str
+    diffkin: float
+    pk: float | None = None
+    note: str = ""
+
+    def cells(self) -> list[str]:
+        """The row's markdown cells."""
+        def timing(seconds):
+            return "n/a" if seconds is None else f"{duration(seconds)} ({rate(self.batch, seconds)})"
+
+        return [self.work, f"{self.batch:,}", self.dtype, timing(self.diffkin), timing(self.pk),
+                "n/a" if self.pk is None else _ratio(self.pk / self.diffkin), self.note]
+
+
+def _ratio(r: float) -> str:
+    return f"**{r:.2f}x**" if r < 1 else f"**{r:.1f}x**" if r < 10 else f"**{r:.0f}x**"
+
+
+def _sci(x: float) -> str:
+    """``1e-5`` rather than Python's ``1e-05``."""
+    mantissa, exponent = f"{x:.0e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
+
+
+def _iiwa14():
+    return dk.robots.iiwa14()
+
+
+@functools.cache
+def _pk_chain(dtype: str):
+    return pk_chain("iiwa14", PK_EE, dtype)
+
+
+@functools.cache
+def _pk_seconds(method: str, n: int, dtype: str) -> float | None:
+    """Median time of pytorch-kinematics' ``method`` on ``n`` configurations; ``None`` without it."""
+    if pk is None:
+        return None
+    q = to_torch(random_configs(_iiwa14(), n, dtype))
+    return median_seconds(torch_synced(getattr(_pk_chain(dtype), method)), q)
+
+
+# --------------------------------------------------------------------------------------------- parts
+
+
+def fk_rows(sizes: Sizes) -> list[Row]:
+    """``dk.fk`` (jitted) vs ``forward_kinematics``."""
+    chain = _iiwa14()
+    fk = jax.jit(lambda q: dk.fk(chain, q))
+    return [Row("FK", n, dtype, median_seconds(fk, jnp.asarray(random_configs(chain, n, dtype))),
+                _pk_seconds("forward_kinematics", n, dtype))
+            for n in sizes.fk for dtype in DTYPES]
+
+
+def jacobian_rows(sizes: Sizes) -> list[Row]:
+    """``dk.jacobian`` in the world frame, analytic and autodiff (jitted), vs ``jacobian``."""
+    chain = _iiwa14()
+    rows = []
+    for n, dtype in sizes.jacobian:
+        q = jnp.asarray(random_configs(chain, n, dtype))
+        for method in ("analytic", "autodiff"):
+            jac = jax.jit(lambda q, method=method: dk.jacobian(chain, q, "world", method=method))
+            rows.append(Row(f"Jacobian (world, {method})", n, dtype, median_seconds(jac, q),
+                            _pk_seconds("jacobian", n, dtype)))
+    return rows
+
+
+def ik_rows(sizes: Sizes) -> list[Row]:
+    """``dk.ik.solve`` with its defaults (jitted) vs ``PseudoInverseIK``, 30 iterations x 10 retries, on reachable
+    float32 pose targets; the note gives each library's success rate at its own tolerances."""
+    chain, n = _iiwa14(), sizes.ik
+    T = np.asarray(dk.fk(chain, random_configs(chain, n, "float64", seed=1)), np.float32)
+    solve = jax.jit(lambda T, key: dk.ik.solve(chain, T, key=key))
+    args = (jnp.asarray(T), jax.random.key(1))
+    t_dk = median_seconds(solve, *args, repeats=3, warmup=1)
+    defaults = inspect.signature(dk.ik.solve).parameters
+    note = (f"success: diffkin {float(np.mean(solve(*args).success)):.1%} (defaults, "
+            f"{_sci(defaults['pos_tol'].default)} m / {_sci(defaults['rot_tol'].default)} rad)")
+    if pk is None:
+        return [Row("IK (LM, defaults)", n, "float32", t_dk, note=note)]
+    solver, goal = pk_ik_solver(_pk_chain("float32"), chain.lower, chain.upper), pk.Transform3d(matrix=to_torch(T))
+    torch.manual_seed(0)
+    t_pk = median_seconds(torch_synced(solver.solve), goal, repeats=3, warmup=1)
+    pk_success = float(solver.solve(goal).converged_any.float().mean())
+    note += f"; pk {pk_success:.1%} (1 mm / 0.01 rad, 30 iterations x 10 retries)"
+    return [Row("IK (LM, defaults)", n, "float32", t_dk, t_pk, note)]
+
+
+def srs_rows(sizes: Sizes) -> list[Row]:
+    """``dk.srs.ik`` (the iiwa closed form) on a batch, and ``dk.srs.sample_self_motion`` of one pose (jitted)."""
+    arm = dk.srs.iiwa14()
+    solve = jax.jit(lambda T, psi, gc: dk.srs.ik(arm, T, psi, gc))
+    rows = []
+    for dtype in DTYPES:
+        q = jnp.asarray(random_configs(arm.chain(), sizes.srs, dtype))
+        T, (psi, gc) = dk.fk(arm.chain(), q), dk.srs.arm_angle(arm, q)
+        rows.append(Row("SRS closed-form IK (`dk.srs.ik`)", sizes.srs, dtype, median_seconds(solve, T, psi, gc),
+                        note="no closed form in pk"))
+    n = sizes.self_motion
+    sample = jax.jit(lambda T, key: dk.srs.sample_self_motion(arm, T, n, key=key))
+    args = (dk.fk(arm.chain(), jnp.asarray(random_configs(arm.chain(), 1, "float32")[0])), jax.random.key(0))
+    valid = int(sample(*args)[1].sum())
+    rows.append(Row("self-motion sampling of one pose (`dk.srs`)", n, "float32", median_seconds(sample, *args),
+                    note=f"{valid:,} of {n:,} valid, spread over every global configuration"))
+    return rows
+
+
+def workspace_rows(sizes: Sizes) -> list[Row]:
+    """``dk.workspace.reachability``: samples per second of a map (counts, manipulability, dexterity)."""
+    chain, n = _iiwa14(), sizes.workspace
+    devices = jax.devices()
+
+    def run():
+        return dk.workspace.reachability(chain, n, key=jax.random.key(0), voxel_size=0.05, dtype="float32",
+                                         progress=False)
+
+    count = len(devices)
+    note = f"5 cm voxels, 48 orientation bins, {count} {devices[0].platform.upper()} device{'s' * (count > 1)}"
+    return [Row("reachability map (`dk.workspace`)", n, "float32", median_seconds(run, repeats=3, warmup=1),
+                note=note)]
+
+
+PARTS = {"fk": fk_rows, "jacobian": jacobian_rows, "ik": ik_rows, "srs": srs_rows, "workspace": workspace_rows}
+
+
+# --------------------------------------------------------------------------------------------- report
+
+
+def report(parts=tuple(PARTS), quick: bool = False) -> str:
+    """The suite's markdown report: a title, the machine, and one table of ``parts`` (keys of :data:`PARTS`)."""
+    jax.config.update("jax_enable_x64", True)  # for the float64 rows; float32 rows stay float32
+    busy, sizes = busy_note(), QUICK if quick else FULL
+    rows = [row.cells() for part in parts for row in PARTS[part](sizes)]
+    header = ["work", "batch", "dtype", "diffkin", "pytorch-kinematics", "pk / diffkin", "notes"]
+    only = "" if tuple(parts) == tuple(PARTS) else " --only " + ",".join(parts)
+    command = "diffkin bench" + " --quick" * quick + only
+    about = (f"`{command}`, {datetime.date.today()}. KUKA iiwa14 (diffkin: built-in DH model; pytorch-kinematics: "
+             "the shipped URDF, the same kinematics). Median of warm runs (compiled first; at least 0.3 s and 5 runs, "
+             "IK and maps 3); rates are items (configurations, targets, samples) per second; "
+             "pk / diffkin > 1: diffkin is faster.")
+    paragraphs = ["# diffkin benchmark", machine_line(), busy, about, table(header, rows)]
+    return "\n\n".join(p for p in paragraphs if p)
+
+
+def default_path() -> Path:
+    """``experiments/results/<machine>.md``."""
+    return Path(__file__).resolve().parent / "results" / f"{machine_slug()}.md"
+
+
+def main(args) -> int:
+    """``diffkin bench``: print the report of ``args.only`` (default all parts; ``args.quick`` sizes) and write it
+    to ``args.out`` (or, with ``args.write``, to :func:`default_path`)."""
+    text = report(args.only or tuple(PARTS), args.quick)
+    print(text)
+    out = Path(args.out) if args.out else default_path() if args.write else None
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text + "\n")
+        print(f"\nwrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    from diffkin.cli import main as cli_main
+
+    sys.exit(cli_main(["bench", *sys.argv[1:]]))
