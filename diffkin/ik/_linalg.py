@@ -32,6 +32,17 @@ def _cholesky_solve(A: list[list], b: list) -> list:
     return x
 
 
+def _materialized(A: list[list]) -> list[list]:
+    """A symmetric matrix with its lower triangle computed once (see :func:`rg.materialize`)."""
+    n = len(A)
+    flat = iter(rg.materialize([A[i][j] for i in range(n) for j in range(i + 1)]))
+    out = [[None] * n for _ in range(n)]
+    for i in range(n):
+        for j in range(i + 1):
+            out[i][j] = out[j][i] = next(flat)
+    return out
+
+
 def damped_step(J: list[list], r: list, lam) -> list:
     """Levenberg step ``dq = argmin |J dq - r|^2 + lam |dq|^2`` for a batch of small systems.
 
@@ -52,10 +63,10 @@ def damped_step(J: list[list], r: list, lam) -> list:
         A = [[rg.add(*(rg.mul(J[i][k], J[j][k]) for k in range(n))) for j in range(m)] for i in range(m)]
         for i in range(m):
             A[i][i] = rg.add(A[i][i], lam)
-        y = _cholesky_solve(A, r)
+        y = rg.materialize(_cholesky_solve(_materialized(A), r))
         return [rg.add(*(rg.mul(J[i][k], y[i]) for i in range(m))) for k in range(n)]
     A = [[rg.add(*(rg.mul(J[i][k], J[i][j]) for i in range(m))) for j in range(n)] for k in range(n)]
     for k in range(n):
         A[k][k] = rg.add(A[k][k], lam)
     b = [rg.add(*(rg.mul(J[i][k], r[i]) for i in range(m))) for k in range(n)]
-    return _cholesky_solve(A, b)
+    return _cholesky_solve(_materialized(A), b)
