@@ -321,6 +321,28 @@ def test_broadcasting_and_vmap_agree_with_flat_batches():
     np.testing.assert_array_equal(valid, valid_flat)
 
 
+def test_large_batches_in_overlapping_steps_agree_with_single_steps():
+    """Batches above ``CHUNK`` go through a loop whose last step overlaps the one before it."""
+    from diffkin.srs._closed_form import CHUNK
+
+    arm = ARMS["iiwa14"]
+    n = 2 * CHUNK + 123
+    q0 = random_q(arm, n, seed=13)
+    T = fk(arm, q0)
+    psi, gc = arm_angle(arm, q0)
+    q, valid = _ik(arm, T, psi, gc)  # one call: three steps
+    q_flat, valid_flat = ik(arm, T, psi, gc)  # CHUNK problems per call: one step each
+    assert q.shape == (n, 7) and valid.shape == (n,)
+    np.testing.assert_allclose(q, q_flat, atol=1e-12)
+    np.testing.assert_array_equal(valid, valid_flat)
+    # One pose broadcast against many arm angles, batch (2, n // 2 + 1) in float32.
+    psi = np.linspace(-np.pi, np.pi, n // 2 + 1, dtype=np.float32)
+    q, valid = _ik(arm, T[0].astype(np.float32), psi, ALL_GC[:2, None])
+    q_flat, valid_flat = ik(arm, T[0], psi, ALL_GC[:2, None])
+    assert q.dtype == jnp.float32 and q.shape == (2, n // 2 + 1, 7)
+    assert np.abs(np.asarray(q, np.float64) - q_flat)[valid_flat].max() < 1e-4
+
+
 # ----- singular and degenerate cases --------------------------------------------------------------
 
 

@@ -11,39 +11,38 @@ joints 1, 3, 5, 7 are ``atan2`` of two such entries ("tangent type"), joints 2, 
 cosine is one entry ("cosine type").
 
 Everything is written entry by entry over the batch (structure of arrays, as in
-:mod:`diffkin._rigid`), which XLA's CPU backend runs much faster than a ``vmap`` of 3x3 products.
+:mod:`diffkin._rigid`), which XLA's CPU backend runs much faster than a ``vmap`` of 3x3 products,
+with the fused :func:`diffkin._trig.sincos` and :func:`diffkin._trig.atan2` in place of XLA's
+slow ``sin``, ``cos`` and ``atan2``. :func:`ik` materialises its stages (inputs, pose geometry,
+``R03``, matrix entries) so that XLA computes each shared value once, and takes large batches in
+steps of :data:`CHUNK` problems.
 """
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from diffkin import _rigid as rg
+from diffkin._trig import atan2, sincos
 from diffkin.srs._arm import SRSArm, broadcast_batch, check_arm, float_input, gc_input, pose_input
+
+CHUNK = 4096
+"""Problems per step of :func:`ik` on large batches: the intermediates of one step stay in cache."""
+
+
+def _once(entries) -> list[jax.Array]:
+    """The entries computed once (:func:`diffkin._rigid.materialize`), as a list of arrays."""
+    return list(rg.materialize(entries))
 
 
 def safe_sqrt(x):
     """``sqrt(max(x, 0))`` with a finite derivative (0) where ``x <= 0``."""
     positive = x > 0
     return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), 0.0)
-
-
-def safe_atan2(y, x):
-    """``atan2(y, x)``; 0 with a finite derivative at ``y = x = 0``.
-
-    Reduced to the octant ``[0, pi/4]`` and computed with ``arctan``, which XLA's CPU backend
-    runs about five times faster than ``arctan2``; the result equals ``arctan2`` up to rounding.
-    """
-    ax, ay = jnp.abs(x), jnp.abs(y)
-    steep = ay > ax
-    num, den = jnp.where(steep, ax, ay), jnp.where(steep, ay, ax)
-    r = jnp.arctan(num / jnp.where(den > 0, den, 1.0))
-    r = jnp.where(steep, 0.5 * jnp.pi - r, r)
-    r = jnp.where(x < 0, jnp.pi - r, r)
-    return jnp.where(jnp.signbit(y), -r, r)
 
 
 class Trig(NamedTuple):
@@ -86,6 +85,10 @@ class Entries(NamedTuple):
     w32: jax.Array
 
 
+ANGLE_ENTRIES = ("r11", "r21", "r31", "r12", "r22", "r32", "w11", "w21", "w31", "w13", "w23", "w33")
+"""The entries :func:`joint_angles` uses (``r33`` and ``w32`` only enter the joint-limit roots)."""
+
+
 def _times(g, x):
     return x.scaled(g) if isinstance(x, Trig) else g * x
 
@@ -109,13 +112,14 @@ def _spherical(g, num, den, cos_b, m11, m21, m31) -> list[jax.Array]:
     Solving ``c`` after ``a`` and ``b`` reproduces ``M`` exactly even where ``a`` is ill-conditioned
     (``sin b -> 0``, where only ``a + c`` is determined), so the solution always reaches the pose.
     """
-    h = safe_sqrt(num * num + den * den)
-    flat = h == 0
-    h_safe = jnp.where(flat, 1.0, h)
-    cos_a, sin_a = jnp.where(flat, 1.0, den / h_safe), jnp.where(flat, 0.0, num / h_safe)
-    sin_b = g * h
-    c = safe_atan2(cos_a * m21 - sin_a * m11, cos_b * (cos_a * m11 + sin_a * m21) - sin_b * m31)
-    return [safe_atan2(num, den), safe_atan2(sin_b, cos_b), c]
+    h2 = num * num + den * den
+    flat = h2 == 0
+    sin_b = g * safe_sqrt(h2)
+    # h (cos c, sin c): positive scaling leaves the angle unchanged and saves two divisions
+    y = jnp.where(flat, m21, den * m21 - num * m11)
+    x = jnp.where(flat, cos_b * m11, cos_b * (den * m11 + num * m21) - g * h2 * m31)
+    c = atan2(y, x)
+    return [atan2(num, den), atan2(sin_b, cos_b), c]
 
 
 def joint_angles(e: Entries, g2, g6, theta4) -> list[jax.Array]:
@@ -131,19 +135,23 @@ def joint_angles(e: Entries, g2, g6, theta4) -> list[jax.Array]:
     return shoulder + [theta4] + wrist
 
 
+def _rows(flat) -> rg.Mat3:
+    """The matrix with the given nine entries, row by row."""
+    return (tuple(flat[0:3]), tuple(flat[3:6]), tuple(flat[6:9]))  # type: ignore[return-value]
+
+
 def _columns(cols) -> rg.Mat3:
     """The matrix with the given three columns."""
     return tuple(tuple(cols[j][i] for j in range(3)) for i in range(3))  # type: ignore[return-value]
 
 
-def shoulder_matrices(d_se, d_ew, x_sw: rg.Vec3, c4, s4) -> tuple[rg.Mat3, rg.Mat3, rg.Mat3]:
-    """``(As, Bs, Cs)`` with ``R03(psi) = As sin(psi) + Bs cos(psi) + Cs``.
+def shoulder_frame(d_se, d_ew, x_sw: rg.Vec3, c4, s4) -> tuple[rg.Vec3, rg.Mat3]:
+    """The shoulder-wrist axis ``u = x_sw / |x_sw|`` and the reference shoulder frame ``R03_ref``.
 
-    The reference frame ``R03_ref = R01(theta1v) R12(theta2v) R23(0)`` puts the arm (shoulder,
-    elbow, wrist) in the vertical plane through ``x_sw`` (``theta1v = atan2(y, x)``, 0 on the
-    joint-1 axis). ``theta2v`` is solved from ``x_sw = R03_ref [-d_ew s4, d_se + d_ew c4, 0]``
-    (the shoulder-wrist vector in frame 3), normalised so that ``R03_ref`` stays a rotation
-    when the target is out of reach.
+    ``R03_ref = R01(theta1v) R12(theta2v) R23(0)`` puts the arm (shoulder, elbow, wrist) in the
+    vertical plane through ``x_sw`` (``theta1v = atan2(y, x)``, 0 on the joint-1 axis). ``theta2v``
+    is solved from ``x_sw = R03_ref [-d_ew s4, d_se + d_ew c4, 0]`` (the shoulder-wrist vector in
+    frame 3), normalised so that ``R03_ref`` stays a rotation when the target is out of reach.
 
     Args:
         d_se, d_ew: upper arm and forearm lengths, metres.
@@ -151,20 +159,26 @@ def shoulder_matrices(d_se, d_ew, x_sw: rg.Vec3, c4, s4) -> tuple[rg.Mat3, rg.Ma
         c4, s4: cosine and sine of ``theta4``.
     """
     x, y, z = x_sw
-    rho = safe_sqrt(x * x + y * y)
-    on_axis = rho == 0
-    rho_safe = jnp.where(on_axis, 1.0, rho)
-    c1, s1 = jnp.where(on_axis, 1.0, x / rho_safe), jnp.where(on_axis, 0.0, y / rho_safe)
+    rho2 = x * x + y * y
+    on_axis = rho2 == 0
+    rho = safe_sqrt(rho2)
+    inv_rho = 1.0 / jnp.where(on_axis, 1.0, rho)
+    c1, s1 = jnp.where(on_axis, 1.0, x * inv_rho), jnp.where(on_axis, 0.0, y * inv_rho)
     v_x, v_y = -d_ew * s4, d_se + d_ew * c4
     cn, sn = v_x * rho + v_y * z, v_y * rho - v_x * z
-    norm = safe_sqrt(cn * cn + sn * sn)
-    degenerate = norm == 0
-    norm_safe = jnp.where(degenerate, 1.0, norm)
-    c2, s2 = jnp.where(degenerate, 1.0, cn / norm_safe), jnp.where(degenerate, 0.0, sn / norm_safe)
+    norm2 = cn * cn + sn * sn
+    degenerate = norm2 == 0
+    inv_norm = 1.0 / jnp.where(degenerate, 1.0, safe_sqrt(norm2))
+    c2, s2 = jnp.where(degenerate, 1.0, cn * inv_norm), jnp.where(degenerate, 0.0, sn * inv_norm)
+    length2 = rho2 + z * z
+    inv_length = 1.0 / jnp.where(length2 == 0, 1.0, safe_sqrt(length2))
+    u = (x * inv_length, y * inv_length, jnp.where(length2 == 0, 1.0, z * inv_length))
     ref = ((c1 * c2, c1 * s2, s1), (s1 * c2, s1 * s2, -c1), (-s2, c2, 0.0))
-    length = safe_sqrt(x * x + y * y + z * z)
-    length_safe = jnp.where(length == 0, 1.0, length)
-    u = (x / length_safe, y / length_safe, jnp.where(length == 0, 1.0, z / length_safe))
+    return u, ref
+
+
+def shoulder_matrices(u: rg.Vec3, ref: rg.Mat3) -> tuple[rg.Mat3, rg.Mat3, rg.Mat3]:
+    """``(As, Bs, Cs)`` with ``R03(psi) = As sin(psi) + Bs cos(psi) + Cs``: ``ref`` rotated by ``psi`` about ``u``."""
     a_cols = [rg.cross(u, rg.column(ref, k)) for k in range(3)]
     b_cols = [rg.scale(-1.0, rg.cross(u, a)) for a in a_cols]
     c_cols = [rg.vadd(rg.column(ref, k), rg.scale(-1.0, b)) for k, b in enumerate(b_cols)]
@@ -175,16 +189,15 @@ class PoseGeometry(NamedTuple):
     """Everything about one pose and global configuration that does not depend on ``psi``.
 
     Attributes:
-        As, Bs, Cs: shoulder coefficient matrices, ``R03(psi) = As sin(psi) + Bs cos(psi) + Cs``.
+        u, ref: the shoulder-wrist axis and the reference shoulder frame (:func:`shoulder_frame`).
         R07: target rotation (3x3 entries).
         c4, s4, theta4: the elbow angle and its cosine and sine.
         g2, g6: the global-configuration signs of joints 2 and 6.
         reachable: whether ``|d_se - d_ew| <= |x_sw| <= d_se + d_ew`` (up to rounding).
     """
 
-    As: rg.Mat3
-    Bs: rg.Mat3
-    Cs: rg.Mat3
+    u: rg.Vec3
+    ref: rg.Mat3
     R07: rg.Mat3
     c4: jax.Array
     s4: jax.Array
@@ -209,14 +222,21 @@ class PoseGeometry(NamedTuple):
 
     def trig_entries(self) -> Entries:
         """The joint-angle entries as functions of ``psi``."""
-        per_matrix = [self.entries(M) for M in (self.As, self.Bs, self.Cs)]
+        per_matrix = [self.entries(M) for M in shoulder_matrices(self.u, self.ref)]
         return Entries(*(Trig(*abc) for abc in zip(*per_matrix, strict=True)))
 
     def angles(self, psi) -> list[jax.Array]:
-        """The seven joint angles (radians) at arm angles ``psi``."""
-        s, c = jnp.sin(psi), jnp.cos(psi)
-        R03 = tuple(tuple(self.As[i][j] * s + self.Bs[i][j] * c + self.Cs[i][j] for j in range(3)) for i in range(3))
-        return joint_angles(self.entries(R03), self.g2, self.g6, self.theta4)
+        """The seven joint angles (radians) at arm angles ``psi``.
+
+        ``R03`` and the entries are materialised (:func:`_once`): each feeds several later
+        expressions, which XLA would otherwise recompute in every one.
+        """
+        s, c = sincos(psi)
+        As, Bs, Cs = shoulder_matrices(self.u, self.ref)
+        R03 = _rows(_once([As[i][j] * s + Bs[i][j] * c + Cs[i][j] for i in range(3) for j in range(3)]))
+        e = self.entries(R03)
+        e = e._replace(**dict(zip(ANGLE_ENTRIES, _once([getattr(e, k) for k in ANGLE_ENTRIES]), strict=True)))
+        return joint_angles(e, self.g2, self.g6, self.theta4)
 
 
 def pose_geometry(arm: SRSArm, target: jax.Array, gc: jax.Array) -> PoseGeometry:
@@ -227,12 +247,18 @@ def pose_geometry(arm: SRSArm, target: jax.Array, gc: jax.Array) -> PoseGeometry
     R07 = tuple(tuple(target[..., i, j] for j in range(3)) for i in range(3))
     x_sw = (target[..., 0, 3] - d_wf * R07[0][2], target[..., 1, 3] - d_wf * R07[1][2],
             target[..., 2, 3] - d_wf * R07[2][2] - d_bs)
+    # Materialised stages (see PoseGeometry.angles): the inputs, read once from their interleaved
+    # layout, then the geometry.
+    flat = _once([e for row in R07 for e in row] + list(x_sw) + [g2, g4, g6])
+    R07, x_sw, (g2, g4, g6) = _rows(flat[:9]), tuple(flat[9:12]), flat[12:]
     c4_raw = (rg.dot(x_sw, x_sw) - d_se * d_se - d_ew * d_ew) / (2.0 * d_se * d_ew)
     reachable = jnp.abs(c4_raw) <= 1.0 + 64.0 * jnp.finfo(dtype).eps
     c4 = jnp.clip(c4_raw, -1.0, 1.0)
     s4 = g4 * safe_sqrt(1.0 - c4 * c4)
-    As, Bs, Cs = shoulder_matrices(d_se, d_ew, x_sw, c4, s4)
-    return PoseGeometry(As, Bs, Cs, R07, c4, s4, safe_atan2(s4, c4), g2, g6, reachable)
+    u, ref = shoulder_frame(d_se, d_ew, x_sw, c4, s4)
+    flat = _once(list(u) + [e for row in ref for e in row][:8] + [c4, s4, atan2(s4, c4)])  # ref[2][2] = 0
+    u, ref, (c4, s4, theta4) = tuple(flat[:3]), _rows(flat[3:11] + [0.0]), flat[11:]
+    return PoseGeometry(u, ref, R07, c4, s4, theta4, g2, g6, reachable)
 
 
 def within_limits(arm: SRSArm, q: list[jax.Array]) -> jax.Array:
@@ -277,6 +303,28 @@ def ik(arm: SRSArm, target: jax.Array, psi: jax.Array, gc: jax.Array) -> tuple[j
             shapes that do not broadcast.
     """
     target, gc, psi = prepare(arm, target, gc, psi=psi)
+    shape = jnp.broadcast_shapes(target.shape[:-2], psi.shape, gc.shape[:-1])
+    n = math.prod(shape)
+    if n <= CHUNK:
+        q, valid = _solve(arm, target, psi, gc)
+        return jnp.broadcast_to(q, shape + (7,)), jnp.broadcast_to(valid, shape)
+    # A large batch goes in steps of CHUNK problems, the last step overlapping the one before it.
+    # Each step's intermediates then stay in cache, and XLA's temporary buffer stays small
+    # (float64 otherwise pays for fresh pages on every call).
+    inputs = (jnp.broadcast_to(target, shape + (4, 4)).reshape(n, 4, 4), jnp.broadcast_to(psi, shape).reshape(n),
+              jnp.broadcast_to(gc, shape + (3,)).reshape(n, 3))
+
+    def step(i, out):
+        start = jnp.minimum(i * CHUNK, n - CHUNK)
+        results = _solve(arm, *(jax.lax.dynamic_slice_in_dim(x, start, CHUNK) for x in inputs))
+        return tuple(jax.lax.dynamic_update_slice_in_dim(o, r, start, 0) for o, r in zip(out, results, strict=True))
+
+    q, valid = jax.lax.fori_loop(0, -(-n // CHUNK), step, (jnp.zeros((n, 7), target.dtype), jnp.zeros((n,), bool)))
+    return q.reshape(shape + (7,)), valid.reshape(shape)
+
+
+def _solve(arm: SRSArm, target, psi, gc) -> tuple[jax.Array, jax.Array]:
+    """:func:`ik` of checked inputs in one step."""
     geometry = pose_geometry(arm, target, gc)
     q = geometry.angles(psi)
     shape = jnp.broadcast_shapes(*(x.shape for x in q))
@@ -313,18 +361,15 @@ def arm_angle(arm: SRSArm, q: jax.Array) -> tuple[jax.Array, jax.Array]:
         raise ValueError(f"q: expected shape (..., 7) for an SRS arm, got {q.shape}")
     dtype = q.dtype
     d_se, d_ew = jnp.asarray(arm.d_se, dtype), jnp.asarray(arm.d_ew, dtype)
-    c = [jnp.cos(q[..., i]) for i in range(4)]
-    s = [jnp.sin(q[..., i]) for i in range(4)]
-    c1, c2, c3, c4 = c
-    s1, s2, s3, s4 = s
+    (s1, c1), (s2, c2), (s3, c3), (s4, c4) = (sincos(q[..., i]) for i in range(4))
     R03 = (
         (c1 * c2 * c3 - s1 * s3, c1 * s2, c1 * c2 * s3 + s1 * c3),
         (s1 * c2 * c3 + c1 * s3, s1 * s2, s1 * c2 * s3 - c1 * c3),
         (-s2 * c3, c2, -s2 * s3),
     )
     x_sw = rg.vadd(rg.scale(-d_ew * s4, rg.column(R03, 0)), rg.scale(d_se + d_ew * c4, rg.column(R03, 1)))
-    As, Bs, _ = shoulder_matrices(d_se, d_ew, x_sw, c4, s4)
+    As, Bs, _ = shoulder_matrices(*shoulder_frame(d_se, d_ew, x_sw, c4, s4))
     frobenius = lambda A, B: rg.add(*(rg.mul(A[i][j], B[i][j]) for i in range(3) for j in range(3)))  # noqa: E731
-    psi = safe_atan2(frobenius(R03, As), frobenius(R03, Bs))
+    psi = atan2(frobenius(R03, As), frobenius(R03, Bs))
     gc = jnp.where(q[..., 1::2] >= 0, 1.0, -1.0).astype(dtype)
     return psi, gc

@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffkin._trig import atan2, sincos
 from diffkin.srs._arm import SRSArm, check_arm, pose_input
 from diffkin.srs._closed_form import (
     Entries,
@@ -31,7 +32,6 @@ from diffkin.srs._closed_form import (
     joint_angles,
     pose_geometry,
     prepare,
-    safe_atan2,
     safe_sqrt,
     tangent_pairs,
     within_limits,
@@ -52,7 +52,7 @@ def _roots(f: Trig) -> jax.Array:
     ratio = -f.c / jnp.where(r > 0, r, 1.0)
     exists = (r > 0) & (jnp.abs(ratio) <= 1.0)
     ratio = jnp.clip(ratio, -1.0, 1.0)
-    phase, half_width = safe_atan2(f.a, f.b), safe_atan2(safe_sqrt(1.0 - ratio * ratio), ratio)
+    phase, half_width = atan2(f.a, f.b), atan2(safe_sqrt(1.0 - ratio * ratio), ratio)
     roots = jnp.concatenate([phase + half_width, phase - half_width], -1)
     roots = jnp.mod(roots + jnp.pi, 2.0 * jnp.pi) - jnp.pi
     return jnp.where(jnp.concatenate([exists, exists], -1), roots, -jnp.pi)
@@ -106,7 +106,7 @@ def feasible_arm_angles(arm: SRSArm, target: jax.Array, gc: jax.Array) -> tuple[
     cuts = jnp.sort(jnp.concatenate([roots] + [x[..., None] for x in ends], -1), -1)
     left, right = cuts[..., :-1], cuts[..., 1:]
     mid = 0.5 * (left + right)
-    s, c = jnp.sin(mid), jnp.cos(mid)
+    s, c = sincos(mid)
     per_piece = lambda x: x[..., None]  # noqa: E731 (one value per pose -> broadcast over the pieces)
     values = Entries(*(t.map(per_piece).at(s, c) for t in e))
     angles = joint_angles(values, per_piece(g2), per_piece(g6), per_piece(geometry.theta4))
