@@ -1,4 +1,4 @@
-"""Sine and cosine of one angle together, fast on XLA's CPU backend.
+"""Sine and cosine of one angle together, and the two-argument arctangent, fast on XLA's CPU backend.
 
 XLA's CPU ``sin`` and ``cos`` are each evaluated on their own and dominate the cost of a
 forward pass (an arm's FK is ~14 of them against ~300 multiply-adds). :func:`sincos` shares
@@ -10,6 +10,16 @@ Accuracy against the exact values, for ``|x| <= 1e4`` rad: float32 within 1e-7 (
 float32 ``sin`` is within 4e-8), float64 within 2e-16 (as the library's). Larger angles lose
 accuracy in the reduction (as ``k * pi/2`` no longer splits exactly): joint angles of that
 size are not meaningful. Other dtypes use ``jnp.sin``/``jnp.cos``.
+
+XLA's CPU ``atan`` is slow too (~13 ns per float32 element on a 2-core EPYC VM, ``atan2`` twice
+that). :func:`atan2` reduces ``(y, x)`` to an argument ``|t| <= tan(pi/8)`` with one division
+(``t = lo/hi`` or ``(lo - hi)/(lo + hi)`` for ``lo = min(|x|, |y|)``, ``hi = max(|x|, |y|)``),
+evaluates the Cephes approximation of ``atan(t)`` there (float32: a degree-9 odd polynomial;
+float64: a rational function) and unfolds the octant with selects. Accuracy: float32 within
+2.7e-7 rad (XLA's within 2.5e-7), float64 within 4.7e-16 rad; signs of zero and the axes as
+``arctan2``, except ``atan2(+-0, +-0) = +-0`` (a neutral value where the angle is undefined).
+
+Both have exact derivatives (custom JVPs, not the derivatives of the approximations).
 """
 
 from __future__ import annotations
@@ -70,3 +80,47 @@ def _sincos_jvp(primals, tangents):
     (x,), (dx,) = primals, tangents
     s, c = sincos(x)
     return (s, c), (c * dx, -s * dx)
+
+
+_TAN_PI_8 = 0.41421356237309504880
+# atan t = t + t z P(z) / Q(z) with z = t^2 (Q monic, float64) or t + t z P(z) (float32),
+# coefficients highest power first (Cephes atanf.c and atan.c).
+_P = {
+    np.dtype(np.float32): (8.05374449538e-2, -1.38776856032e-1, 1.99777106478e-1, -3.33329491539e-1),
+    np.dtype(np.float64): (-8.750608600031904122785e-1, -1.615753718733365076637e1, -7.500855792314704667340e1,
+                           -1.228866684490136173410e2, -6.485021904942025371773e1),
+}
+_Q = (1.0, 2.485846490142306297962e1, 1.650270098316988542046e2, 4.328810604912902668951e2,
+      4.853903996359136964868e2, 1.945506571482613964425e2)
+
+
+@jax.custom_jvp
+def atan2(y: jax.Array, x: jax.Array) -> jax.Array:
+    """``arctan2(y, x)`` of float arrays of one dtype (broadcast together), elementwise; ``+-0`` at the origin."""
+    dtype = np.dtype(jnp.result_type(y, x))
+    if dtype not in _P:
+        return jnp.arctan2(y, x)
+    ax, ay = jnp.abs(x), jnp.abs(y)
+    steep = ay > ax
+    lo, hi = jnp.minimum(ax, ay), jnp.maximum(ax, ay)
+    upper = lo > _TAN_PI_8 * hi  # atan(lo/hi) = pi/4 + atan((lo - hi)/(lo + hi))
+    num, den = jnp.where(upper, lo - hi, lo), jnp.where(upper, lo + hi, hi)
+    t = num / jnp.where(den > 0, den, 1.0)
+    z = t * t
+    if dtype == np.float32:
+        r = t + t * z * _poly(_P[dtype], z)
+    else:
+        r = t + t * z * _poly(_P[dtype], z) / _poly(_Q, z)
+    r = jnp.where(upper, 0.25 * np.pi + r, r)
+    r = jnp.where(steep, 0.5 * np.pi - r, r)
+    r = jnp.where(x < 0, np.pi - r, r)
+    return jnp.where(jnp.signbit(y), -r, r)
+
+
+@atan2.defjvp
+def _atan2_jvp(primals, tangents):
+    (y, x), (dy, dx) = primals, tangents
+    r2 = x * x + y * y
+    nonzero = r2 > 0
+    d = jnp.where(nonzero, (x * dy - y * dx) / jnp.where(nonzero, r2, 1.0), 0.0)
+    return atan2(y, x), d

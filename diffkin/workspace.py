@@ -35,6 +35,7 @@ from jax.sharding import PartitionSpec as P
 
 from diffkin import _rigid as rg
 from diffkin import kinematics
+from diffkin._trig import atan2
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain, to_poe
 
@@ -196,7 +197,7 @@ def _orientation_bin(R: rg.Mat3, n_roll: int) -> jax.Array:
     z_a = jnp.where(a == 0, R[0][2], jnp.where(a == 1, R[1][2], R[2][2]))
     x_u = jnp.where(a == 0, R[1][0], jnp.where(a == 1, R[2][0], R[0][0]))
     y_u = jnp.where(a == 0, R[1][1], jnp.where(a == 1, R[2][1], R[0][1]))
-    roll = jnp.arctan2(-y_u, x_u)  # [-pi, pi]
+    roll = atan2(-y_u, x_u)  # [-pi, pi]
     sector = jnp.clip(jnp.floor((roll + jnp.pi) * (n_roll / (2 * jnp.pi))), 0, n_roll - 1).astype(jnp.int32)
     return (2 * a + (z_a < 0)) * n_roll + sector
 
