@@ -152,8 +152,8 @@ def stack(entries: list[Entry], shape: tuple[int, ...], dtype) -> jax.Array:
     return jnp.stack(arrays, axis=-1)
 
 
-def materialize(entries: list[Entry]) -> list[jax.Array]:
-    """The entries computed once, as slices of one stacked array behind an optimization barrier.
+def materialize(entries: list[Entry]) -> jax.Array:
+    """The entries computed once: ``(len(entries),) + batch`` stacked behind an optimization barrier.
 
     XLA's CPU fusion duplicates an elementwise producer into every consumer kernel; in a deep
     computation with much reuse (a forward pass, a Cholesky factorisation) that recomputes the
@@ -163,7 +163,7 @@ def materialize(entries: list[Entry]) -> list[jax.Array]:
     shape = batch_shape(*entries)
     dtype = jnp.result_type(*(e for e in entries if not isinstance(e, float)))
     flat = jnp.stack([jnp.broadcast_to(jnp.asarray(e, dtype), shape) for e in entries])  # entry axis first
-    return list(jax.lax.optimization_barrier(flat))
+    return jax.lax.optimization_barrier(flat)
 
 
 def to_matrix(A: Rigid, shape: tuple[int, ...], dtype) -> jax.Array:

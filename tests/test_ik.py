@@ -163,7 +163,7 @@ def test_planar_2r_matches_closed_form():
 def test_batch_shapes_vmap_and_independence():
     chain = dk.robots.iiwa7()
     target = jnp.asarray(_dh_fk(chain, random_q(chain, 6, seed=8)), jnp.float32)
-    solve = jax.jit(lambda t: ik.solve(chain, t, key=jax.random.key(3), num_seeds=4))
+    solve = jax.jit(lambda t: ik.solve(chain, t, key=jax.random.key(3), num_seeds=16))
     res = solve(target.reshape(2, 3, 4, 4))
     assert res.q.shape == (2, 3, 7) and res.success.shape == (2, 3) and res.iters.shape == (2, 3)
     flat = solve(target)
@@ -173,7 +173,7 @@ def test_batch_shapes_vmap_and_independence():
     more = solve(jnp.concatenate([target, far[None]]))
     np.testing.assert_array_equal(more.q[:6], flat.q)
     np.testing.assert_array_equal(more.iters[:6], flat.iters)
-    single = jax.vmap(lambda t: ik.solve(chain, t, key=jax.random.key(3), num_seeds=4))(target)
+    single = jax.vmap(lambda t: ik.solve(chain, t, key=jax.random.key(3), num_seeds=16))(target)
     assert np.all(single.success) and single.q.shape == (6, 7)
 
 

@@ -15,8 +15,8 @@ _LAM_MIN = 1e-10  # m^2: keeps J J^T positive definite at singularities
 
 
 def init(q: jnp.ndarray) -> jnp.ndarray:
-    """Per-problem damping factor ``mu`` ``(P,)``."""
-    return jnp.full(q.shape[:1], _MU_INIT, q.dtype)
+    """Per-problem damping factor ``mu`` ``(P,)`` for ``q`` ``(dof, P)``."""
+    return jnp.full(q.shape[1:], _MU_INIT, q.dtype)
 
 
 def step(problem: Problem, q, ev: Eval, mu):
@@ -27,7 +27,7 @@ def step(problem: Problem, q, ev: Eval, mu):
     keeps ``q`` and raises the damping.
     """
     lam = mu * ev.cost + _LAM_MIN
-    dq = jnp.stack(damped_step(ev.J, ev.r, lam), axis=-1)
+    dq = jnp.stack(damped_step(ev.J, ev.r, lam))
     q_try = problem.project(q + dq)
     ev_try = evaluate(problem, q_try)
     accept = ev_try.cost < ev.cost

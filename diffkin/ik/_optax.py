@@ -15,8 +15,8 @@ def default_optimizer() -> optax.GradientTransformation:
 
 
 def init(optimizer: optax.GradientTransformation, q: jax.Array):
-    """Optimizer state of every problem (vmapped, so no statistic is shared across the batch)."""
-    return jax.vmap(optimizer.init)(q)
+    """Optimizer state of every problem, problem axis last (vmapped: no statistic is shared)."""
+    return jax.vmap(optimizer.init, in_axes=-1, out_axes=-1)(q)
 
 
 def step(optimizer: optax.GradientTransformation, problem: Problem, q, ev: Eval, state):
@@ -25,7 +25,7 @@ def step(optimizer: optax.GradientTransformation, problem: Problem, q, ev: Eval,
     Returns ``(q_new, ev_new, state_new, accepted, stalled)``: every step is taken (first-order
     methods may go uphill), none stalls.
     """
-    updates, state = jax.vmap(optimizer.update)(gradient(ev), state, q)
+    updates, state = jax.vmap(optimizer.update, in_axes=-1, out_axes=-1)(gradient(ev), state, q)
     q_new = problem.project(optax.apply_updates(q, updates))
     ev_new = evaluate(problem, q_new)
     accept = jnp.ones(ev.cost.shape, bool)

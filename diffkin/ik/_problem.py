@@ -1,7 +1,8 @@
 """The IK residual, its Jacobian and the joint-limit projection, from one forward pass.
 
-All arrays here are flat over ``P = seeds x targets`` problems; vectors and matrices are
-held as lists of per-entry arrays (structure of arrays, as in :mod:`diffkin._rigid`).
+All arrays here are flat over ``P = seeds x targets`` problems, with that axis last: ``q`` is
+``(dof, P)`` and vectors and matrices are stacks of per-entry arrays (structure of arrays, as in
+:mod:`diffkin._rigid`), so that one select or copy moves a whole field.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin import kinematics
+from diffkin._trig import atan2
 
 #: Metres per radian in the residual: the rotation error enters as ``ROT_WEIGHT * angle``, so a
 #: 1e-4 rad rotation error counts like a 2e-5 m position error (about a tenth of an arm's reach).
@@ -24,8 +26,8 @@ class Eval(NamedTuple):
     """The residual at configurations ``q``: ``r = [p_t - p; ROT_WEIGHT log(R_t R^T)]``.
 
     Attributes:
-        r: ``m`` entries (``m = 6`` for poses, 3 for positions), each ``(P,)``.
-        J: ``m x dof`` entries of ``d(-r)/dq``: the world Jacobian, rotation rows weighted.
+        r: ``(m, P)`` (``m = 6`` for poses, 3 for positions).
+        J: ``(m, dof, P)`` ``d(-r)/dq``: the world Jacobian, rotation rows weighted.
         cost: ``(P,)`` ``|r|^2``.
         pos_err: ``(P,)`` metres.
         rot_err: ``(P,)`` radians.
@@ -60,13 +62,15 @@ class Problem(NamedTuple):
 
     def project(self, q: jax.Array) -> jax.Array:
         """Wrap unlimited revolute joints and (with ``respect_limits``) clip to the limits."""
-        wrapped = jnp.where(self.wrap, jnp.mod(q + np.pi, 2 * np.pi) - np.pi, q)
-        return jnp.clip(wrapped, self.lower, self.upper) if self.respect_limits else wrapped
+        wrap, lower, upper = self.wrap[:, None], self.lower[:, None], self.upper[:, None]
+        wrapped = jnp.where(wrap, jnp.mod(q + np.pi, 2 * np.pi) - np.pi, q)
+        return jnp.clip(wrapped, lower, upper) if self.respect_limits else wrapped
 
 
 def evaluate(problem: Problem, q: jax.Array) -> Eval:
-    """Residual, weighted Jacobian and errors at ``q`` ``(P, dof)``, from one forward pass."""
-    frames, shape, dtype = kinematics._frames(problem.chain, q)
+    """Residual, weighted Jacobian and errors at ``q`` ``(dof, P)``, from one forward pass."""
+    frames = problem.chain._frames(list(q))
+    shape, dtype = q.shape[1:], q.dtype
     ee = frames.ee
     columns = kinematics._world_from_space(frames.screws, ee.p)
     e_p = [rg.add(problem.p[i], -ee.p[i]) for i in range(3)]
@@ -80,11 +84,10 @@ def evaluate(problem: Problem, q: jax.Array) -> Eval:
         J = J + [[rg.mul(ROT_WEIGHT, c[1][i]) for c in columns] for i in range(3)]
     m, n = len(r), len(J[0])
     cost = rg.add(*(rg.mul(e, e) for e in r))
-    # One stacked array behind a barrier: XLA's CPU fusion would otherwise recompute the whole
-    # forward pass inside every kernel of the solver that consumes these entries (20x slower).
-    flat = rg.stack([*r, *(e for row in J for e in row), cost, pos_err, rot_err], shape, dtype)
-    flat = jnp.moveaxis(jax.lax.optimization_barrier(flat), -1, 0)
-    return Eval(list(flat[:m]), [list(flat[m + i * n : m + (i + 1) * n]) for i in range(m)], *flat[m + m * n :])
+    # Materialised: XLA's CPU fusion would otherwise recompute the whole forward pass inside
+    # every kernel of the solver that consumes these entries (20x slower).
+    flat = rg.materialize([*r, *(e for row in J for e in row), cost, pos_err, rot_err])
+    return Eval(flat[:m], flat[m : m + m * n].reshape(m, n, -1), *flat[m + m * n :])
 
 
 def _log(M: rg.Mat3) -> tuple[rg.Vec3, jax.Array]:
@@ -98,7 +101,7 @@ def _log(M: rg.Mat3) -> tuple[rg.Vec3, jax.Array]:
     sin2 = rg.dot(v, v)
     sin_ = jnp.sqrt(sin2)
     cos_ = 0.5 * (rg.add(M[0][0], M[1][1], M[2][2]) - 1.0)
-    theta = jnp.arctan2(sin_, cos_)
+    theta = atan2(sin_, cos_)
     small = theta < 1e-4
     factor = jnp.where(small, 1.0 + theta * theta / 6.0, theta / jnp.where(small, 1.0, sin_))
     S = [[rg.add(0.5 * rg.add(M[i][j], M[j][i]), -cos_ if i == j else 0.0) for j in range(3)] for i in range(3)]
@@ -113,6 +116,5 @@ def _log(M: rg.Mat3) -> tuple[rg.Vec3, jax.Array]:
 
 
 def gradient(ev: Eval) -> jax.Array:
-    """``(P, dof)`` gradient of ``cost / 2`` with respect to ``q``: ``-J^T r`` (exact, SO(3) log included)."""
-    m, n = len(ev.J), len(ev.J[0])
-    return jnp.stack([-sum(ev.J[i][k] * ev.r[i] for i in range(m)) for k in range(n)], axis=-1)
+    """``(dof, P)`` gradient of ``cost / 2`` with respect to ``q``: ``-J^T r`` (exact, SO(3) log included)."""
+    return -jnp.sum(ev.J * ev.r[:, None], axis=0)

@@ -10,6 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from diffkin import _rigid as rg
+from diffkin import kinematics
 from diffkin._rigid import is_concrete
 from diffkin.ik import _lm, _optax
 from diffkin.ik._implicit import implicit_q
@@ -19,15 +21,21 @@ from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain
 
 _METHODS = ("lm", "optax")
-_DEFAULT_ITERS = {"lm": 60, "optax": 1000}
-_FIRST_ROUND = 15  # LM iterations of every seed; then only the best _KEEP seeds of each target go on
-_KEEP = 3
+_DEFAULT_ITERS = {"lm": 10, "optax": 1000}
+# Rounds of _GROUP seeds per target: the first for every target, the later ones only for the
+# targets still unsolved, packed into chunks of max(n / 32, 8) targets (one compiled loop serves
+# every later round, and small chunks keep its iterations cheap).
+_GROUP = 4
+_CHUNK_DIV, _MIN_CHUNK = 32, 8
+_SCREEN = 8  # each random seed is the best (least pose error) of this many uniform draws
+_POLISH = 3  # LM: final rounds go on from the best seed so far and perturbations of it ...
+_JITTER = 0.05  # ... each a step of this fraction towards a random seed
 
 
 class _Seeds(NamedTuple):
     """Iteration state of every seed, flat over ``P = num_seeds x targets``."""
 
-    q: jax.Array  # (P, dof)
+    q: jax.Array  # (dof, P)
     ev: Eval
     aux: object  # method state: LM damping or optax state
     success: jax.Array  # (P,) bool, sticky
@@ -50,10 +58,8 @@ def _cast(tree, dtype):
 
 
 def _where(mask, new, old):
-    """Per-problem select over a pytree whose leaves all lead with the ``(P,)`` axis."""
-    def pick(a, b):
-        return jnp.where(mask.reshape(mask.shape + (1,) * (jnp.ndim(a) - 1)), a, b)
-    return jax.tree.map(pick, new, old)
+    """Per-problem select over a pytree whose leaves all end with the problem axis."""
+    return jax.tree.map(lambda a, b: jnp.where(mask, a, b), new, old)
 
 
 def _inward(limit, dtype, side: int) -> jax.Array:
@@ -64,23 +70,39 @@ def _inward(limit, dtype, side: int) -> jax.Array:
     return jnp.where(outside, jnp.nextafter(rounded, jnp.asarray(-side * jnp.inf, dtype)), rounded)
 
 
-def _seed_configs(key, lower, upper, num_seeds: int, num_targets: int, dtype) -> jax.Array:
-    """``(num_seeds, num_targets, dof)`` uniform within the limits (one turn / one metre if unlimited).
+def _seed_configs(key, targets: jax.Array, rounds: jax.Array, lower, upper, count: int, dtype) -> jax.Array:
+    """``(count, len(targets), dof)`` uniform within the limits (one turn / one metre if unlimited).
 
-    Target ``b`` draws from ``fold_in(key, b)``, so its seeds do not depend on the batch size.
+    Target ``b = targets[i]`` draws its seeds of round ``r = rounds[i]`` from
+    ``fold_in(fold_in(key, b), r)``: they depend neither on the batch nor on the pass that tries them.
     """
     lo = jnp.where(jnp.isfinite(lower), lower, -np.pi)
     hi = jnp.where(jnp.isfinite(upper), upper, np.pi)
-    keys = jax.vmap(lambda b: jax.random.fold_in(key, b))(jnp.arange(num_targets))
-    u = jax.vmap(lambda k: jax.random.uniform(k, (num_seeds, lower.shape[0]), dtype))(keys)
+    keys = jax.vmap(lambda b, r: jax.random.fold_in(jax.random.fold_in(key, b), r))(targets, rounds)
+    u = jax.vmap(lambda k: jax.random.uniform(k, (count, lower.shape[0]), dtype))(keys)
     return jnp.swapaxes(lo + u * (hi - lo), 0, 1)
 
 
+def _screened(model, targets, q, group: int, position_only: bool):
+    """The ``group`` candidates ``q`` ``(K, m, dof)`` of least pose error (one forward pass each)."""
+    frames, _, _ = kinematics._frames(model, q)
+    ee = frames.ee
+    if position_only:
+        tp, cost = targets, 0.0
+    else:
+        tp = targets[..., :3, 3]
+        trace = sum(rg.mul(ee.R[i][j], targets[..., i, j]) for i in range(3) for j in range(3))
+        cost = 0.04 * (3.0 - trace)
+    cost = cost + sum((ee.p[i] - tp[..., i]) ** 2 for i in range(3))
+    order = jnp.argsort(cost, axis=0)[:group]
+    return jnp.take_along_axis(q, order[..., None], axis=0)
+
+
 def _start(problem: Problem, q: jax.Array, aux, pos_tol: float, rot_tol: float) -> _Seeds:
-    """Seeds at ``q`` ``(P, dof)``, evaluated (one forward pass)."""
+    """Seeds at ``q`` ``(dof, P)``, evaluated (one forward pass)."""
     ev = evaluate(problem, q)
-    zeros = jnp.zeros(q.shape[0], bool)
-    return _Seeds(q, ev, aux, _succeeded(ev, pos_tol, rot_tol), zeros, jnp.zeros(q.shape[0], jnp.int32))
+    zeros = jnp.zeros(q.shape[1:], bool)
+    return _Seeds(q, ev, aux, _succeeded(ev, pos_tol, rot_tol), zeros, jnp.zeros(q.shape[1:], jnp.int32))
 
 
 def _succeeded(ev: Eval, pos_tol: float, rot_tol: float) -> jax.Array:
@@ -125,23 +147,21 @@ def _run(problem: Problem, seeds: _Seeds, step_fn, *, num_targets: int, has_q0: 
     return jax.lax.while_loop(cond, body, (jnp.asarray(0), seeds))[1]
 
 
-def _ranked(s: _Seeds, num_targets: int, keep: int, q0) -> _Seeds:
-    """The ``keep`` best seeds of every target, best first, flat as ``(keep * num_targets,)``.
+def _best(s: _Seeds, num_targets: int, q0) -> _Seeds:
+    """The best seed of every target (leaves end with ``(num_targets,)``).
 
-    Successful seeds come first, ordered by distance to ``q0`` when given (else by residual),
-    then the others by residual.
+    A successful seed wins, the one nearest ``q0`` when given (else of least residual);
+    without a success, the seed of least residual.
     """
-    def per_target(x):
-        return x.reshape((-1, num_targets) + x.shape[1:])
+    def per_target(x):  # (..., P) -> (..., seeds, targets)
+        return x.reshape(x.shape[:-1] + (-1, num_targets))
 
     success, cost = per_target(s.success), per_target(s.ev.cost)
-    rank = cost if q0 is None else jnp.sum((per_target(s.q) - q0[None]) ** 2, axis=-1)
-    order = jnp.lexsort((jnp.where(success, rank, cost), ~success), axis=0)[:keep]
-
+    rank = cost if q0 is None else jnp.sum((per_target(s.q) - q0.T[:, None, :]) ** 2, axis=0)
+    order = jnp.lexsort((jnp.where(success, rank, cost), ~success), axis=0)[:1]  # (1, targets)
     def take(x):
         x = per_target(x)
-        x = jnp.take_along_axis(x, order.reshape(order.shape + (1,) * (x.ndim - 2)), axis=0)
-        return x.reshape((-1,) + x.shape[2:])
+        return jnp.take_along_axis(x, order.reshape((1,) * (x.ndim - 2) + order.shape), axis=-2)[..., 0, :]
 
     return jax.tree.map(take, s)
 
@@ -190,9 +210,14 @@ def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str 
           pos_tol: float = 1e-5, rot_tol: float = 1e-4, respect_limits: bool = True, optimizer=None) -> IKResult:
     """Inverse kinematics for a batch of targets, from random seeds (and an optional warm start).
 
-    Every target is solved from ``num_seeds`` configurations drawn uniformly within the
-    limits (plus ``q0`` when given); all seeds of all targets iterate together in one
-    fixed-size ``lax.while_loop`` that exits when every target is done. Pure and traceable:
+    Every target gets up to ``num_seeds`` seeds, each the best (least pose error) of 8
+    configurations drawn uniformly within the limits, in rounds of 4: the first round (plus
+    ``q0`` when given) for every target at once, each later one only for the targets still
+    unsolved, packed into small chunks; with LM, three final rounds go on from the best seed so
+    far and small perturbations of it. Each round iterates its seeds together in a
+    ``lax.while_loop`` that exits when every target in it is done, so easy targets cost one
+    round and only hard (or unreachable) ones cost more. A target's
+    result does not depend on the rest of the batch. Pure and traceable:
     works under ``jit``/``vmap``/``grad``; ``num_seeds``, ``method``, ``max_iters``,
     ``respect_limits`` and ``optimizer`` are static. Nothing raises inside ``jit``: a target
     that cannot be reached (or holds NaN) gives ``success=False`` and finite values.
@@ -215,13 +240,14 @@ def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str 
         target: ``(..., 4, 4)`` end-effector poses ``T_base_ee`` or ``(..., 3)`` positions in the
             base frame (metres; orientation free). The solver runs in this dtype (float32 default).
         key: PRNG key for the seeds; default ``jax.random.key(0)``. Target ``b`` of the flattened
-            batch uses ``fold_in(key, b)``.
+            batch draws round ``r``'s seeds from ``fold_in(fold_in(key, b), r)``.
         q0: optional ``(..., dof)`` warm start broadcastable to the targets' batch; it is an extra
             seed and, among successful seeds, the solution nearest to ``q0`` is returned.
-        num_seeds: random seeds per target (static, >= 1).
+        num_seeds: most random seeds per target (static, >= 1), in rounds of 4; only unsolved
+            targets use more than the first round.
         method: ``"lm"`` (default) or ``"optax"``.
-        max_iters: iteration cap (static); default 60 for LM, 1000 for optax. Each iteration is
-            one forward pass.
+        max_iters: iterations per seed (static); default 10 for LM, 1000 for optax. Each
+            iteration is one forward pass.
         pos_tol: success tolerance on the position error, metres.
         rot_tol: success tolerance on the rotation angle error, radians.
         respect_limits: keep every iterate (and the result) within ``[chain.lower, chain.upper]``.
@@ -260,47 +286,92 @@ def _solve(chain, target, key, q0, *, num_seeds, method, max_iters, pos_tol, rot
     model = _cast(_detach(chain), dtype)
     lower, upper = _inward(_detach(chain.lower), dtype, -1), _inward(_detach(chain.upper), dtype, 1)
     wrap = jnp.asarray([t == "R" for t in chain.joint_types]) & ~jnp.isfinite(lower) & ~jnp.isfinite(upper)
-    q_seeds = _seed_configs(key, lower, upper, num_seeds, n, dtype)
+    fixed = _detach(safe)
+    q0_flat = None
     if q0 is not None:
         q0_flat = jnp.broadcast_to(jnp.asarray(q0, dtype), batch + (dof,)).reshape(n, dof)
         q0_flat = jnp.where(jnp.isfinite(q0_flat), _detach(q0_flat), 0.0)
-        q_seeds = jnp.concatenate([q0_flat[None], q_seeds], axis=0)
-    num_all = q_seeds.shape[0]
-    fixed = _detach(safe)
-
-    def problem_for(copies: int) -> Problem:
-        def tile(x):
-            return jnp.broadcast_to(x, (copies,) + x.shape).reshape((-1,) + x.shape[1:])
-
-        if position_only:
-            p, R = tuple(tile(fixed[:, i]) for i in range(3)), None
-        else:
-            p = tuple(tile(fixed[:, i, 3]) for i in range(3))
-            R = tuple(tuple(tile(fixed[:, i, j]) for j in range(3)) for i in range(3))
-        return Problem(model, p, R, lower, upper, wrap, respect_limits)
-
-    problem = problem_for(num_all)
-    q = problem.project(q_seeds.reshape(-1, dof))
     if method == "lm":
-        aux, step_fn = _lm.init(q), _lm.step
+        init, step_fn = _lm.init, _lm.step
     else:
         opt = _optax.default_optimizer() if optimizer is None else optimizer
-        aux, step_fn = _optax.init(opt, q), functools.partial(_optax.step, opt)
-    q0_rank = None if q0 is None else q0_flat
-    run = functools.partial(_run, step_fn=step_fn, num_targets=n, pos_tol=pos_tol, rot_tol=rot_tol)
-    first = min(max_iters, _FIRST_ROUND) if method == "lm" and num_all > _KEEP else max_iters
-    seeds = run(problem, _start(problem, q, aux, pos_tol, rot_tol), has_q0=q0 is not None, max_iters=first)
-    if first < max_iters:
-        seeds = _ranked(seeds, n, _KEEP, q0_rank)
-        seeds = run(problem_for(_KEEP), seeds, has_q0=False, max_iters=max_iters - first)
-    best = _ranked(seeds, n, 1, q0_rank)
-    q_best, success, pos_err, rot_err, iters = best.q, best.success, best.ev.pos_err, best.ev.rot_err, best.iters
+        init, step_fn = functools.partial(_optax.init, opt), functools.partial(_optax.step, opt)
+
+    def run_from(idx, q, live=None, q_first=None) -> _Seeds:
+        """Iterate the seeds ``q`` ``(copies, m, dof)`` of the targets ``idx``; the best of each.
+
+        ``live`` marks the targets that are not padding of a chunk; ``q_first`` is a warm start.
+        """
+        if q_first is not None:
+            q = jnp.concatenate([q_first[None], q], axis=0)
+        copies, m = q.shape[0], idx.shape[0]
+        T = jnp.broadcast_to(fixed[idx], (copies,) + fixed[idx].shape).reshape((copies * m,) + fixed.shape[1:])
+        p = tuple(T[:, i] if position_only else T[:, i, 3] for i in range(3))
+        R = None if position_only else tuple(tuple(T[:, i, j] for j in range(3)) for i in range(3))
+        problem = Problem(model, p, R, lower, upper, wrap, respect_limits)
+        q = problem.project(q.reshape(-1, dof).T)
+        start = _start(problem, q, init(q), pos_tol, rot_tol)
+        if live is not None:  # padding: finished before it starts
+            start = start._replace(stalled=~jnp.tile(live, copies))
+        seeds = _run(problem, start, step_fn, num_targets=m, has_q0=q_first is not None, max_iters=max_iters,
+                     pos_tol=pos_tol, rot_tol=rot_tol)
+        return _best(seeds, m, q_first)
+
+    def seeds(idx, round_index, group: int):
+        """``group`` seeds per target of round ``round_index`` (per target): ``(group, len(idx), dof)``."""
+        q = _seed_configs(key, idx, round_index, lower, upper, group * _SCREEN, dtype)
+        return _screened(model, fixed[idx], q, group, position_only)
+
+    first = min(num_seeds, _GROUP)
+    best = run_from(jnp.arange(n), seeds(jnp.arange(n), jnp.zeros(n, jnp.int32), first), q_first=q0_flat)
+    random_rounds = -(-(num_seeds - first) // _GROUP)
+    rounds = 1 + random_rounds + (_POLISH if method == "lm" else 0)
+    if rounds > 1:
+        chunk = min(n, max(_MIN_CHUNK, -(-n // _CHUNK_DIV)))
+
+        def attempt(idx, round_index, live, best):
+            """Round ``round_index`` (per target) for the targets ``idx``: random or polishing seeds."""
+            fresh = seeds(idx, round_index, _GROUP)
+            near = best.q[:, idx].T
+            nearby = jnp.concatenate([near[None], near + _JITTER * (fresh[1:] - near)])
+            polishing = round_index > random_rounds
+            found = run_from(idx, jnp.where(polishing[:, None], nearby, fresh), live)
+            return found._replace(iters=found.iters + jnp.where(polishing, best.iters[idx], 0))
+
+        best = _retry_unsolved(attempt, best, rounds, chunk)
     big = jnp.finfo(dtype).max
-    q_best = implicit_q(chain, safe, q_best)
+    q_best = implicit_q(chain, safe, best.q.T)
     return IKResult(
         q=q_best.reshape(batch + (dof,)),
-        success=(success & valid).reshape(batch),
-        pos_err=jnp.where(valid, pos_err, big).reshape(batch),
-        rot_err=jnp.where(valid, rot_err, big).reshape(batch),
-        iters=iters.reshape(batch),
+        success=(best.success & valid).reshape(batch),
+        pos_err=jnp.where(valid, best.ev.pos_err, big).reshape(batch),
+        rot_err=jnp.where(valid, best.ev.rot_err, big).reshape(batch),
+        iters=best.iters.reshape(batch),
     )
+
+
+def _retry_unsolved(attempt, best: _Seeds, rounds: int, chunk: int) -> _Seeds:
+    """Rounds ``1 .. rounds - 1`` for every unsolved target, ``chunk`` targets at a time.
+
+    Each pass takes the first unsolved targets with rounds left, runs
+    ``attempt(idx, round_index, live, best)`` on them (each at its own next round) and keeps
+    whatever is better per target. A target's result does not depend on the others: its rounds
+    are tried in order, from its own keys and its own best so far.
+    """
+    n = best.success.shape[0]
+
+    def pending(best, done):
+        return ~best.success & (done < rounds)
+
+    def body(state):
+        best, done = state
+        idx = jnp.nonzero(pending(best, done), size=chunk, fill_value=n)[0]
+        live = idx < n
+        safe_idx = jnp.where(live, idx, 0)
+        new = attempt(safe_idx, done[safe_idx], live, best)
+        better = live & (new.success | (new.ev.cost < best.ev.cost[safe_idx]))
+        best = jax.tree.map(lambda old, x: old.at[..., idx].set(jnp.where(better, x, old[..., safe_idx]), mode="drop"),
+                            best, new)
+        return best, done.at[idx].add(1, mode="drop")
+
+    return jax.lax.while_loop(lambda state: jnp.any(pending(*state)), body, (best, jnp.ones(n, jnp.int32)))[0]
