@@ -15,7 +15,7 @@ from diffkin import kinematics
 from diffkin._rigid import is_concrete
 from diffkin.ik import _lm, _optax
 from diffkin.ik._implicit import implicit_q
-from diffkin.ik._problem import Eval, Problem, evaluate
+from diffkin.ik._problem import ROT_WEIGHT, Eval, Problem, evaluate
 from diffkin.ik._result import IKResult
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain
@@ -83,19 +83,28 @@ def _seed_configs(key, targets: jax.Array, rounds: jax.Array, lower, upper, coun
     return jnp.swapaxes(lo + u * (hi - lo), 0, 1)
 
 
-def _screened(model, targets, q, group: int, position_only: bool):
-    """The ``group`` candidates ``q`` ``(K, m, dof)`` of least pose error (one forward pass each)."""
-    frames, _, _ = kinematics._frames(model, q)
-    ee = frames.ee
+def _screened(model, targets, q, position_only: bool):
+    """Per target and seed slot, the candidate of least pose error (one forward pass each).
+
+    Args:
+        model: the chain.
+        targets: ``(m, 4, 4)`` poses or ``(m, 3)`` positions.
+        q: ``(K, group, m, dof)`` candidates, ``K`` per seed slot.
+
+    Returns:
+        ``(group, m, dof)``. The error is ``|p_t - p|^2 + ROT_WEIGHT^2 (3 - trace(R_t^T R))``
+        (the rotation term is ``2 (1 - cos angle)``, the squared angle near 0).
+    """
+    ee = kinematics._frames(model, q)[0].ee
     if position_only:
         tp, cost = targets, 0.0
     else:
         tp = targets[..., :3, 3]
         trace = sum(rg.mul(ee.R[i][j], targets[..., i, j]) for i in range(3) for j in range(3))
-        cost = 0.04 * (3.0 - trace)
+        cost = ROT_WEIGHT**2 * (3.0 - trace)
     cost = cost + sum((ee.p[i] - tp[..., i]) ** 2 for i in range(3))
-    order = jnp.argsort(cost, axis=0)[:group]
-    return jnp.take_along_axis(q, order[..., None], axis=0)
+    best = jnp.argmin(cost, axis=0)
+    return jnp.take_along_axis(q, best[None, ..., None], axis=0)[0]
 
 
 def _start(problem: Problem, q: jax.Array, aux, pos_tol: float, rot_tol: float) -> _Seeds:
@@ -319,8 +328,8 @@ def _solve(chain, target, key, q0, *, num_seeds, method, max_iters, pos_tol, rot
 
     def seeds(idx, round_index, group: int):
         """``group`` seeds per target of round ``round_index`` (per target): ``(group, len(idx), dof)``."""
-        q = _seed_configs(key, idx, round_index, lower, upper, group * _SCREEN, dtype)
-        return _screened(model, fixed[idx], q, group, position_only)
+        q = _seed_configs(key, idx, round_index, lower, upper, _SCREEN * group, dtype)
+        return _screened(model, fixed[idx], q.reshape((_SCREEN, group) + q.shape[1:]), position_only)
 
     first = min(num_seeds, _GROUP)
     best = run_from(jnp.arange(n), seeds(jnp.arange(n), jnp.zeros(n, jnp.int32), first), q_first=q0_flat)
