@@ -146,10 +146,10 @@ def vector(x) -> Vec3:
     return (x[..., 0], x[..., 1], x[..., 2])
 
 
-def stack(entries: list[Entry], shape: tuple[int, ...], dtype) -> jax.Array:
-    """Entries broadcast to ``shape`` and stacked on a new last axis."""
+def stack(entries: list[Entry], shape: tuple[int, ...], dtype, axis: int = -1) -> jax.Array:
+    """Entries broadcast to ``shape`` and stacked on a new axis (the last by default)."""
     arrays = [jnp.broadcast_to(jnp.asarray(e, dtype=dtype), shape) for e in entries]
-    return jnp.stack(arrays, axis=-1)
+    return jnp.stack(arrays, axis=axis)
 
 
 def materialize(entries: list[Entry]) -> jax.Array:
@@ -162,8 +162,7 @@ def materialize(entries: list[Entry]) -> jax.Array:
     """
     shape = batch_shape(*entries)
     dtype = jnp.result_type(*(e for e in entries if not isinstance(e, float)))
-    flat = jnp.stack([jnp.broadcast_to(jnp.asarray(e, dtype), shape) for e in entries])  # entry axis first
-    return jax.lax.optimization_barrier(flat)
+    return jax.lax.optimization_barrier(stack(entries, shape, dtype, axis=0))
 
 
 def to_matrix(A: Rigid, shape: tuple[int, ...], dtype) -> jax.Array:

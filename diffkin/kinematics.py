@@ -78,8 +78,7 @@ def _analytic(chain: Chain, q, frame: str) -> jax.Array:
     if frame == "body":
         Rt = tuple(rg.column(frames.ee.R, j) for j in range(3))
         columns = [(rg.rotate(Rt, v), rg.rotate(Rt, w)) for v, w in columns]
-    rows = [column[part][i] for part in (0, 1) for i in range(3) for column in columns]
-    return rg.stack(rows, shape, dtype).reshape(shape + (6, chain.dof))
+    return _stack_columns(columns, shape, dtype)
 
 
 def _autodiff(chain: Chain, q, frame: str) -> jax.Array:
@@ -101,8 +100,13 @@ def _autodiff(chain: Chain, q, frame: str) -> jax.Array:
         else:
             w = _vee_of_product(dR, R)  # vee(dR R^T)
             columns.append((dp if frame == "world" else rg.vadd(dp, rg.cross(p, w)), w))
+    return _stack_columns(columns, q.shape[:-1], q.dtype)
+
+
+def _stack_columns(columns, shape, dtype) -> jax.Array:
+    """Twist columns ``(v, w)`` (entries) as one ``shape + (6, len(columns))`` array, in one stack."""
     rows = [column[part][i] for part in (0, 1) for i in range(3) for column in columns]
-    return rg.stack(rows, q.shape[:-1], q.dtype).reshape(q.shape[:-1] + (6, chain.dof))
+    return rg.stack(rows, shape, dtype).reshape(shape + (6, len(columns)))
 
 
 def _split(entries) -> rg.Mat3:

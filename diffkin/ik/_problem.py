@@ -33,8 +33,8 @@ class Eval(NamedTuple):
         rot_err: ``(P,)`` radians.
     """
 
-    r: list
-    J: list
+    r: jax.Array
+    J: jax.Array
     cost: jax.Array
     pos_err: jax.Array
     rot_err: jax.Array

@@ -33,7 +33,7 @@ _JITTER = 0.05  # ... each a step of this fraction towards a random seed
 
 
 class _Seeds(NamedTuple):
-    """Iteration state of every seed, flat over ``P = num_seeds x targets``."""
+    """Iteration state of every seed, flat over ``P = seeds x targets`` (problem axis last)."""
 
     q: jax.Array  # (dof, P)
     ev: Eval
@@ -168,6 +168,7 @@ def _best(s: _Seeds, num_targets: int, q0) -> _Seeds:
     success, cost = per_target(s.success), per_target(s.ev.cost)
     rank = cost if q0 is None else jnp.sum((per_target(s.q) - q0.T[:, None, :]) ** 2, axis=0)
     order = jnp.lexsort((jnp.where(success, rank, cost), ~success), axis=0)[:1]  # (1, targets)
+
     def take(x):
         x = per_target(x)
         return jnp.take_along_axis(x, order.reshape((1,) * (x.ndim - 2) + order.shape), axis=-2)[..., 0, :]
