@@ -10,6 +10,11 @@ import re
 import statistics
 import time
 
+try:
+    import resource
+except ImportError:  # not on Windows
+    resource = None
+
 import jax
 import numpy as np
 
@@ -38,6 +43,21 @@ def median_seconds(fn, *args, repeats: int = 5, warmup: int = 2, min_time: float
         jax.block_until_ready(fn(*args))
         times.append(time.perf_counter() - start)
     return statistics.median(times)
+
+
+def page_faults_per_call(fn, *args, calls: int = 10) -> float | None:
+    """Mean minor page faults of one warm call of ``fn(*args)`` (``None`` where the OS does not count them).
+
+    Thousands per call mean the allocator hands every call fresh pages that the kernel must map and
+    zero: glibc serves blocks above its mmap threshold (at most 32 MiB) with a new ``mmap`` each time.
+    """
+    if resource is None:
+        return None
+    jax.block_until_ready(fn(*args))
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(calls):
+        jax.block_until_ready(fn(*args))
+    return (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) / calls
 
 
 def cpu_model() -> str:

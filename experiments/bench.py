@@ -17,7 +17,7 @@ import datetime
 import functools
 import inspect
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import jax
@@ -30,6 +30,7 @@ from _bench import (
     machine_line,
     machine_slug,
     median_seconds,
+    page_faults_per_call,
     pk,
     pk_chain,
     pk_ik_solver,
@@ -59,7 +60,9 @@ class Sizes:
     workspace: int  # reachability-map samples
 
 
-FULL = Sizes(fk=(1, 1000, 100_000), jacobian=((1000, "float32"), (100_000, "float32"), (100_000, "float64")),
+FULL = Sizes(fk=(1, 1000, 100_000),
+             jacobian=((1000, "float32"), (10_000, "float32"), (10_000, "float64"), (100_000, "float32"),
+                       (100_000, "float64")),
              ik=1000, srs=100_000, self_motion=2000, workspace=4_000_000)
 QUICK = Sizes(fk=(1, 1000), jacobian=((1000, "float32"),), ik=100, srs=10_000, self_motion=200, workspace=200_000)
 
@@ -112,6 +115,22 @@ def _pk_seconds(method: str, n: int, dtype: str) -> float | None:
     return median_seconds(torch_synced(getattr(_pk_chain(dtype), method)), q)
 
 
+def _diffkin_row(work: str, n: int, dtype: str, fn, *args, pk_seconds: float | None = None, note: str = "") -> Row:
+    """A row timing ``fn(*args)``; the note says so when the allocator maps fresh pages on every call."""
+    faults = page_faults_per_call(fn, *args)
+    if faults is not None and faults >= 1000:
+        note = "; ".join(filter(None, [note, f"{faults:,.0f} page faults per call (fresh output pages: see README)"]))
+    return Row(work, n, dtype, median_seconds(fn, *args), pk_seconds, note)
+
+
+def _with_float64_costs(rows: list[Row]) -> list[Row]:
+    """Each float64 row noted with its cost relative to the float32 row of the same work and batch."""
+    f32 = {(r.work, r.batch): r.diffkin for r in rows if r.dtype == "float32"}
+    return [replace(r, note="; ".join(filter(None, [f"{r.diffkin / f32[r.work, r.batch]:.1f}x float32",
+                                                                 r.note])))
+            if r.dtype == "float64" and (r.work, r.batch) in f32 else r for r in rows]
+
+
 # --------------------------------------------------------------------------------------------- parts
 
 
@@ -119,8 +138,8 @@ def fk_rows(sizes: Sizes) -> list[Row]:
     """``dk.fk`` (jitted) vs ``forward_kinematics``."""
     chain = _iiwa14()
     fk = jax.jit(lambda q: dk.fk(chain, q))
-    return [Row("FK", n, dtype, median_seconds(fk, jnp.asarray(random_configs(chain, n, dtype))),
-                _pk_seconds("forward_kinematics", n, dtype))
+    return [_diffkin_row("FK", n, dtype, fk, jnp.asarray(random_configs(chain, n, dtype)),
+                         pk_seconds=_pk_seconds("forward_kinematics", n, dtype))
             for n in sizes.fk for dtype in DTYPES]
 
 
@@ -132,8 +151,8 @@ def jacobian_rows(sizes: Sizes) -> list[Row]:
         q = jnp.asarray(random_configs(chain, n, dtype))
         for method in ("analytic", "autodiff"):
             jac = jax.jit(lambda q, method=method: dk.jacobian(chain, q, "world", method=method))
-            rows.append(Row(f"Jacobian (world, {method})", n, dtype, median_seconds(jac, q),
-                            _pk_seconds("jacobian", n, dtype)))
+            rows.append(_diffkin_row(f"Jacobian (world, {method})", n, dtype, jac, q,
+                                     pk_seconds=_pk_seconds("jacobian", n, dtype)))
     return rows
 
 
@@ -170,8 +189,8 @@ def srs_rows(sizes: Sizes) -> list[Row]:
     for dtype in DTYPES:
         q = jnp.asarray(random_configs(arm.chain(), sizes.srs, dtype))
         T, (psi, gc) = dk.fk(arm.chain(), q), dk.srs.arm_angle(arm, q)
-        rows.append(Row("SRS closed-form IK (`dk.srs.ik`)", sizes.srs, dtype, median_seconds(solve, T, psi, gc),
-                        note="no closed form in pk"))
+        rows.append(_diffkin_row("SRS closed-form IK (`dk.srs.ik`)", sizes.srs, dtype, solve, T, psi, gc,
+                                 note="no closed form in pk"))
     n = sizes.self_motion
     sample = jax.jit(lambda T, key: dk.srs.sample_self_motion(arm, T, n, key=key))
     args = (dk.fk(arm.chain(), jnp.asarray(random_configs(arm.chain(), 1, "float32")[0])), jax.random.key(0))
@@ -206,7 +225,7 @@ def report(parts=tuple(PARTS), quick: bool = False) -> str:
     """The suite's markdown report: a title, the machine, and one table of ``parts`` (keys of :data:`PARTS`)."""
     jax.config.update("jax_enable_x64", True)  # for the float64 rows; float32 rows stay float32
     busy, sizes = busy_note(), QUICK if quick else FULL
-    rows = [row.cells() for part in parts for row in PARTS[part](sizes)]
+    rows = [row.cells() for row in _with_float64_costs([row for part in parts for row in PARTS[part](sizes)])]
     header = ["work", "batch", "dtype", "diffkin", "pytorch-kinematics", "pk / diffkin", "notes"]
     only = "" if tuple(parts) == tuple(PARTS) else " --only " + ",".join(parts)
     command = "diffkin bench" + " --quick" * quick + only
