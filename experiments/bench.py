@@ -115,12 +115,15 @@ def _pk_seconds(method: str, n: int, dtype: str) -> float | None:
     return median_seconds(torch_synced(getattr(_pk_chain(dtype), method)), q)
 
 
-def _diffkin_row(work: str, n: int, dtype: str, fn, *args, pk_seconds: float | None = None, note: str = "") -> Row:
-    """A row timing ``fn(*args)``; the note says so when the allocator maps fresh pages on every call."""
+def _diffkin_row(work: str, n: int, dtype: str, fn, *args, pk_seconds=lambda: None, note: str = "") -> Row:
+    """A row timing ``fn(*args)``, then ``pk_seconds()`` (after diffkin, so torch's threads, busy for a while
+    after a call, do not disturb diffkin's timing); the note says so when the allocator maps fresh pages on
+    every call."""
     faults = page_faults_per_call(fn, *args)
     if faults is not None and faults >= 1000:
         note = "; ".join(filter(None, [note, f"{faults:,.0f} page faults per call (fresh output pages: see README)"]))
-    return Row(work, n, dtype, median_seconds(fn, *args), pk_seconds, note)
+    seconds = median_seconds(fn, *args)
+    return Row(work, n, dtype, seconds, pk_seconds(), note)
 
 
 def _with_float64_costs(rows: list[Row]) -> list[Row]:
@@ -139,7 +142,7 @@ def fk_rows(sizes: Sizes) -> list[Row]:
     chain = _iiwa14()
     fk = jax.jit(lambda q: dk.fk(chain, q))
     return [_diffkin_row("FK", n, dtype, fk, jnp.asarray(random_configs(chain, n, dtype)),
-                         pk_seconds=_pk_seconds("forward_kinematics", n, dtype))
+                         pk_seconds=functools.partial(_pk_seconds, "forward_kinematics", n, dtype))
             for n in sizes.fk for dtype in DTYPES]
 
 
@@ -152,7 +155,7 @@ def jacobian_rows(sizes: Sizes) -> list[Row]:
         for method in ("analytic", "autodiff"):
             jac = jax.jit(lambda q, method=method: dk.jacobian(chain, q, "world", method=method))
             rows.append(_diffkin_row(f"Jacobian (world, {method})", n, dtype, jac, q,
-                                     pk_seconds=_pk_seconds("jacobian", n, dtype)))
+                                     pk_seconds=functools.partial(_pk_seconds, "jacobian", n, dtype)))
     return rows
 
 
