@@ -116,9 +116,9 @@ def _pk_seconds(method: str, n: int, dtype: str) -> float | None:
 
 
 def _diffkin_row(work: str, n: int, dtype: str, fn, *args, pk_seconds=lambda: None, note: str = "") -> Row:
-    """A row timing ``fn(*args)``, then ``pk_seconds()`` (after diffkin, so torch's threads, busy for a while
-    after a call, do not disturb diffkin's timing); the note says so when the allocator maps fresh pages on
-    every call."""
+    """A row timing ``fn(*args)``, then ``pk_seconds()``; the note says so when the allocator maps fresh pages
+    on every call. diffkin goes first: with torch's first call just before it, the first row (FK of one
+    configuration) read 49 us instead of 5 us."""
     faults = page_faults_per_call(fn, *args)
     if faults is not None and faults >= 1000:
         note = "; ".join(filter(None, [note, f"{faults:,.0f} page faults per call (fresh output pages: see README)"]))
@@ -129,9 +129,11 @@ def _diffkin_row(work: str, n: int, dtype: str, fn, *args, pk_seconds=lambda: No
 def _with_float64_costs(rows: list[Row]) -> list[Row]:
     """Each float64 row noted with its cost relative to the float32 row of the same work and batch."""
     f32 = {(r.work, r.batch): r.diffkin for r in rows if r.dtype == "float32"}
-    return [replace(r, note="; ".join(filter(None, [f"{r.diffkin / f32[r.work, r.batch]:.1f}x float32",
-                                                                 r.note])))
-            if r.dtype == "float64" and (r.work, r.batch) in f32 else r for r in rows]
+    def noted(r: Row) -> Row:
+        cost = f"{r.diffkin / f32[r.work, r.batch]:.1f}x float32"
+        return replace(r, note="; ".join(filter(None, [cost, r.note])))
+
+    return [noted(r) if r.dtype == "float64" and (r.work, r.batch) in f32 else r for r in rows]
 
 
 # --------------------------------------------------------------------------------------------- parts
