@@ -115,13 +115,18 @@ def _pk_seconds(method: str, n: int, dtype: str) -> float | None:
     return median_seconds(torch_synced(getattr(_pk_chain(dtype), method)), q)
 
 
+def _notes(*notes: str | None) -> str:
+    """The non-empty notes, joined by semicolons."""
+    return "; ".join(filter(None, notes))
+
+
 def _diffkin_row(work: str, n: int, dtype: str, fn, *args, pk_seconds=lambda: None, note: str = "") -> Row:
     """A row timing ``fn(*args)``, then ``pk_seconds()``; the note says so when the allocator maps fresh pages
     on every call. diffkin goes first: with torch's first call just before it, the first row (FK of one
     configuration) read 49 us instead of 5 us."""
     faults = page_faults_per_call(fn, *args)
     if faults is not None and faults >= 1000:
-        note = "; ".join(filter(None, [note, f"{faults:,.0f} page faults per call (fresh output pages: see README)"]))
+        note = _notes(note, f"{faults:,.0f} page faults per call (fresh output pages: see README)")
     seconds = median_seconds(fn, *args)
     return Row(work, n, dtype, seconds, pk_seconds(), note)
 
@@ -129,9 +134,9 @@ def _diffkin_row(work: str, n: int, dtype: str, fn, *args, pk_seconds=lambda: No
 def _with_float64_costs(rows: list[Row]) -> list[Row]:
     """Each float64 row noted with its cost relative to the float32 row of the same work and batch."""
     f32 = {(r.work, r.batch): r.diffkin for r in rows if r.dtype == "float32"}
+
     def noted(r: Row) -> Row:
-        cost = f"{r.diffkin / f32[r.work, r.batch]:.1f}x float32"
-        return replace(r, note="; ".join(filter(None, [cost, r.note])))
+        return replace(r, note=_notes(f"{r.diffkin / f32[r.work, r.batch]:.1f}x float32", r.note))
 
     return [noted(r) if r.dtype == "float64" and (r.work, r.batch) in f32 else r for r in rows]
 
@@ -181,8 +186,8 @@ def ik_rows(sizes: Sizes) -> list[Row]:
         solve = jax.jit(lambda T, key, tol=tol: dk.ik.solve(chain, T, key=key, pos_tol=tol[0], rot_tol=tol[1]))
         t_dk = median_seconds(solve, *args, repeats=15, warmup=1)
         note = f"success at {_sci(tol[0])} m / {_sci(tol[1])} rad: diffkin {float(np.mean(solve(*args).success)):.1%}"
-        rows.append(Row(f"IK (LM, {label})", n, "float32", t_dk, t_pk,
-                        note if note_pk is None or label == "defaults" else f"{note}; {note_pk}"))
+        pk_note = None if label == "defaults" else note_pk
+        rows.append(Row(f"IK (LM, {label})", n, "float32", t_dk, t_pk, _notes(note, pk_note)))
     return rows
 
 
