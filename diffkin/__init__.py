@@ -14,18 +14,18 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from diffkin import ik, robots, srs, workspace
     from diffkin.kinematics import fk, jacobian, link_poses, manipulability
-    from diffkin.models import DHChain, PoEChain, load_urdf, to_poe
+    from diffkin.models import DHChain, PoEChain, Robot, load_robot, load_urdf, to_poe
 
 _HOMES = {
     "ik": None, "robots": None, "srs": None, "workspace": None,  # submodules
     "fk": "diffkin.kinematics", "jacobian": "diffkin.kinematics", "link_poses": "diffkin.kinematics",
     "manipulability": "diffkin.kinematics",
     "DHChain": "diffkin.models", "PoEChain": "diffkin.models", "load_urdf": "diffkin.models",
-    "to_poe": "diffkin.models",
+    "to_poe": "diffkin.models", "Robot": "diffkin.models", "load_robot": "diffkin.models",
 }
 
 __all__ = [
-    "DHChain", "PoEChain", "fk", "jacobian", "link_poses", "load_urdf", "manipulability",
+    "DHChain", "PoEChain", "Robot", "fk", "jacobian", "link_poses", "load_robot", "load_urdf", "manipulability",
     "ik", "robots", "srs", "to_poe", "workspace",
 ]
 __version__ = "0.1.0"

@@ -193,8 +193,8 @@ def screw_exp(v: Vec3, w: Vec3, theta: jax.Array) -> Rigid:
         if n2 == 0.0:
             return Rigid(IDENTITY.R, scale(theta, v))
         if abs(n2 - 1.0) < _SNAP:
-            s, c = sincos(theta)
-            A, B, C = s, 1.0 - c, theta - s
+            c, s = cos_sin(theta)
+            A, B, C = s, add(1.0, -c), add(theta, -s)
         else:
             A, B, C = _exp_coefficients(jnp.asarray(n2), theta)
     else:

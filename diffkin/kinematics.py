@@ -1,67 +1,96 @@
-"""Forward kinematics, Jacobians and manipulability for every chain model."""
+"""Forward kinematics, Jacobians and manipulability for every model: chains and whole robots."""
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import jax
 import jax.numpy as jnp
 
 from diffkin import _rigid as rg
-from diffkin.models.dh import DHChain
-from diffkin.models.poe import PoEChain
+from diffkin.models import forward
+from diffkin.models.forward import Model
+from diffkin.models.robot import Robot
 
-Chain = DHChain | PoEChain
 _FRAMES = ("world", "space", "body")
 _METHODS = ("autodiff", "analytic")
 
 
-def _joint_values(chain: Chain, q) -> jax.Array:
-    """``q`` as a float array of shape ``(..., dof)``; raises on a bad chain or shape."""
-    if not isinstance(chain, (DHChain, PoEChain)):
-        raise TypeError(f"chain: expected a DHChain or PoEChain, got {type(chain).__name__}")
-    q = jnp.asarray(q)
-    if not jnp.issubdtype(q.dtype, jnp.floating):
-        q = q.astype(jnp.result_type(float))
-    if q.ndim == 0 or q.shape[-1] != chain.dof:
-        raise ValueError(f"q: expected shape (..., {chain.dof}) for a {chain.dof}-joint chain, got {q.shape}")
-    return q
+def _base(model: Model, base) -> rg.Rigid:
+    """``T_world_root`` of a robot as entries (identity by default); chains take no base."""
+    if base is None:
+        return rg.IDENTITY
+    if not isinstance(model, Robot):
+        raise ValueError("base: only a Robot takes a base pose (a chain's base is its own field)")
+    shape = jnp.shape(base)
+    if len(shape) < 2 or shape[-2:] != (4, 4):
+        raise ValueError(f"base: expected a (..., 4, 4) pose T_world_root, got shape {shape}")
+    return rg.from_matrix(base)
 
 
-def _frames(chain: Chain, q) -> tuple[rg.Frames, tuple[int, ...], jnp.dtype]:
-    """Check ``q`` against ``chain`` and run the model's forward pass."""
-    q = _joint_values(chain, q)
-    frames = chain._frames([q[..., i] for i in range(chain.dof)])
-    arrays = [e for e in rg.leaves(frames.ee) if not isinstance(e, float)]
+def _pass(model: Model, q, frame: int | None = None, base=None, *, every: bool = False):
+    """Check ``q`` and run the model's forward pass; returns the frames, batch shape and dtype."""
+    q = forward.joint_values(model, q)
+    frames = forward.frames(model, [q[..., i] for i in range(model.dof)], frame, _base(model, base), every=every)
+    arrays = [e for T in (frames.ee, *frames.links) for e in rg.leaves(T) if not isinstance(e, float)]
     shape = jnp.broadcast_shapes(q.shape[:-1], *(jnp.shape(e) for e in arrays))
     return frames, shape, jnp.result_type(q, *arrays)
 
 
-def fk(chain: Chain, q: jax.Array) -> jax.Array:
-    """End-effector pose of ``chain`` at ``q``.
+def _frame_indices(robot: Robot, frames) -> tuple[list[int], bool]:
+    """Indices of one frame name or a sequence of names; and whether one name was given."""
+    if isinstance(frames, str):
+        return [robot.frame_index(frames)], True
+    if not isinstance(frames, Sequence) or not frames:
+        raise TypeError(f"frames: expected a frame name or a non-empty sequence of names, got {frames!r}")
+    return [robot.frame_index(f) for f in frames], False
+
+
+def fk(model: Model, q: jax.Array, frames: str | Sequence[str] | None = None, *, base=None) -> jax.Array:
+    """Pose of a chain's end effector, or of named frames of a robot.
 
     Args:
-        chain: a :class:`DHChain` (DH product) or :class:`PoEChain` (product of exponentials).
-        q: ``(..., dof)`` joint values, radians (revolute) or metres (prismatic).
+        model: a :class:`DHChain` (DH product), a :class:`PoEChain` (product of exponentials) or
+            a :class:`Robot` (tree).
+        q: ``(..., dof)`` joint values, radians (revolute) or metres (prismatic); for a robot the
+            actuated joints in ``robot.joint_names`` order (mimic joints follow).
+        frames: robots only: a frame name, or a sequence of ``k`` names (``robot.frame_names``).
+        base: robots only: ``(..., 4, 4)`` pose ``T_world_root`` of the root (default identity),
+            for a floating base or a robot placed in the world.
 
     Returns:
-        ``(..., 4, 4)`` pose ``T_base_ee`` of the end effector in the base frame, tool included.
+        A chain: ``(..., 4, 4)`` pose ``T_base_ee`` of the end effector, tool included.
+        A robot: ``(..., 4, 4)`` pose ``T_world_frame`` of one frame, or ``(..., k, 4, 4)``.
     """
-    frames, shape, dtype = _frames(chain, q)
-    return rg.to_matrix(frames.ee, shape, dtype)
+    if not isinstance(model, Robot):
+        if frames is not None:
+            raise ValueError("frames: a chain has one end effector; name frames only for a Robot")
+        frames_, shape, dtype = _pass(model, q, base=base)
+        return rg.to_matrix(frames_.ee, shape, dtype)
+    if frames is None:
+        raise ValueError(f"frames: name the frame(s) of the robot, one of {list(model.frame_names)}")
+    indices, single = _frame_indices(model, frames)
+    frames_, shape, dtype = _pass(model, q, indices[0], base, every=not single)
+    if single:
+        return rg.to_matrix(frames_.ee, shape, dtype)
+    return jnp.stack([rg.to_matrix(frames_.links[f], shape, dtype) for f in indices], axis=-3)
 
 
-def link_poses(chain: Chain, q: jax.Array) -> jax.Array:
-    """Poses of the base and of every moving link.
+def link_poses(model: Model, q: jax.Array, *, base=None) -> jax.Array:
+    """Poses of every link (chain) or every named frame (robot).
 
     Args:
-        chain: any chain model.
+        model: any model.
         q: ``(..., dof)`` joint values.
+        base: robots only: ``(..., 4, 4)`` pose ``T_world_root`` (default identity).
 
     Returns:
-        ``(..., dof + 1, 4, 4)``: the base frame (DH frame 0, or the identity for a
+        A chain: ``(..., dof + 1, 4, 4)``: the base frame (DH frame 0, or the identity for a
         :class:`PoEChain`), then the frame of each moving link (DH frame ``i``, or the URDF
         child link of joint ``i``), all in the base frame.
+        A robot: ``(..., len(robot.frame_names), 4, 4)`` in ``robot.frame_names`` order, in the world.
     """
-    frames, shape, dtype = _frames(chain, q)
+    frames, shape, dtype = _pass(model, q, base=base, every=True)
     return jnp.stack([rg.to_matrix(T, shape, dtype) for T in frames.links], axis=-3)
 
 
@@ -70,9 +99,18 @@ def _world_from_space(screws, p_ee):
     return [(rg.vadd(v, rg.cross(w, p_ee)), w) for v, w in screws]
 
 
-def _analytic(chain: Chain, q, frame: str) -> jax.Array:
-    frames, shape, dtype = _frames(chain, q)
+def _root_screws(B: rg.Rigid) -> list[tuple[rg.Vec3, rg.Vec3]]:
+    """Space twists of the root's body twist ``[v; w]`` (unit steps): ``Ad(T_world_root) e_k``."""
+    axes = [rg.column(B.R, k) for k in range(3)]
+    zero = (0.0, 0.0, 0.0)
+    return [(a, zero) for a in axes] + [(rg.cross(B.p, a), a) for a in axes]
+
+
+def _analytic(model: Model, q, frame: str, f: int | None, base, include_base: bool) -> jax.Array:
+    frames, shape, dtype = _pass(model, q, f, base)
     columns = frames.screws
+    if include_base:
+        columns = _root_screws(_base(model, base)) + columns
     if frame != "space":
         columns = _world_from_space(columns, frames.ee.p)
     if frame == "body":
@@ -81,18 +119,27 @@ def _analytic(chain: Chain, q, frame: str) -> jax.Array:
     return _stack_columns(columns, shape, dtype)
 
 
-def _autodiff(chain: Chain, q, frame: str) -> jax.Array:
-    """Columns from forward-mode derivatives of the end-effector pose, one joint at a time."""
-    q = _joint_values(chain, q)
-    qs = [q[..., i] for i in range(chain.dof)]
+def _autodiff(model: Model, q, frame: str, f: int | None, base, include_base: bool) -> jax.Array:
+    """Columns from forward-mode derivatives of the frame's pose, one joint (or root axis) at a time."""
+    q = forward.joint_values(model, q)
+    qs = [q[..., i] for i in range(model.dof)]
+    B = _base(model, base)
+    shape = jnp.broadcast_shapes(q.shape[:-1], jnp.shape(base)[:-2] if base is not None else ())
 
-    def pose(i, x):
-        ee = chain._frames(qs[:i] + [x] + qs[i + 1:]).ee
+    def pose(qs_, B_):
+        ee = forward.frames(model, qs_, f, B_).ee
         return tuple(jnp.asarray(e, q.dtype) for e in rg.leaves(ee))
 
+    moves = []  # (pose as a function of one scalar, the scalar's value)
+    if include_base:  # the root moved by exp(t e_k) in its own frame
+        zero, unit = (0.0, 0.0, 0.0), ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+        steps = [(e, zero) for e in unit] + [(zero, e) for e in unit]
+        t0 = jnp.zeros(shape, q.dtype)
+        moves += [(lambda t, v=v, w=w: pose(qs, rg.compose(B, rg.screw_exp(v, w, t))), t0) for v, w in steps]
+    moves += [(lambda x, i=i: pose(qs[:i] + [x] + qs[i + 1:], B), qs[i]) for i in range(model.dof)]
     columns = []
-    for i in range(chain.dof):
-        T, dT = jax.jvp(lambda x, i=i: pose(i, x), (qs[i],), (jnp.ones_like(qs[i]),))
+    for fn, x in moves:
+        T, dT = jax.jvp(fn, (x,), (jnp.ones_like(x),))
         R, p, dR, dp = _split(T), T[9:], _split(dT), dT[9:]
         if frame == "body":  # [R^T dp; vee(R^T dR)]
             Rt, dRt = [rg.column(R, j) for j in range(3)], [rg.column(dR, j) for j in range(3)]
@@ -100,12 +147,14 @@ def _autodiff(chain: Chain, q, frame: str) -> jax.Array:
         else:
             w = _vee_of_product(dR, R)  # vee(dR R^T)
             columns.append((dp if frame == "world" else rg.vadd(dp, rg.cross(p, w)), w))
-    return _stack_columns(columns, q.shape[:-1], q.dtype)
+    return _stack_columns(columns, shape, q.dtype)
 
 
 def _stack_columns(columns, shape, dtype) -> jax.Array:
     """Twist columns ``(v, w)`` (entries) as one ``shape + (6, len(columns))`` array, in one stack."""
     rows = [column[part][i] for part in (0, 1) for i in range(3) for column in columns]
+    if not rows:  # a robot without joints
+        return jnp.zeros(shape + (6, 0), dtype)
     return rg.stack(rows, shape, dtype).reshape(shape + (6, len(columns)))
 
 
@@ -120,47 +169,89 @@ def _vee_of_product(A: rg.Mat3, B: rg.Mat3) -> rg.Vec3:
     return tuple(0.5 * (W(a, b) - W(b, a)) for a, b in ((2, 1), (0, 2), (1, 0)))  # type: ignore[return-value]
 
 
-def jacobian(chain: Chain, q: jax.Array, frame: str = "world", *, method: str = "autodiff") -> jax.Array:
-    """Geometric Jacobian of the end effector, rows ``[v; w]``.
-
-    Args:
-        chain: any chain model.
-        q: ``(..., dof)`` joint values.
-        frame: ``"world"``: linear velocity of the end-effector origin and angular velocity, both
-            in base axes (pytorch-kinematics' ``jacobian``, Pinocchio's ``LOCAL_WORLD_ALIGNED``);
-            ``"space"``: spatial twist Jacobian ``J_s`` (column ``i`` is the current screw axis of
-            joint ``i`` in the base frame; Pinocchio's ``WORLD``); ``"body"``: body twist
-            Jacobian ``J_b = Ad(T^-1) J_s`` in the end-effector frame (Pinocchio's ``LOCAL``).
-        method: ``"autodiff"`` differentiates :func:`fk` with JAX (forward mode); ``"analytic"``
-            uses the screw axes of the forward pass. Both agree to rounding.
-
-    Returns:
-        ``(..., 6, dof)`` Jacobian; column ``i`` is the twist per unit ``q_i``.
-    """
+def _where(model: Model, where: tuple, frame: str | None, frame_name: str | None) -> tuple[int | None, str]:
+    """The frame index (robots) and the reference frame of a :func:`jacobian` call."""
+    where = list(where)
+    if isinstance(model, Robot):
+        if frame_name is None and where:
+            frame_name = where.pop(0)
+        if frame_name is None:
+            raise TypeError(f"frame_name: name the frame of the robot, one of {list(model.frame_names)}")
+        f = model.frame_index(frame_name)
+    else:
+        if frame_name is not None:
+            raise TypeError("frame_name: a chain has one end effector; name frames only for a Robot")
+        f = None
+    if where and frame is not None:
+        raise TypeError(f"frame: given twice ({where[0]!r} and {frame!r})")
+    if len(where) > 1:
+        raise TypeError(f"jacobian: too many positional arguments: {tuple(where)!r}")
+    frame = where[0] if where else ("world" if frame is None else frame)
     if frame not in _FRAMES:
         raise ValueError(f"frame: expected one of {_FRAMES}, got {frame!r}")
+    return f, frame
+
+
+def jacobian(model: Model, q: jax.Array, *where: str, frame: str | None = None, frame_name: str | None = None,
+             method: str | None = None, base=None, include_base: bool = False) -> jax.Array:
+    """Geometric Jacobian of a chain's end effector or of a robot's frame, rows ``[v; w]``.
+
+    Called as ``jacobian(chain, q, frame="world")`` or ``jacobian(robot, q, frame_name, frame="world")``
+    (positionally or by keyword).
+
+    Args:
+        model: any model.
+        q: ``(..., dof)`` joint values.
+        frame_name: robots only: the frame whose motion the Jacobian gives.
+        frame: ``"world"``: linear velocity of the frame's origin and angular velocity, both
+            in base (world) axes (pytorch-kinematics' ``jacobian``, Pinocchio's ``LOCAL_WORLD_ALIGNED``);
+            ``"space"``: spatial twist Jacobian ``J_s`` (column ``i`` is the current screw axis of
+            joint ``i`` in the base frame; Pinocchio's ``WORLD``); ``"body"``: body twist
+            Jacobian ``J_b = Ad(T^-1) J_s`` in the frame itself (Pinocchio's ``LOCAL``).
+        method: ``"autodiff"`` differentiates :func:`fk` with JAX (forward mode); ``"analytic"``
+            uses the screw axes of the forward pass. Both agree to rounding. Default
+            ``"autodiff"`` for chains, ``"analytic"`` for robots (its compile time grows
+            linearly with the number of joints, which matters for humanoids and hands).
+        base: robots only: ``(..., 4, 4)`` pose ``T_world_root`` (default identity).
+        include_base: robots only: prepend the six columns of the root's body twist ``[v; w]``
+            (a floating base moving as ``T_world_root exp([V] t)``).
+
+    Returns:
+        ``(..., 6, dof)`` Jacobian (``(..., 6, 6 + dof)`` with ``include_base``); column ``i``
+        is the twist per unit ``q_i``. A mimic joint adds its motion (times its multiplier) to
+        the column of its source joint; joints off the frame's path give zero columns.
+    """
+    forward.check(model)
+    f, frame = _where(model, where, frame, frame_name)
+    if method is None:
+        method = "analytic" if isinstance(model, Robot) else "autodiff"
     if method not in _METHODS:
         raise ValueError(f"method: expected one of {_METHODS}, got {method!r}")
-    return (_analytic if method == "analytic" else _autodiff)(chain, q, frame)
+    if include_base and not isinstance(model, Robot):
+        raise ValueError("include_base: only a Robot has a root pose to move")
+    return (_analytic if method == "analytic" else _autodiff)(model, q, frame, f, base, bool(include_base))
 
 
-def manipulability(chain: Chain, q: jax.Array) -> jax.Array:
-    """Yoshikawa's manipulability of the world Jacobian.
+def manipulability(model: Model, q: jax.Array, frame_name: str | None = None, *, base=None) -> jax.Array:
+    """Yoshikawa's manipulability of the world Jacobian (of a chain, or of a robot's frame).
 
-    ``sqrt(det(J J^T))`` for chains of 6 or more joints, ``sqrt(det(J^T J))`` for fewer (both
-    the product of the singular values of ``J``). At a singular configuration the value is 0
+    ``sqrt(det(J J^T))`` for 6 or more joints, ``sqrt(det(J^T J))`` for fewer (both the
+    product of the singular values of ``J``). At a singular configuration the value is 0
     and its gradient is finite (0 there: a subgradient of the measure at its minimum).
 
     Args:
-        chain: any chain model.
+        model: any model.
         q: ``(..., dof)`` joint values.
+        frame_name: robots only: the frame.
+        base: robots only: ``(..., 4, 4)`` pose ``T_world_root``.
 
     Returns:
         ``(...,)`` manipulability (units of the Jacobian's entries).
     """
-    J = jacobian(chain, q, "world", method="analytic")
+    names = () if frame_name is None else (frame_name,)
+    J = jacobian(model, q, *names, frame="world", method="analytic", base=base)
     Jt = jnp.swapaxes(J, -1, -2)
-    G = J @ Jt if chain.dof >= 6 else Jt @ J
+    G = J @ Jt if model.dof >= 6 else Jt @ J
     det = jnp.linalg.det(G)
     tiny = jnp.finfo(G.dtype).eps ** 2
     singular = jax.lax.stop_gradient(det) <= tiny

@@ -1,0 +1,365 @@
+"""Whole robots: kinematic trees with named frames, mimic (coupled) joints and floating bases.
+
+A :class:`Robot` is a tree of rigid *bodies* joined by moving joints. Body ``0`` is the root;
+joint ``j`` moves body ``j + 1`` relative to body ``parents[j]`` (so parents come first):
+
+    T_world_body[j + 1] = T_world_body[parents[j]] @ joint_poses[j] @ exp([screws[j]] theta_j)
+    theta_j = multipliers[j] * q[sources[j]] + offsets[j]
+
+Fixed joints are merged: a link fixed to a body is a named *frame* of that body, at a constant
+pose ``frame_poses[f]`` in the body frame. URDF links and MJCF bodies and sites are all frames.
+``q`` holds the actuated joints only; a mimic joint follows its source joint through
+``multipliers``/``offsets`` (and an MJCF joint's ``ref`` is an offset too).
+
+Robots are built by the loaders (:func:`diffkin.load_robot`) through :func:`build`, which takes
+a host-side list of :class:`JointSpec` and checks the tree (one root, no loops, one parent per
+link, known mimic sources, no mimic cycles).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffkin import _rigid as rg
+from diffkin._pytree import pytree_dataclass, static
+from diffkin.models import _validate as check
+from diffkin.models.poe import PoEChain
+
+
+@pytree_dataclass
+class Robot:
+    """A kinematic tree (see the module docstring for the forward pass).
+
+    Attributes:
+        joint_poses: ``(nj, 4, 4)`` pose of each moving joint's frame in its parent body's frame
+            at ``theta = 0``.
+        screws: ``(nj, 6)`` unit screw ``[v; w]`` of each joint in its own frame: revolute
+            ``[c x w; w]`` (rotation about the axis ``w`` through the point ``c``), prismatic ``[v; 0]``.
+        multipliers, offsets: ``(nj,)``: ``theta_j = multipliers[j] * q[sources[j]] + offsets[j]``
+            (``1, 0`` for an actuated joint without MJCF ``ref``).
+        frame_poses: ``(nf, 4, 4)`` pose of each named frame in the frame of its body.
+        lower, upper: ``(dof,)`` limits of the actuated joints (``-inf``/``inf`` if unlimited).
+        parents: static, per joint, the index of its parent body (``< j + 1``).
+        joint_types: static, per joint, ``"R"`` (revolute) or ``"P"`` (prismatic).
+        sources: static, per joint, the index in ``q`` of the actuated joint that drives it.
+        tree_joints: static, per joint, its name (mimic joints included).
+        frame_bodies: static, per frame, the index of its body.
+        frame_names: static, per frame, its name: every link (or MJCF body), then extra frames.
+        joint_names: static names of the actuated joints, the order of ``q``.
+        floating: static; ``True`` if the root moves (its pose is an argument of ``fk``).
+        name: static name of the robot.
+    """
+
+    joint_poses: jax.Array
+    screws: jax.Array
+    multipliers: jax.Array
+    offsets: jax.Array
+    frame_poses: jax.Array
+    lower: jax.Array
+    upper: jax.Array
+    parents: tuple[int, ...] = static()
+    joint_types: str = static()
+    sources: tuple[int, ...] = static()
+    tree_joints: tuple[str, ...] = static()
+    frame_bodies: tuple[int, ...] = static()
+    frame_names: tuple[str, ...] = static()
+    joint_names: tuple[str, ...] = static()
+    floating: bool = static(default=False)
+    name: str = static(default="")
+
+    @property
+    def dof(self) -> int:
+        return len(self.joint_names)
+
+    @property
+    def mimic(self) -> dict[str, tuple[str, float, float]]:
+        """``{joint: (source, multiplier, offset)}`` of the joints that follow another (host values)."""
+        m, o = np.asarray(self.multipliers, np.float64), np.asarray(self.offsets, np.float64)
+        return {
+            name: (self.joint_names[s], float(m[j]), float(o[j]))
+            for j, (name, s) in enumerate(zip(self.tree_joints, self.sources, strict=True))
+            if name != self.joint_names[s]
+        }
+
+    def frame_index(self, name: str) -> int:
+        """Index of the frame ``name`` in :attr:`frame_names`; a ValueError lists the frames."""
+        if not isinstance(name, str):
+            raise TypeError(f"frame name: expected a string, got {type(name).__name__}")
+        try:
+            return self.frame_names.index(name)
+        except ValueError:
+            raise ValueError(f"unknown frame {name!r}; the robot's frames are {list(self.frame_names)}") from None
+
+    def ancestors(self, body: int) -> list[int]:
+        """The joints between the root and ``body``, root first."""
+        path = []
+        while body > 0:
+            path.append(body - 1)
+            body = self.parents[body - 1]
+        return path[::-1]
+
+    def _bodies(self, q: list, base: rg.Rigid) -> tuple[list[rg.Rigid], list[tuple[rg.Vec3, rg.Vec3]]]:
+        """Forward pass: every body's pose in the world, and every joint's current screw (world frame).
+
+        Args:
+            q: ``dof`` joint values (arrays of any batch shape, or Python floats).
+            base: ``T_world_root``.
+        """
+        P, S, m, o = (_host(x) for x in (self.joint_poses, self.screws, self.multipliers, self.offsets))
+        m, o = rg.entries(m), rg.entries(o)
+        bodies, screws = [base], []
+        for j, parent in enumerate(self.parents):
+            T = rg.compose(bodies[parent], rg.from_matrix(P[j]))
+            v, w = rg.vector(S[j, :3]), rg.vector(S[j, 3:])
+            w_world = rg.rotate(T.R, w)
+            screws.append((rg.vadd(rg.rotate(T.R, v), rg.cross(T.p, w_world)), w_world))
+            theta = rg.add(rg.mul(m[j], q[self.sources[j]]), o[j])
+            bodies.append(rg.compose(T, rg.screw_exp(v, w, theta)))
+        return bodies, screws
+
+    def _frame(self, bodies: list[rg.Rigid], f: int) -> rg.Rigid:
+        """World pose of frame ``f`` from the body poses."""
+        return rg.compose(bodies[self.frame_bodies[f]], rg.from_matrix(_host(self.frame_poses)[f]))
+
+    def _frames(self, q: list, frame: int, base: rg.Rigid = rg.IDENTITY, *, every: bool = False) -> rg.Frames:
+        """One forward pass for frame ``frame``: its pose (``ee``) and the columns of its space Jacobian.
+
+        ``screws[i]`` is the space twist per unit ``q[i]``: the sum over the joints that ``q[i]``
+        drives between the root and the frame of ``multiplier * screw`` (zero if none).
+        ``links`` holds every frame (in :attr:`frame_names` order) if ``every``, else is empty.
+        """
+        bodies, screws = self._bodies(q, base)
+        zero = (0.0, 0.0, 0.0)
+        columns: list = [(zero, zero)] * self.dof
+        m = rg.entries(_host(self.multipliers))
+        for j in self.ancestors(self.frame_bodies[frame]):
+            v, w = screws[j]
+            i = self.sources[j]
+            columns[i] = (rg.vadd(columns[i][0], rg.scale(m[j], v)), rg.vadd(columns[i][1], rg.scale(m[j], w)))
+        links = [self._frame(bodies, f) for f in range(len(self.frame_names))] if every else []
+        return rg.Frames(links, self._frame(bodies, frame), columns)
+
+    def chain(self, end: str, base: str | None = None) -> PoEChain:
+        """The exact :class:`PoEChain` of the path from frame ``base`` (default the root) to frame ``end``.
+
+        The chain's world frame is ``base``; its joints are the moving joints on the path (in
+        order), each driven by its actuated source joint (the chain's ``joint_names``, limits
+        and ``q`` are those of the sources). A mimic joint on the path is folded into its source
+        (screw times the multiplier, offset folded into the poses), which is exact when the
+        multiplier is ``+-1`` and the source drives no other joint on the path. Differentiable
+        with respect to the robot's arrays.
+
+        Raises:
+            ValueError: unknown frames, ``base`` not an ancestor of ``end``, no moving joint on
+                the path, or a mimic coupling that a serial chain cannot express.
+        """
+        f_end = self.frame_index(end)
+        f_base = self.frame_index(base) if base is not None else 0
+        b_end, b_base = self.frame_bodies[f_end], self.frame_bodies[f_base]
+        path = self.ancestors(b_end)
+        below = self.ancestors(b_base)
+        if path[: len(below)] != below:
+            raise ValueError(f"chain: frame {end!r} is not below frame {self.frame_names[f_base]!r}")
+        path = path[len(below):]
+        if not path:
+            raise ValueError(f"chain: no moving joint between {self.frame_names[f_base]!r} and {end!r}")
+        sources = [self.sources[j] for j in path]
+        m_host = np.asarray(self.multipliers, np.float64) if rg.is_concrete(self.multipliers) else None
+        for j in path:
+            if sources.count(self.sources[j]) > 1:
+                driven = [self.tree_joints[k] for k in path if self.sources[k] == self.sources[j]]
+                raise ValueError(f"chain: joint {self.joint_names[self.sources[j]]!r} drives several joints on the "
+                                 f"path to {end!r} ({driven}); a serial chain has one joint per variable")
+            if m_host is not None and abs(abs(m_host[j]) - 1.0) > 1e-12:
+                raise ValueError(f"chain: mimic joint {self.tree_joints[j]!r} has multiplier {m_host[j]}; a serial "
+                                 "chain needs +-1")
+        dtype = jnp.result_type(self.joint_poses)
+        T = rg.inverse(rg.from_matrix(self.frame_poses[f_base]))
+        screws, link_homes = [], []
+        for j in path:
+            T = rg.compose(T, rg.from_matrix(self.joint_poses[j]))
+            v, w = rg.vector(self.screws[j, :3]), rg.vector(self.screws[j, 3:])
+            T = rg.compose(T, rg.screw_exp(v, w, rg.constant(self.offsets[j])))
+            w_now = rg.rotate(T.R, w)
+            m = rg.constant(self.multipliers[j])
+            v_now = rg.vadd(rg.rotate(T.R, v), rg.cross(T.p, w_now))
+            screws.append(rg.stack([*rg.scale(m, v_now), *rg.scale(m, w_now)], (), dtype))
+            link_homes.append(rg.to_matrix(T, (), dtype))
+        home = rg.to_matrix(rg.compose(T, rg.from_matrix(self.frame_poses[f_end])), (), dtype)
+        return PoEChain(
+            screws=jnp.stack(screws), home=home, link_homes=jnp.stack(link_homes),
+            lower=self.lower[jnp.asarray(sources)], upper=self.upper[jnp.asarray(sources)],
+            joint_types="".join(self.joint_types[j] for j in path),
+            joint_names=tuple(self.joint_names[i] for i in sources), name=self.name,
+        )
+
+
+def _host(x):
+    """A concrete model array as float64 numpy (so entries fold at trace time); a traced one as is."""
+    return np.asarray(x, dtype=np.float64) if rg.is_concrete(x) else x
+
+
+# --------------------------------------------------------------------------------------------- building
+
+
+@dataclasses.dataclass(frozen=True)
+class JointSpec:
+    """One joint of a robot description, as the loaders read it (host side, float64).
+
+    Attributes:
+        name: joint name (unique).
+        kind: ``"R"`` (revolute), ``"P"`` (prismatic) or ``"F"`` (fixed).
+        parent, child: link names.
+        origin: ``(4, 4)`` pose of the joint frame in the parent link frame; the child link frame
+            is the joint frame moved by ``exp([screw] theta)``.
+        screw: ``(6,)`` unit screw ``[v; w]`` in the joint frame (unused for fixed joints).
+        lower, upper: limits (``-inf``/``inf`` if unlimited).
+        mimic: ``(source joint, multiplier, offset)``: ``theta = multiplier * theta_source + offset``.
+        offset: constant added to ``theta`` (MJCF ``ref``: the joint angle is ``q - ref``).
+    """
+
+    name: str
+    kind: str
+    parent: str
+    child: str
+    origin: np.ndarray
+    screw: np.ndarray
+    lower: float = -np.inf
+    upper: float = np.inf
+    mimic: tuple[str, float, float] | None = None
+    offset: float = 0.0
+
+
+def build(
+    joints: Sequence[JointSpec],
+    links: Sequence[str],
+    *,
+    frames: Sequence[tuple[str, str, np.ndarray]] = (),
+    floating: bool = False,
+    name: str = "",
+    where: str = "robot",
+) -> Robot:
+    """Check a tree description and build the :class:`Robot`.
+
+    Args:
+        joints: every joint, in file order (the order of ``q`` follows a depth-first walk of the
+            tree that visits children in this order).
+        links: every named link; joints may also connect unnamed links (not frames; the MJCF
+            loader uses them for bodies with several joints).
+        frames: extra fixed frames ``(name, link, T_link_frame)``.
+        floating: whether the root moves.
+        name: robot name.
+        where: what the description is called in error messages (``"URDF"``, ``"MJCF"``).
+
+    Raises:
+        ValueError: duplicate names, a link with two parents, several roots or none, kinematic
+            loops, unknown links, mimic joints of missing or fixed joints, mimic cycles.
+    """
+    for kind, names in (("link", list(links)), ("joint", [j.name for j in joints])):
+        seen = set()
+        for n in names:
+            if n in seen:
+                raise ValueError(f"{where}: duplicate {kind} name {n!r}")
+            seen.add(n)
+    by_child: dict[str, JointSpec] = {}
+    children: dict[str, list[JointSpec]] = {}
+    for j in joints:
+        if j.parent == j.child:
+            raise ValueError(f"{where}: joint {j.name!r} connects link {j.parent!r} to itself (a kinematic loop)")
+        if j.child in by_child:
+            raise ValueError(f"{where}: link {j.child!r} is the child of two joints ({by_child[j.child].name!r}, "
+                             f"{j.name!r}); a tree has one parent per link (kinematic loops are not supported)")
+        by_child[j.child] = j
+        children.setdefault(j.parent, []).append(j)
+    everything = list(dict.fromkeys([*links, *(x for j in joints for x in (j.parent, j.child))]))
+    roots = [n for n in everything if n not in by_child]
+    if not everything:
+        raise ValueError(f"{where}: no links")
+    if len(roots) != 1:
+        if not roots:
+            raise ValueError(f"{where}: no root link (every link is a child: a kinematic loop)")
+        raise ValueError(f"{where}: expected one root link, found {len(roots)}: {roots}")
+    root = roots[0]
+
+    # Depth-first walk from the root (children in file order): fixed joints become frames of their body.
+    body_of: dict[str, tuple[int, np.ndarray]] = {root: (0, np.eye(4))}
+    moving: list[JointSpec] = []
+    joint_poses, parents = [], []
+    order = [root]  # links in the order of the walk
+    stack = list(reversed(children.get(root, [])))
+    while stack:
+        j = stack.pop()
+        order.append(j.child)
+        body, T_body_link = body_of[j.parent]
+        if j.kind == "F":
+            body_of[j.child] = (body, T_body_link @ j.origin)
+        else:
+            moving.append(j)
+            parents.append(body)
+            joint_poses.append(T_body_link @ j.origin)
+            body_of[j.child] = (len(moving), np.eye(4))
+        stack.extend(reversed(children.get(j.child, [])))
+    unreached = [n for n in everything if n not in body_of]
+    if unreached:
+        raise ValueError(f"{where}: links {unreached} are not connected to the root {root!r} (a kinematic loop)")
+
+    index = {j.name: k for k, j in enumerate(moving)}
+    fixed = {j.name for j in joints if j.kind == "F"}
+    actuated = [j for j in moving if j.mimic is None]
+    q_index = {j.name: i for i, j in enumerate(actuated)}
+    sources, multipliers, offsets = [], [], []
+    for j in moving:
+        # positions: pos_j = mult * pos_src + off along the mimic chain, so pos_j = m q_src + o;
+        # the joint's angle is theta_j = pos_j + j.offset.
+        m, o, cur, seen = 1.0, 0.0, j, [j.name]
+        while cur.mimic is not None:
+            src, mult, off = cur.mimic
+            if src in fixed:
+                raise ValueError(f"{where}: joint {cur.name!r} mimics {src!r}, a fixed joint")
+            if src not in index:
+                raise ValueError(f"{where}: joint {cur.name!r} mimics {src!r}, which is not a joint of the robot")
+            if src in seen:
+                raise ValueError(f"{where}: mimic joints form a cycle: {' -> '.join([*seen, src])}")
+            seen.append(src)
+            m, o = m * mult, o + m * off
+            cur = moving[index[src]]
+        sources.append(q_index[cur.name])
+        multipliers.append(m)
+        offsets.append(o + j.offset)
+
+    named = set(links) | {root}
+    frame_names = [n for n in order if n in named]
+    frame_specs = [(n, *body_of[n]) for n in frame_names]
+    for fname, link, T in frames:
+        if fname in frame_names:
+            raise ValueError(f"{where}: frame {fname!r} has the name of a link or of another frame")
+        if link not in body_of:
+            raise ValueError(f"{where}: frame {fname!r} is attached to unknown link {link!r}")
+        body, T_body_link = body_of[link]
+        frame_specs.append((fname, body, T_body_link @ check.rigid_transform(T, f"frame {fname!r}")))
+        frame_names.append(fname)
+    f = jnp.asarray
+    nj = len(moving)
+    return Robot(
+        joint_poses=f(np.array(joint_poses).reshape(nj, 4, 4)),
+        screws=f(np.array([j.screw for j in moving], np.float64).reshape(nj, 6)),
+        multipliers=f(np.array(multipliers, np.float64)),
+        offsets=f(np.array(offsets, np.float64)),
+        frame_poses=f(np.array([T for _, _, T in frame_specs]).reshape(-1, 4, 4)),
+        lower=f(np.array([j.lower for j in actuated], np.float64)),
+        upper=f(np.array([j.upper for j in actuated], np.float64)),
+        parents=tuple(parents),
+        joint_types="".join(j.kind for j in moving),
+        sources=tuple(sources),
+        tree_joints=tuple(j.name for j in moving),
+        frame_bodies=tuple(b for _, b, _ in frame_specs),
+        frame_names=tuple(frame_names),
+        joint_names=tuple(j.name for j in actuated),
+        floating=bool(floating),
+        name=name,
+    )
