@@ -1,0 +1,286 @@
+"""Whole robots (trees, mimic joints, floating roots): every frame and Jacobian against Pinocchio on the
+URDFs of example-robot-data, finite differences, chains cut from trees, and bad input."""
+
+import glob
+import os
+from importlib import metadata
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pinocchio as pin
+import pytest
+from conftest import DATA
+
+import diffkin as dk
+from diffkin import se3
+
+
+def _example_robot_data() -> str | None:
+    try:
+        dist = metadata.distribution("example-robot-data")
+    except metadata.PackageNotFoundError:
+        return None
+    path = str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))
+    return path if os.path.isdir(path) else None
+
+
+ERD = _example_robot_data()
+ERD_URDFS = sorted(glob.glob(os.path.join(ERD, "**", "*.urdf"), recursive=True)) if ERD else []
+# Files of example-robot-data that are not loadable robots, and why (checked in test_rejected_files).
+REJECTED = {
+    "alex_description/urdf/alex_psyonic_hands.urdf": "mimics 'index_q1', which is not a joint of the robot",
+    "ur_description/urdf/ur3.urdf": "no links",  # an empty <robot> (a xacro stub)
+}
+LOADABLE = [p for p in ERD_URDFS if os.path.relpath(p, ERD) not in REJECTED]
+PANDA = os.path.join(DATA, "panda.urdf")
+
+
+def _random_q(robot, n, seed):
+    """In-limit configurations; unlimited (or huge-limit) joints within one turn either way."""
+    lo = np.maximum(np.where(np.isfinite(robot.lower), robot.lower, -np.pi), -np.pi)
+    hi = np.minimum(np.where(np.isfinite(robot.upper), robot.upper, np.pi), np.pi)
+    return np.random.default_rng(seed).uniform(lo, hi, (n, robot.dof))
+
+
+def _pin_q(model, robot, q):
+    """Pinocchio's configuration for our ``q``: mimic joints set from their sources (Pinocchio's
+    default URDF reader keeps them as independent joints)."""
+    values = dict(zip(robot.joint_names, q, strict=True))
+    for name, (source, m, o) in robot.mimic.items():
+        values[name] = m * values[source] + o
+    qp = pin.neutral(model)
+    for name, value in values.items():
+        joint = model.joints[model.getJointId(name)]
+        if joint.nq == 2:  # continuous joints: (cos, sin)
+            qp[joint.idx_q: joint.idx_q + 2] = np.cos(value), np.sin(value)
+        else:
+            qp[joint.idx_q] = value
+    return qp
+
+
+def _pin_columns(model, robot, J):
+    """Pinocchio's ``(6, nv)`` Jacobian as ours: each joint's column, times its multiplier, on its source's column."""
+    out = np.zeros((6, robot.dof))
+    m = np.asarray(robot.multipliers)
+    for j, (name, s) in enumerate(zip(robot.tree_joints, robot.sources, strict=True)):
+        out[:, s] += m[j] * J[:, model.joints[model.getJointId(name)].idx_v]
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not ERD, reason="example-robot-data is not installed (pip install -e '.[test]')")
+@pytest.mark.parametrize("path", LOADABLE, ids=lambda p: os.path.relpath(p, ERD))
+def test_every_frame_and_jacobian_matches_pinocchio(path):
+    robot = dk.load_robot(path)
+    model = pin.buildModelFromUrdf(path)
+    data = model.createData()
+    q = _random_q(robot, 3, seed=len(robot.frame_names))
+    poses = np.asarray(dk.link_poses(robot, q))
+    # Jacobians of the frames farthest down the tree (hands, feet, fingertips, flanges): at most 3.
+    depth = [len(robot.ancestors(b)) for b in robot.frame_bodies]
+    ends = sorted(range(len(depth)), key=lambda f: -depth[f])[:3] if robot.dof else []  # (Pinocchio: nv > 0)
+    jacobians = {(f, ref): np.asarray(dk.jacobian(robot, q, robot.frame_names[f], ref))
+                 for f in ends for ref in ("world", "space", "body")}
+    ref_frames = {"world": pin.LOCAL_WORLD_ALIGNED, "space": pin.WORLD, "body": pin.LOCAL}
+    worst_pose = worst_jac = 0.0
+    for k in range(len(q)):
+        qp = _pin_q(model, robot, q[k])
+        pin.framesForwardKinematics(model, data, qp)
+        if ends:
+            pin.computeJointJacobians(model, data, qp)
+        for f, name in enumerate(robot.frame_names):
+            M = data.oMf[model.getFrameId(name, pin.BODY)].homogeneous
+            worst_pose = max(worst_pose, np.abs(M - poses[k, f]).max())
+        for (f, ref), J in jacobians.items():
+            J_pin = pin.getFrameJacobian(model, data, model.getFrameId(robot.frame_names[f], pin.BODY),
+                                         ref_frames[ref])
+            worst_jac = max(worst_jac, np.abs(_pin_columns(model, robot, J_pin) - J[k]).max())
+    assert worst_pose < 1e-10 and worst_jac < 1e-10, (worst_pose, worst_jac)
+
+
+@pytest.mark.skipif(not ERD, reason="example-robot-data is not installed")
+@pytest.mark.parametrize("name, match", list(REJECTED.items()))
+def test_rejected_files(name, match):
+    with pytest.raises(ValueError, match=match):
+        dk.load_robot(os.path.join(ERD, name))
+
+
+@pytest.fixture(scope="module")
+def panda():
+    """The Panda with its gripper: a tree (two fingers), one mimic joint (finger 2 follows finger 1)."""
+    return dk.load_robot(PANDA)
+
+
+def test_panda_tree_structure(panda):
+    assert panda.dof == 8 and panda.joint_names[-1] == "panda_finger_joint1"
+    assert panda.mimic == {"panda_finger_joint2": ("panda_finger_joint1", 1.0, 0.0)}
+    assert panda.frame_names[0] == "panda_link0" and "panda_hand_tcp" in panda.frame_names
+    assert not panda.floating and dk.load_robot(PANDA, floating=True).floating
+
+
+def test_chain_of_a_tree_is_the_path(panda):
+    """``robot.chain(end, base)`` (product of exponentials) against the tree's own forward pass."""
+    q = _random_q(panda, 16, seed=3)
+    names = panda.frame_names
+    poses = np.asarray(dk.link_poses(panda, q))
+    for end, base in (("panda_hand_tcp", None), ("panda_link8", "panda_link2"), ("panda_leftfinger", "panda_hand"),
+                      ("panda_rightfinger", None)):
+        chain = panda.chain(end, base)
+        cols = [panda.joint_names.index(n) for n in chain.joint_names]
+        T_base = poses[:, names.index(base or names[0])]
+        expected = np.linalg.inv(T_base) @ poses[:, names.index(end)]
+        np.testing.assert_allclose(dk.fk(chain, q[:, cols]), expected, atol=1e-12)
+        assert chain.dof == len(cols)
+    right = panda.chain("panda_rightfinger", "panda_hand")  # the mimic joint, folded into its source
+    assert right.joint_names == ("panda_finger_joint1",) and right.joint_types == "P"
+
+
+def test_fk_of_several_frames_and_batches(panda):
+    q = _random_q(panda, 6, seed=4).reshape(2, 3, 8)
+    both = dk.fk(panda, q, ["panda_leftfinger", "panda_link3"])
+    assert both.shape == (2, 3, 2, 4, 4)
+    np.testing.assert_allclose(both[..., 1, :, :], dk.fk(panda, q, "panda_link3"), atol=1e-15)
+    assert dk.link_poses(panda, q).shape == (2, 3, len(panda.frame_names), 4, 4)
+    assert dk.jacobian(panda, q, "panda_hand_tcp").shape == (2, 3, 6, 8)
+    assert dk.manipulability(panda, q, "panda_hand_tcp").shape == (2, 3)
+
+
+def _fd_columns(pose_of, x, eps=1e-6):
+    """Central differences of a pose function of a vector ``x``: world-aligned ``[dp; w]`` columns."""
+    cols = []
+    T = pose_of(x)
+    for i in range(len(x)):
+        dx = np.zeros(len(x))
+        dx[i] = eps
+        dT = (pose_of(x + dx) - pose_of(x - dx)) / (2 * eps)
+        cols.append(np.concatenate([dT[:3, 3], se3.vee(dT[:3, :3] @ T[:3, :3].T)]))
+    return np.stack(cols, axis=1)
+
+
+@pytest.mark.parametrize("method", ["analytic", "autodiff"])
+def test_mimic_columns_match_finite_differences(panda, method):
+    """Finger 2 follows finger 1: the Jacobian of the right finger moves with joint 1's column."""
+    q = _random_q(panda, 1, seed=5)[0]
+    for name in ("panda_rightfinger", "panda_leftfinger", "panda_link5"):
+        J = np.asarray(dk.jacobian(panda, q, name, method=method))
+        fd = _fd_columns(lambda x, name=name: np.asarray(dk.fk(panda, x, name)), q)
+        np.testing.assert_allclose(J, fd, atol=1e-8)
+    assert np.abs(np.asarray(dk.jacobian(panda, q, "panda_link5"))[:, 5:]).max() == 0.0  # joints off the path
+
+
+@pytest.mark.parametrize("method", ["analytic", "autodiff"])
+@pytest.mark.parametrize("ref", ["world", "space", "body"])
+def test_floating_base_columns(panda, method, ref):
+    """``include_base``: the root moving as ``T_world_root exp([V] t)``; against finite differences."""
+    robot = dk.load_robot(PANDA, floating=True)
+    rng = np.random.default_rng(6)
+    q = _random_q(robot, 1, seed=6)[0]
+    base = np.asarray(jax.scipy.linalg.expm(se3.skew(rng.normal(size=3)) * 1.0))
+    T_wr = np.eye(4)
+    T_wr[:3, :3], T_wr[:3, 3] = base, rng.normal(size=3)
+
+    def moved(V):
+        twist = np.zeros((4, 4))
+        twist[:3, :3], twist[:3, 3] = se3.skew(V[3:]), V[:3]
+        return np.asarray(dk.fk(robot, q, "panda_hand_tcp", base=T_wr @ np.asarray(jax.scipy.linalg.expm(twist))))
+
+    J = np.asarray(dk.jacobian(robot, q, "panda_hand_tcp", ref, method=method, base=T_wr, include_base=True))
+    fd = _fd_columns(moved, np.zeros(6))  # world-aligned columns of the root's body twist
+    T = moved(np.zeros(6))
+    if ref == "space":
+        fd = np.concatenate([fd[:3] + np.cross(fd[3:].T, T[:3, 3]).T * -1, fd[3:]])  # v_s = v_p - w x p
+    if ref == "body":
+        fd = np.concatenate([T[:3, :3].T @ fd[:3], T[:3, :3].T @ fd[3:]])
+    assert J.shape == (6, 6 + robot.dof)
+    np.testing.assert_allclose(J[:, :6], fd, atol=1e-8)
+    np.testing.assert_allclose(J[:, 6:], dk.jacobian(robot, q, "panda_hand_tcp", ref, base=T_wr), atol=1e-12)
+    np.testing.assert_allclose(dk.fk(robot, q, "panda_hand_tcp", base=T_wr),
+                               T_wr @ np.asarray(dk.fk(robot, q, "panda_hand_tcp")), atol=1e-14)
+
+
+def test_jit_argument_or_closure_and_parameter_gradients(panda):
+    """One compiled function serves a robot passed as an argument; gradients reach its arrays."""
+    q = jnp.asarray(_random_q(panda, 4, seed=7))
+    closed = jax.jit(lambda q: dk.fk(panda, q, "panda_hand_tcp"))(q)
+    passed = jax.jit(lambda r, q: dk.fk(r, q, "panda_hand_tcp"))(panda, q)
+    np.testing.assert_allclose(closed, passed, atol=1e-14)
+    np.testing.assert_allclose(passed, dk.fk(panda, q, "panda_hand_tcp"), atol=1e-14)
+
+    def reach(poses):
+        return jnp.sum(dk.fk(panda.replace(joint_poses=poses), q, "panda_hand_tcp")[..., :3, 3])
+
+    g = jax.grad(reach)(panda.joint_poses)
+    eps, j = 1e-6, 3
+    bumped = panda.joint_poses.at[j, 0, 3].add(eps)
+    fd = (reach(bumped) - reach(panda.joint_poses.at[j, 0, 3].add(-eps))) / (2 * eps)
+    np.testing.assert_allclose(g[j, 0, 3], fd, rtol=1e-7)
+
+
+def _urdf(joints: str, links=None) -> str:
+    import re
+
+    names = links or dict.fromkeys(re.findall(r'link="(\w+)"', joints))
+    return '<robot name="r">' + "".join(f'<link name="{n}"/>' for n in names) + joints + "</robot>"
+
+
+def _joint(name, kind, parent, child, extra=""):
+    limit = '<limit lower="-1" upper="1"/>' if kind in ("revolute", "prismatic") else ""
+    return f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>{limit}{extra}</joint>'
+
+
+REV, FIX = "revolute", "fixed"
+
+
+@pytest.mark.parametrize(
+    "xml, match",
+    [
+        (_urdf(_joint("j1", REV, "a", "b") + _joint("j2", REV, "b", "c") + _joint("j3", FIX, "c", "b")),
+         r"link 'b' is the child of two joints \('j1', 'j3'\)"),
+        (_urdf(_joint("j1", REV, "a", "b") + _joint("j2", REV, "b", "c") + _joint("j3", FIX, "c", "a")),
+         r"no root link"),
+        (_urdf(_joint("j1", REV, "a", "b") + _joint("j2", REV, "c", "d") + _joint("j3", FIX, "d", "c"),
+               ["a", "b", "c", "d"]), r"link 'c' is the child of two joints|not connected to the root"),
+        (_urdf(_joint("j1", REV, "a", "a")), r"joint 'j1' connects link 'a' to itself"),
+        (_urdf(_joint("j1", REV, "a", "b") + _joint("j2", REV, "c", "d")),
+         r"expected one root link, found 2: \['a', 'c'\]"),
+        (_urdf(_joint("j1", REV, "a", "b"), ["a", "b", "a"]), r"duplicate link name 'a'"),
+        (_urdf(_joint("j1", REV, "a", "b") + _joint("j1", REV, "b", "c")), r"duplicate joint name 'j1'"),
+        (_urdf(_joint("j1", REV, "a", "b") + _joint("j2", REV, "b", "c", '<mimic joint="nope"/>')),
+         r"joint 'j2' mimics 'nope', which is not a joint of the robot"),
+        (_urdf(_joint("j0", REV, "a", "b") + _joint("j1", REV, "b", "c", '<mimic joint="j2"/>')
+               + _joint("j2", REV, "c", "d", '<mimic joint="j1"/>')), r"mimic joints form a cycle: j1 -> j2 -> j1"),
+        (_urdf(_joint("j1", FIX, "a", "b") + _joint("j2", REV, "b", "c", '<mimic joint="j1"/>')),
+         r"joint 'j2' mimics 'j1', a fixed joint"),
+    ],
+)
+def test_bad_trees_are_rejected(xml, match):
+    with pytest.raises(ValueError, match=match):
+        dk.load_robot(xml)
+
+
+def test_bad_calls_are_rejected(panda):
+    q = np.zeros(8)
+    with pytest.raises(ValueError, match=r"unknown frame 'hand'; the robot's frames are \['panda_link0'"):
+        dk.fk(panda, q, "hand")
+    with pytest.raises(ValueError, match=r"q: expected shape \(\.\.\., 8\) for a 8-joint robot, got \(7,\)"):
+        dk.fk(panda, np.zeros(7), "panda_hand")
+    with pytest.raises(ValueError, match="frames: name the frame"):
+        dk.fk(panda, q)
+    with pytest.raises(TypeError, match="frame_name: name the frame of the robot"):
+        dk.jacobian(panda, q)
+    with pytest.raises(ValueError, match="frame: expected one of"):
+        dk.jacobian(panda, q, "panda_hand", "tool")
+    with pytest.raises(ValueError, match=r"base: expected a \(\.\.\., 4, 4\) pose"):
+        dk.fk(panda, q, "panda_hand", base=np.eye(3))
+    with pytest.raises(ValueError, match="include_base: only a Robot"):
+        dk.jacobian(dk.robots.iiwa14(), np.zeros(7), include_base=True)
+    with pytest.raises(ValueError, match="source: expected a <robot> \\(URDF\\)"):
+        dk.load_robot("<model/>")
+
+
+def test_a_robot_without_joints():
+    robot = dk.load_robot(_urdf(_joint("j", "fixed", "a", "b", '<origin xyz="1 2 3"/>')))
+    assert robot.dof == 0 and robot.frame_names == ("a", "b")
+    np.testing.assert_allclose(dk.fk(robot, np.zeros((2, 0)), "b")[:, :3, 3], [[1, 2, 3]] * 2)
+    assert dk.jacobian(robot, np.zeros(0), "b").shape == (6, 0)
