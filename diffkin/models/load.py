@@ -3,18 +3,27 @@
 from __future__ import annotations
 
 from diffkin.models import _xml
+from diffkin.models.mjcf import robot_from_mjcf
 from diffkin.models.robot import Robot
 from diffkin.models.urdf import robot_from_urdf
 
 
 def load_robot(source, *, floating: bool = False) -> Robot:
-    """Read a whole robot from a URDF file (root element ``<robot>``).
+    """Read a whole robot from a URDF (root element ``<robot>``) or MJCF (root ``<mujoco>``) file.
 
-    Fixed joints are merged (their links become frames of the moving body they are fixed to);
-    ``continuous`` joints and revolute or prismatic joints without ``<limit lower= upper=>``
+    URDF: fixed joints are merged (their links become frames of the moving body they are fixed
+    to); ``continuous`` joints and revolute or prismatic joints without ``<limit lower= upper=>``
     are unlimited (as urdfdom and Pinocchio read them); ``<mimic joint= multiplier= offset=>``
     makes a joint follow its source, ``q_j = multiplier * q_source + offset``, outside ``q``. A
     ``floating`` joint from the root link makes its child the floating root.
+
+    MJCF (see :mod:`diffkin.models.mjcf`): bodies (with ``pos`` and ``quat``/``axisangle``/
+    ``euler``/``xyaxes``/``zaxis``, in ``<compiler angle= eulerseq=>`` units), ``<frame>``s,
+    ``<default>`` classes, hinge and slide joints (several per body, applied in order; ``ref``,
+    ``range``, ``limited``), named sites as frames, ``<include>``; a linear
+    ``<equality><joint polycoef=>`` makes ``joint1`` follow ``joint2``,
+    ``q1 - ref1 = c0 + c1 (q2 - ref2)``; a free joint on a top-level body makes it the floating
+    root. The world body is the frame ``"world"``; angles in ``q`` and limits are radians.
 
     Args:
         source: path to the file, or the XML text itself.
@@ -22,18 +31,21 @@ def load_robot(source, *, floating: bool = False) -> Robot:
             of :func:`diffkin.fk`, and :func:`diffkin.jacobian` can include its six columns).
 
     Returns:
-        The :class:`Robot`: frames are every link, in a depth-first walk from the root;
-        ``q`` is the actuated (non-mimic, non-fixed) joints in the same order.
+        The :class:`Robot`: frames are every link (or body), in a depth-first walk from the
+        root, then the extra frames (MJCF sites); ``q`` is the actuated (non-mimic, non-fixed)
+        joints in the same order.
 
     Raises:
         TypeError: ``source`` is not a path or string.
         ValueError: a missing file, malformed XML, an unknown root element, or anything the
-            format's reader rejects (loops, several roots, duplicate names, unsupported joints,
-            mimic joints of missing joints or in cycles), with the element named.
+            format's reader rejects (loops, several roots, duplicate names, unsupported joints
+            or elements, mimic joints of missing joints or in cycles), with the element named.
     """
-    root, _ = _xml.read(source)
+    root, path = _xml.read(source)
     if root.tag == "robot":
         robot = robot_from_urdf(root)
+    elif root.tag == "mujoco":
+        robot = robot_from_mjcf(root, path)
     else:
-        raise ValueError(f"source: expected a <robot> (URDF) root element, got <{root.tag}>")
+        raise ValueError(f"source: expected a <robot> (URDF) or <mujoco> (MJCF) root element, got <{root.tag}>")
     return robot.replace(floating=True) if floating else robot

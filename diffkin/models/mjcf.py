@@ -1,0 +1,438 @@
+"""A strict MJCF (MuJoCo XML) reader: the kinematic tree of a ``<mujoco>`` model as a :class:`Robot`.
+
+What MuJoCo's ``mj_kinematics`` computes is reproduced exactly: a body's frame is its parent's
+frame moved by the body's ``pos`` and orientation, then by its joints in order, each about its
+anchor ``pos`` and ``axis`` in the body frame (``T_parent_body @ exp([S1] q1) @ exp([S2] q2)``),
+by ``qpos - ref``. Lengths are metres; angles are degrees unless ``<compiler angle="radian">``
+(Euler angles in ``<compiler eulerseq>``, default ``xyz``: lowercase about moving axes, uppercase
+about fixed axes). ``<default>`` classes (nested, ``class``, ``childclass``), ``<frame>``
+transforms and ``<include>`` are resolved as MuJoCo does; joint limits follow ``limited``,
+``range`` and ``<compiler autolimits>`` (radians in ``q``, ``+-inf`` when unlimited). Geoms,
+inertia, cameras, lights, actuators, sensors and tendons that no equality uses do not move
+anything and are ignored; mocap bodies are fixed at their pose in the file.
+
+Frames: the world body is ``"world"``; every body is a frame by its name (an unnamed body is
+``body{id}``, ``id`` its MuJoCo body id); every named ``<site>`` is a frame (``site:{name}`` if a
+body has the same name: MuJoCo keeps bodies and sites in separate namespaces). Unnamed joints
+are ``joint{id}`` (MuJoCo joint id). A ``<freejoint>`` (or ``<joint type="free">``) on a
+top-level body makes that body the floating root: its pose is ``fk``'s ``base`` (MuJoCo's
+``qpos`` position and ``w x y z`` quaternion), and static world bodies and world sites, which are
+not part of the robot, are left out.
+
+Rejected with a ValueError naming the element: ball joints, free joints below the top level or
+with other joints, several free bodies, moving top-level bodies beside a free one, equality
+constraints other than linear ``<joint>`` ones (``connect``, ``weld``, ``tendon``, ``flex``:
+they close loops or couple tendons), ``<attach>``, ``<replicate>``, ``<composite>``,
+``<flexcomp>``, unknown default classes, missing include files. Inactive equalities
+(``active="false"``) are ignored. ``<include>`` paths are relative to the main file's folder
+(as MuJoCo resolves them; the working directory for XML text).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+from diffkin.models import _xml
+from diffkin.models.robot import JointSpec, Robot, build
+
+_ORIENTATIONS = ("quat", "axisangle", "euler", "xyaxes", "zaxis")
+_REJECTED = ("attach", "replicate", "composite", "flexcomp")
+_FROMTO_TYPES = ("capsule", "cylinder", "box", "ellipsoid")
+
+
+def _describe(el: ET.Element) -> str:
+    """``MJCF <tag name='...'>`` (or the attributes that identify an unnamed element)."""
+    keys = [k for k in ("name", "joint1", "joint2", "tendon1", "body1", "file", "class", "type") if el.get(k)]
+    attributes = "".join(f" {k}={el.get(k)!r}" for k in keys[:3])
+    return f"MJCF <{el.tag}{attributes}>"
+
+
+# ------------------------------------------------------------------------------------------- rotations
+
+
+def _unit(v: np.ndarray, where: str) -> np.ndarray:
+    norm = np.linalg.norm(v)
+    if norm < 1e-12:
+        raise ValueError(f"{where}: expected a nonzero vector, got {v.tolist()}")
+    return v / norm
+
+
+def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation by ``angle`` (radians) about the unit ``axis`` (Rodrigues)."""
+    K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * K @ K
+
+
+def _quat(q: np.ndarray, where: str) -> np.ndarray:
+    """Rotation of the quaternion ``w x y z`` (normalised, as MuJoCo does)."""
+    w, x, y, z = _unit(q, where)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def _zaxis(z: np.ndarray, where: str) -> np.ndarray:
+    """The minimal rotation taking ``(0, 0, 1)`` to ``z`` (a half turn about x if ``z`` points down)."""
+    z = _unit(z, where)
+    axis = np.cross([0.0, 0.0, 1.0], z)
+    s = np.linalg.norm(axis)
+    axis = axis / s if s >= 1e-10 else np.array([1.0, 0.0, 0.0])
+    return _axis_angle(axis, np.arctan2(s, z[2]))
+
+
+def _euler(angles: np.ndarray, seq: str) -> np.ndarray:
+    """Euler angles (radians) in MuJoCo's ``eulerseq``: lowercase about the moving axes (post-multiplied),
+    uppercase about the fixed axes (pre-multiplied)."""
+    R = np.eye(3)
+    for angle, axis in zip(angles, seq, strict=True):
+        Ri = _axis_angle(np.eye(3)["xyz".index(axis.lower())], angle)
+        R = R @ Ri if axis.islower() else Ri @ R
+    return R
+
+
+# ---------------------------------------------------------------------------------------------- reader
+
+
+@dataclasses.dataclass
+class _Part:
+    """What one top-level body (or the world itself) contributes: its joints, bodies and sites."""
+
+    joints: list[JointSpec] = dataclasses.field(default_factory=list)
+    links: list[str] = dataclasses.field(default_factory=list)
+    sites: list[tuple[str, str, np.ndarray]] = dataclasses.field(default_factory=list)
+    free: ET.Element | None = None
+
+
+class _Reader:
+    """One pass over a ``<mujoco>`` element (includes already expanded)."""
+
+    def __init__(self, root: ET.Element):
+        self.degrees, self.eulerseq, self.autolimits = True, "xyz", True
+        for el in root.findall("compiler"):
+            self._compiler(el)
+        self.classes: dict[str, tuple[str | None, dict[str, dict[str, str]]]] = {"main": (None, {})}
+        for el in root.findall("default"):
+            name = el.get("class", "main")
+            self._defaults(el, name, None if name == "main" else "main")
+        self.n_bodies, self.n_joints = 1, 0
+        self.parts: dict[str, _Part] = {"world": _Part(links=["world"])}
+
+    def _compiler(self, el: ET.Element) -> None:
+        angle, seq, auto = el.get("angle"), el.get("eulerseq"), el.get("autolimits")
+        if angle is not None:
+            if angle not in ("degree", "radian"):
+                raise ValueError(f"{_describe(el)}: angle must be 'degree' or 'radian', got {angle!r}")
+            self.degrees = angle == "degree"
+        if seq is not None:
+            if len(seq) != 3 or any(c not in "xyzXYZ" for c in seq):
+                raise ValueError(f"{_describe(el)}: eulerseq must be 3 letters of xyzXYZ, got {seq!r}")
+            self.eulerseq = seq
+        if auto is not None:
+            self.autolimits = self._bool(el, "autolimits", auto)
+
+    def _defaults(self, el: ET.Element, name: str, parent: str | None) -> None:
+        """Record a ``<default>`` class: per element tag, its attributes (nested classes inherit)."""
+        if name in self.classes and name != "main":
+            raise ValueError(f"{_describe(el)}: repeated default class {name!r}")
+        tags = self.classes.setdefault(name, (parent, {}))[1]
+        for child in el:
+            if child.tag == "default":
+                if not child.get("class"):
+                    raise ValueError(f"MJCF nested <default> in class {name!r}: missing 'class' attribute")
+                self._defaults(child, child.get("class"), name)
+            else:
+                tags.setdefault(child.tag, {}).update(child.attrib)
+
+    # -- attributes
+
+    def _class(self, el: ET.Element, inherited: str, attribute: str = "class") -> str:
+        name = el.get(attribute, inherited)
+        if name not in self.classes:
+            raise ValueError(f"{_describe(el)}: unknown default class {name!r}")
+        return name
+
+    def _chain(self, cls: str | None, tag: str):
+        """The attribute dicts of ``tag`` in class ``cls`` and its ancestors, most specific first."""
+        while cls is not None:
+            parent, tags = self.classes[cls]
+            yield tags.get(tag, {})
+            cls = parent
+
+    def _get(self, el: ET.Element, attribute: str, cls: str | None, default: str | None = None,
+             tag: str | None = None) -> str | None:
+        """An attribute from the element, else its class chain, else ``default``."""
+        if el.get(attribute) is not None:
+            return el.get(attribute)
+        for attrs in self._chain(cls, tag or el.tag):
+            if attribute in attrs:
+                return attrs[attribute]
+        return default
+
+    @staticmethod
+    def _bool(el: ET.Element, attribute: str, text: str, allowed=("true", "false")) -> bool | str:
+        if text not in allowed:
+            raise ValueError(f"{_describe(el)}: {attribute} must be one of {list(allowed)}, got {text!r}")
+        return {"true": True, "false": False}.get(text, text)
+
+    def _angle(self, value: float) -> float:
+        return float(np.deg2rad(value)) if self.degrees else float(value)
+
+    def _rotation(self, el: ET.Element, cls: str | None = None) -> np.ndarray:
+        """The element's orientation (from its class chain if it gives none), as a 3x3 rotation."""
+        sources = [el.attrib, *(self._chain(cls, el.tag) if cls is not None else ())]
+        attrs = next((a for a in sources if any(k in a for k in _ORIENTATIONS)), {})
+        given = [k for k in _ORIENTATIONS if k in attrs]
+        where = _describe(el)
+        if len(given) > 1:
+            raise ValueError(f"{where}: several orientations given ({given}); MuJoCo allows one")
+        if not given:
+            return np.eye(3)
+        kind = given[0]
+        values = _xml.numbers(None, kind, {"quat": 4, "axisangle": 4, "euler": 3, "xyaxes": 6, "zaxis": 3}[kind],
+                              attrs[kind], where)
+        if kind == "quat":
+            return _quat(values, f"{where} quat")
+        if kind == "axisangle":
+            return _axis_angle(_unit(values[:3], f"{where} axisangle"), self._angle(values[3]))
+        if kind == "euler":
+            return _euler([self._angle(a) for a in values], self.eulerseq)
+        if kind == "zaxis":
+            return _zaxis(values, f"{where} zaxis")
+        x = _unit(values[:3], f"{where} xyaxes")
+        y = _unit(values[3:] - x * (x @ values[3:]), f"{where} xyaxes")
+        return np.column_stack([x, y, np.cross(x, y)])
+
+    def _pose(self, el: ET.Element, cls: str | None = None) -> np.ndarray:
+        """``(4, 4)`` pose of a body, frame or site in its container's frame (``pos`` in metres)."""
+        T = np.eye(4)
+        where = _describe(el)
+        fromto = self._get(el, "fromto", cls) if el.tag == "site" else None
+        if fromto is not None:
+            kind = self._get(el, "type", cls, "sphere")
+            if kind not in _FROMTO_TYPES:
+                raise ValueError(f"{where}: fromto needs a site of type {list(_FROMTO_TYPES)}, got {kind!r}")
+            if self._get(el, "pos", cls) is not None:
+                raise ValueError(f"{where}: both pos and fromto given (MuJoCo allows one)")
+            ends = _xml.numbers(None, "fromto", 6, fromto, where)
+            T[:3, :3] = _zaxis(ends[:3] - ends[3:], f"{where} fromto")  # z from `to` to `from`, as MuJoCo
+            T[:3, 3] = 0.5 * (ends[:3] + ends[3:])
+            return T
+        T[:3, :3] = self._rotation(el, cls)
+        T[:3, 3] = _xml.numbers(None, "pos", 3, self._get(el, "pos", cls, "0 0 0"), where)
+        return T
+
+    # -- the body tree
+
+    def _contents(self, el: ET.Element, T: np.ndarray, cls: str, out: list) -> list:
+        """The joints, sites and bodies of a body (through its ``<frame>``s), in document order,
+        each as ``(element, pose of its container in the body frame, class)``."""
+        for child in el:
+            if child.tag in _REJECTED:
+                raise ValueError(f"{_describe(child)}: <{child.tag}> is not supported")
+            if child.tag == "frame":
+                inner = self._class(child, cls, "childclass")
+                self._contents(child, T @ self._pose(child), inner, out)
+            elif child.tag in ("joint", "freejoint", "site", "body"):
+                out.append((child, T, cls))
+        return out
+
+    def _joint(self, el: ET.Element, T: np.ndarray, cls: str, body: str) -> tuple[JointSpec | None, bool]:
+        """A hinge or slide joint as a spec from the body's parent side (``origin`` set later), or
+        ``(None, True)`` for a free joint."""
+        jid, self.n_joints = self.n_joints, self.n_joints + 1
+        cls = self._class(el, cls)
+        kind = "free" if el.tag == "freejoint" else self._get(el, "type", cls, "hinge")
+        if kind == "free":
+            return None, True
+        where = _describe(el)
+        if kind not in ("hinge", "slide"):
+            raise ValueError(f"{where}: joint type {kind!r} is not supported (hinge, slide, free on a top-level body)")
+        axis = T[:3, :3] @ _unit(_xml.numbers(None, "axis", 3, self._get(el, "axis", cls, "0 0 1"), where),
+                                 f"{where} axis")
+        anchor = T[:3, :3] @ _xml.numbers(None, "pos", 3, self._get(el, "pos", cls, "0 0 0"), where) + T[:3, 3]
+        hinge = kind == "hinge"
+        screw = np.concatenate([np.cross(anchor, axis), axis] if hinge else [axis, np.zeros(3)])
+        ref = float(_xml.numbers(None, "ref", 1, self._get(el, "ref", cls, "0"), where)[0])
+        lower, upper = self._limits(el, cls, hinge)
+        name = el.get("name") or f"joint{jid}"
+        return JointSpec(name, "R" if hinge else "P", "", body, np.eye(4), screw, lower, upper,
+                         offset=-(self._angle(ref) if hinge else ref)), False
+
+    def _limits(self, el: ET.Element, cls: str, hinge: bool) -> tuple[float, float]:
+        """``(lower, upper)`` in radians or metres; ``+-inf`` if unlimited (MuJoCo's ``limited`` rules)."""
+        where = _describe(el)
+        text = self._get(el, "range", cls)
+        limited = self._bool(el, "limited", self._get(el, "limited", cls, "auto"), ("true", "false", "auto"))
+        if limited == "auto" and text is not None and not self.autolimits:
+            raise ValueError(f"{where}: 'range' without 'limited' needs <compiler autolimits=\"true\">")
+        lower, upper = _xml.numbers(None, "range", 2, text or "0 0", where)
+        if limited is True and not lower < upper:
+            raise ValueError(f"{where}: a limited joint needs range lower < upper, got {text!r}")
+        if limited is False or (limited == "auto" and not lower < upper):
+            return -np.inf, np.inf
+        return (self._angle(lower), self._angle(upper)) if hinge else (float(lower), float(upper))
+
+    def _body(self, el: ET.Element, parent: str, T_parent_body: np.ndarray, cls: str, part: _Part) -> None:
+        """Add a body, its joints and sites, then its children (depth first, MuJoCo's id order)."""
+        bid, self.n_bodies = self.n_bodies, self.n_bodies + 1
+        name = el.get("name") or f"body{bid}"
+        cls = self._class(el, cls, "childclass")
+        part.links.append(name)
+        contents = self._contents(el, np.eye(4), cls, [])
+        moving = []
+        for child, T, c in contents:
+            if child.tag in ("joint", "freejoint"):
+                spec, free = self._joint(child, T, c, name)
+                if free and (parent != "world" or part.free is not None):
+                    raise ValueError(f"{_describe(child)}: a free joint must be the only joint of a top-level body")
+                if free:
+                    part.free = child
+                else:
+                    moving.append(spec)
+        if part.free is not None and parent == "world" and moving:
+            raise ValueError(f"{_describe(part.free)}: a free joint must be the only joint of a top-level body")
+        if part.free is None or parent != "world":
+            self._connect(parent, name, T_parent_body, moving, part)
+        for child, T, c in contents:
+            if child.tag == "site" and child.get("name"):
+                part.sites.append((child.get("name"), name, T @ self._pose(child, self._class(child, c))))
+            elif child.tag == "body":
+                self._body(child, name, T @ self._pose(child), c, part)
+
+    @staticmethod
+    def _connect(parent: str, body: str, T_parent_body: np.ndarray, moving: list[JointSpec], part: _Part) -> None:
+        """Chain a body's joints through unnamed intermediate bodies (a fixed joint if it has none)."""
+        if not moving:
+            part.joints.append(JointSpec(f"{body}\0fixed", "F", parent, body, T_parent_body, np.zeros(6)))
+            return
+        for k, spec in enumerate(moving):
+            child = body if k == len(moving) - 1 else f"{body}\0{k}"
+            origin = T_parent_body if k == 0 else np.eye(4)
+            part.joints.append(dataclasses.replace(spec, parent=parent, child=child, origin=origin))
+            parent = child
+
+    def worldbody(self, el: ET.Element) -> None:
+        for child, T, cls in self._contents(el, np.eye(4), "main", []):
+            if child.tag in ("joint", "freejoint"):
+                raise ValueError(f"{_describe(child)}: the world body cannot have joints")
+            if child.tag == "site" and child.get("name"):
+                T_world_site = T @ self._pose(child, self._class(child, cls))
+                self.parts["world"].sites.append((child.get("name"), "world", T_world_site))
+            elif child.tag == "body":
+                part = _Part()
+                self._body(child, "world", T @ self._pose(child), cls, part)
+                self.parts[part.links[0]] = part
+
+
+# ----------------------------------------------------------------------------------------------- equality
+
+
+def _screw_exp(screw: np.ndarray, theta: float) -> np.ndarray:
+    """``exp([screw] theta)`` of a unit hinge ``[c x a; a]`` or slide ``[a; 0]`` screw."""
+    v, w = screw[:3], screw[3:]
+    T = np.eye(4)
+    if np.linalg.norm(w) < 0.5:
+        T[:3, 3] = v * theta
+    else:
+        R = _axis_angle(w, theta)
+        T[:3, :3], T[:3, 3] = R, (np.eye(3) - R) @ np.cross(w, v)
+    return T
+
+
+def _equalities(reader: _Reader, root: ET.Element, joints: list[JointSpec]) -> list[JointSpec]:
+    """Apply the ``<equality><joint>`` couplings: ``q1 - ref1 = c0 + c1 (q2 - ref2)`` (MuJoCo's, linear).
+
+    A joint with ``joint2`` omitted is locked at ``q1 - ref1 = c0`` (a fixed joint).
+    """
+    index = {j.name: k for k, j in enumerate(joints)}
+    for group in root.findall("equality"):
+        for el in group:
+            cls = reader._class(el, "main")
+            if not reader._bool(el, "active", reader._get(el, "active", cls, "true", "equality")):
+                continue
+            where = _describe(el).replace("MJCF <", "MJCF <equality><", 1)
+            if el.tag != "joint":
+                raise ValueError(f"{where}: <equality><{el.tag}> constraints are not supported (they close "
+                                 "kinematic loops or couple tendons); only linear <joint> equalities are")
+            c = _xml.numbers(None, "polycoef", 5, reader._get(el, "polycoef", cls, "0 1 0 0 0", "equality"), where)
+            if np.any(c[2:] != 0):
+                raise ValueError(f"{where}: polycoef {c.tolist()} is not linear (c2 = c3 = c4 = 0 is needed)")
+            names = [el.get("joint1"), el.get("joint2")]
+            if not names[0]:
+                raise ValueError(f"{where}: missing 'joint1' attribute")
+            for n in filter(None, names):
+                if n not in index or joints[index[n]].kind == "F":
+                    raise ValueError(f"{where}: {n!r} is not a hinge or slide joint of the robot")
+            j1 = joints[index[names[0]]]
+            if j1.mimic is not None:
+                raise ValueError(f"{where}: joint {j1.name!r} is already coupled to {j1.mimic[0]!r}")
+            if names[1] is None:
+                locked = j1.origin @ _screw_exp(j1.screw, c[0])
+                joints[index[j1.name]] = dataclasses.replace(j1, kind="F", origin=locked)
+            else:
+                ref1, ref2 = -j1.offset, -joints[index[names[1]]].offset
+                joints[index[j1.name]] = dataclasses.replace(j1, mimic=(names[1], c[1], c[0] + ref1 - c[1] * ref2))
+    return joints
+
+
+# --------------------------------------------------------------------------------------------- front door
+
+
+def _expand_includes(el: ET.Element, folder: str, stack: tuple[str, ...] = ()) -> None:
+    """Replace every ``<include file=...>`` by the children of the included ``<mujoco>`` (recursively)."""
+    children = []
+    for child in el:
+        if child.tag != "include":
+            _expand_includes(child, folder, stack)
+            children.append(child)
+            continue
+        if not child.get("file"):
+            raise ValueError("MJCF <include>: missing 'file' attribute")
+        path = os.path.normpath(os.path.join(folder, child.get("file")))
+        if not os.path.isfile(path):
+            raise ValueError(f"{_describe(child)}: file not found: {path!r}")
+        if path in stack:
+            raise ValueError(f"{_describe(child)}: recursive include of {path!r}")
+        included, _ = _xml.read(path, "MJCF")
+        if included.tag != "mujoco":
+            raise ValueError(f"{_describe(child)}: expected a <mujoco> root element in {path!r}, got <{included.tag}>")
+        _expand_includes(included, folder, (*stack, path))
+        children.extend(included)
+    el[:] = children
+
+
+def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
+    """The :class:`Robot` of a parsed ``<mujoco>`` element (see the module docstring and :func:`diffkin.load_robot`).
+
+    Args:
+        root: the ``<mujoco>`` element (modified: its includes are expanded in place).
+        path: the file it was read from (includes are relative to its folder), or ``None``.
+    """
+    _expand_includes(root, os.path.dirname(path) if path else os.getcwd())
+    reader = _Reader(root)
+    for el in root.findall("worldbody"):
+        reader.worldbody(el)
+    free = [(name, part) for name, part in reader.parts.items() if part.free is not None]
+    if len(free) > 1:
+        raise ValueError(f"{_describe(free[1][1].free)}: several bodies have free joints ({[n for n, _ in free]}); "
+                         "a robot has one floating root")
+    parts = list(reader.parts.values())
+    if free:
+        name, part = free[0]
+        for other, p in reader.parts.items():
+            moving = [j.name for j in p.joints if j.kind != "F"]
+            if p is not part and moving:
+                raise ValueError(f"MJCF <body name={other!r}>: its joints {moving} move a second tree beside the "
+                                 f"floating root {name!r}; one tree is supported")
+        parts = [part]
+    joints = _equalities(reader, root, [j for p in parts for j in p.joints])
+    links = [n for p in parts for n in p.links]
+    bodies = set(links)
+    sites = [(f"site:{n}" if n in bodies else n, body, T) for p in parts for n, body, T in p.sites]
+    return build(joints, links, frames=sites, floating=bool(free), name=root.get("model", ""), where="MJCF")
