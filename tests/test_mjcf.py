@@ -403,6 +403,7 @@ PUBLISHED = {  # path, frames whose Jacobians are compared (None: all)
 }
 
 
+@pytest.mark.skipif(not os.path.isdir(DM_CONTROL), reason="dm_control is not installed (pip install -e '.[test]')")
 @pytest.mark.parametrize("name", PUBLISHED)
 def test_published_models_against_mujoco(name):
     path, frames = PUBLISHED[name]
@@ -412,6 +413,7 @@ def test_published_models_against_mujoco(name):
     against_mujoco(robot, model, n=3, frames=frames)
 
 
+@pytest.mark.skipif(not os.path.isdir(DM_CONTROL), reason="dm_control is not installed")
 @pytest.mark.parametrize(
     ("path", "message"),
     [
