@@ -30,15 +30,6 @@ def vee(W: jax.Array) -> jax.Array:
     )
 
 
-def inverse(T: jax.Array) -> jax.Array:
-    """Inverse of rigid transforms ``(..., 4, 4)``."""
-    R, p = T[..., :3, :3], T[..., :3, 3]
-    Rt = jnp.swapaxes(R, -1, -2)
-    top = jnp.concatenate([Rt, -(Rt @ p[..., None])], -1)
-    bottom = jnp.broadcast_to(jnp.array([0.0, 0.0, 0.0, 1.0], T.dtype), top.shape[:-2] + (1, 4))
-    return jnp.concatenate([top, bottom], -2)
-
-
 def adjoint(T: jax.Array) -> jax.Array:
     """``(..., 4, 4) -> (..., 6, 6)``: ``Ad_T`` acting on twists ``[v; w]``: ``[[R, [p] R], [0, R]]``."""
     R, p = T[..., :3, :3], T[..., :3, 3]

@@ -17,13 +17,16 @@ from _bench import PK_IK_TOL, machine_line, median_seconds, pk, pk_ik_solver, ta
 
 import diffkin as dk
 import diffkin.ik as ik
+from diffkin import se3
 
 N = 1000
 TIGHT_TOL = (1e-5, 1e-4)
 
 
 def _rotation_angle(M):
-    return np.arccos(np.clip((np.trace(M, axis1=-2, axis2=-1) - 1) / 2, -1, 1))
+    """Angle of rotations (float64), accurate near 0 and pi (``arccos`` of the trace is not)."""
+    with jax.enable_x64(True):
+        return np.asarray(se3.rotation_angle(np.asarray(M, np.float64)))
 
 
 def main():

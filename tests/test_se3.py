@@ -1,0 +1,99 @@
+"""Rotations and rigid transforms (``diffkin.se3``) in jaxlie's style: random, near-identity and
+near-half-turn rotations over several batch shapes, derivatives against finite differences, and the
+IK residual's elementwise SO(3) log against ``se3.so3_log``."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from diffkin import _rigid as rg
+from diffkin import se3
+from diffkin.ik._problem import _log
+
+SHAPES = [(), (1,), (5,), (2, 3)]
+
+
+def _rotations(kind: str, shape, seed=0):
+    """Rotations ``exp([w])`` with ``|w|`` random in (0, pi), about 1e-9..1e-3, or pi minus that."""
+    rng = np.random.default_rng(seed)
+    axis = rng.normal(size=shape + (3,))
+    axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+    if kind == "random":
+        angle = rng.uniform(0.0, np.pi, shape)
+    elif kind == "near_identity":
+        angle = 10.0 ** rng.uniform(-9, -3, shape)
+    else:
+        angle = np.pi - 10.0 ** rng.uniform(-9, -3, shape)
+    w = axis * angle[..., None]
+    return np.asarray(jax.scipy.linalg.expm(se3.skew(w))), w, angle
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("kind", ["random", "near_identity", "near_pi"])
+def test_log_and_angle_invert_exp(kind, shape):
+    R, w, angle = _rotations(kind, shape)
+    np.testing.assert_allclose(se3.rotation_angle(R), angle, atol=1e-12)
+    w_log = np.asarray(se3.so3_log(R))
+    assert w_log.shape == shape + (3,)
+    # near pi the sign of the axis is ambiguous only at exactly pi: here it is not.
+    np.testing.assert_allclose(w_log, w, atol=1e-7 if kind == "near_pi" else 1e-12)
+    np.testing.assert_allclose(jax.scipy.linalg.expm(se3.skew(jnp.asarray(w_log))), R, atol=1e-12)
+
+
+@pytest.mark.parametrize("kind", ["random", "near_identity", "near_pi"])
+def test_the_ik_residual_log_is_so3_log(kind):
+    R, _, angle = _rotations(kind, (64,), seed=1)
+    M = tuple(tuple(jnp.asarray(R[:, i, j]) for j in range(3)) for i in range(3))
+    w, theta = _log(M)
+    np.testing.assert_allclose(theta, angle, atol=1e-12)
+    np.testing.assert_allclose(np.stack(w, -1), se3.so3_log(R), atol=1e-9)
+
+
+def test_skew_vee_adjoint():
+    rng = np.random.default_rng(2)
+    w, v = rng.normal(size=(4, 3)), rng.normal(size=(4, 3))
+    np.testing.assert_allclose(se3.skew(w) @ v[..., None], np.cross(w, v)[..., None], atol=1e-15)
+    np.testing.assert_allclose(se3.vee(se3.skew(w)), w, atol=1e-15)
+    R, _, _ = _rotations("random", (4,), seed=3)
+    T = np.tile(np.eye(4), (4, 1, 1))
+    T[:, :3, :3], T[:, :3, 3] = R, rng.normal(size=(4, 3))
+
+    def hat(xi):
+        X = np.zeros(xi.shape[:-1] + (4, 4))
+        X[..., :3, :3], X[..., :3, 3] = se3.skew(xi[..., 3:]), xi[..., :3]
+        return X
+
+    xi = rng.normal(size=(4, 6))
+    expected = T @ hat(xi) @ np.linalg.inv(T)  # Ad_T xi = (T [xi] T^-1)^vee
+    np.testing.assert_allclose(hat(np.einsum("...ij,...j->...i", se3.adjoint(T), xi)), expected, atol=1e-13)
+    # the rigid-transform entries' inverse, against numpy
+    A = rg.from_matrix(jnp.asarray(T))
+    inv = rg.to_matrix(rg.inverse(A), (4,), jnp.float64)
+    np.testing.assert_allclose(inv, np.linalg.inv(T), atol=1e-13)
+
+
+@pytest.mark.parametrize("kind", ["random", "near_identity", "near_pi"])
+def test_derivatives_match_finite_differences(kind):
+    """d/dt of log(exp([a] t) R) and of its angle, through the whole function, at every kind of rotation."""
+    R, _, angle = _rotations(kind, (), seed=4)
+    a = np.random.default_rng(5).normal(size=3)
+
+    def rotated(t):
+        return jax.scipy.linalg.expm(se3.skew(jnp.asarray(a) * t)) @ R
+
+    for fn in (se3.so3_log, se3.rotation_angle):
+        _, tangent = jax.jvp(lambda t, fn=fn: fn(rotated(t)), (0.0,), (1.0,))
+        eps = min(1e-6, (np.pi - angle) / 10)  # do not step across the half-turn, where log jumps
+        fd = (fn(rotated(eps)) - fn(rotated(-eps))) / (2 * eps)
+        assert np.all(np.isfinite(tangent))
+        if kind == "near_identity" and fn is se3.rotation_angle:
+            continue  # |w| is not differentiable at the identity: finite, but no two-sided derivative
+        np.testing.assert_allclose(tangent, fd, atol=1e-5, rtol=1e-6)
+
+
+def test_derivatives_are_finite_at_the_identity_and_a_half_turn():
+    for R in (np.eye(3), np.diag([1.0, -1.0, -1.0])):
+        for fn in (se3.so3_log, se3.rotation_angle):
+            J = jax.jacfwd(lambda M, fn=fn: fn(M))(jnp.asarray(R))
+            assert np.all(np.isfinite(J))
