@@ -95,7 +95,7 @@ def _screened(model, targets, q, position_only: bool):
         ``(group, m, dof)``. The error is ``|p_t - p|^2 + ROT_WEIGHT^2 (3 - trace(R_t^T R))``
         (the rotation term is ``2 (1 - cos angle)``, the squared angle near 0).
     """
-    ee = kinematics._frames(model, q)[0].ee
+    ee = kinematics._pass(model, q)[0].ee
     if position_only:
         tp, cost = targets, 0.0
     else:
