@@ -22,6 +22,11 @@ _ARM_NAMES = ("iiwa7", "iiwa14")
 BUILTIN = ("iiwa7", "iiwa14", "panda", "ur5", "puma560")
 
 
+def _shown(x: float) -> float:
+    """A value as a slider shows it: 6 decimals (the browser breaks on values such as ``1e-17``)."""
+    return round(float(x), 6) + 0.0
+
+
 def _safe(name: str) -> str:
     """A frame name as one scene-tree path component."""
     return name.replace("/", "_") or "_"
@@ -207,7 +212,7 @@ class Viewer:
             self.sliders = []
             for i, joint in enumerate(self.kin.joint_names):
                 lo, hi = float(self.kin.lower[i]), float(self.kin.upper[i])
-                slider = gui.add_slider(joint, min=lo, max=hi, step=1e-3, initial_value=float(self.q[i]))
+                slider = gui.add_slider(joint, min=lo, max=hi, step=1e-3, initial_value=_shown(self.q[i]))
                 slider.on_update(lambda _event, i=i: self._on_slider(i))
                 self.sliders.append(slider)
             reset = gui.add_button("Reset to zero")
@@ -232,13 +237,12 @@ class Viewer:
             self._srs_ik = jax.jit(lambda T, psi, gc: dk.srs.ik(arm, T, psi, gc))
             self._srs_angle = jax.jit(lambda q: dk.srs.arm_angle(arm, q))
             self._srs_feasible = jax.jit(lambda T, gc: dk.srs.feasible_arm_angles(arm, T, gc))
-            with gui.add_folder("Arm angle (iiwa)"):
+            with gui.add_folder("Arm angle (iiwa)") as self._arm_folder:
                 self.psi_slider = gui.add_slider("arm angle psi", min=-np.pi, max=np.pi, step=1e-3, initial_value=0.0)
-                self.gc_dropdown = gui.add_dropdown("gc (signs q2 q4 q6)", GC_OPTIONS, initial_value=GC_OPTIONS[0])
                 self.srs_status = gui.add_markdown("")
+            self.gc_dropdown = None
+            self._show_gc(GC_OPTIONS[0])
             self.psi_slider.on_update(lambda _event: self._quiet or self.set_arm_angle(self.psi_slider.value))
-            self.gc_dropdown.on_update(lambda _event: self._quiet or self.set_arm_angle(
-                self.psi_slider.value, np.array([float(s) for s in self.gc_dropdown.value.split()]), nearest=True))
 
         self.map = workspace_map
         if workspace_map is not None:
@@ -260,6 +264,23 @@ class Viewer:
                 self.result_status = gui.add_markdown(f"{n} configurations")
             self.result_slider.on_update(lambda _event: self.show_result(int(self.result_slider.value)))
 
+    def _show_gc(self, text: str) -> None:
+        """Show the global configuration ``text`` in its dropdown.
+
+        The dropdown is rebuilt rather than updated: viser 1.1.1's page goes blank when a
+        dropdown's value is changed from Python after the page has loaded other updates.
+        """
+        old = self.gc_dropdown
+        if old is not None and old.value == text:
+            return
+        with self._arm_folder:
+            self.gc_dropdown = self.server.gui.add_dropdown("gc (signs q2 q4 q6)", GC_OPTIONS, initial_value=text,
+                                                            order=None if old is None else old.order)
+        if old is not None:
+            old.remove()
+        self.gc_dropdown.on_update(lambda _event: self._quiet or self.set_arm_angle(
+            self.psi_slider.value, np.array([float(s) for s in self.gc_dropdown.value.split()]), nearest=True))
+
     def _draw_map(self) -> None:
         points, colors = _overlays.map_points(self.map, self.map_quantity.value)
         self.map_cloud = self.server.scene.add_point_cloud(
@@ -278,7 +299,7 @@ class Viewer:
             try:
                 if source != "slider":
                     for slider, value in zip(self.sliders, self.q, strict=True):
-                        slider.value = float(value)
+                        slider.value = _shown(value)
                 for end, gizmo in self.targets.items():
                     if source != ("gizmo", end):
                         f = self.kin.frame_names.index(end)
@@ -361,8 +382,8 @@ class Viewer:
         q = jnp.asarray(self.q)
         self._flange = self._srs_fk(q)
         psi, gc = (np.asarray(x) for x in self._srs_angle(q))
-        self.psi_slider.value = float(psi) if np.isfinite(psi) else 0.0
-        self.gc_dropdown.value = " ".join(f"{int(s):+d}" for s in gc)
+        self.psi_slider.value = _shown(psi) if np.isfinite(psi) else 0.0
+        self._show_gc(" ".join(f"{int(s):+d}" for s in gc))
         self._show_intervals(gc, "" if np.isfinite(psi) else "arm angle undefined here (elbow stretched)")
 
     def _show_intervals(self, gc, note: str = "") -> np.ndarray:
@@ -397,8 +418,8 @@ class Viewer:
                 q, valid = self._srs_ik(self._flange, psi, jnp.asarray(gc))
             self._quiet = True
             try:
-                self.psi_slider.value = float(psi)
-                self.gc_dropdown.value = " ".join(f"{int(s):+d}" for s in gc)
+                self.psi_slider.value = _shown(psi)
+                self._show_gc(" ".join(f"{int(s):+d}" for s in gc))
             finally:
                 self._quiet = False
             if not bool(valid):
