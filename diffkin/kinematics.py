@@ -19,6 +19,8 @@ def _joint_values(chain: Chain, q) -> jax.Array:
     if not isinstance(chain, (DHChain, PoEChain)):
         raise TypeError(f"chain: expected a DHChain or PoEChain, got {type(chain).__name__}")
     q = jnp.asarray(q)
+    if q.dtype == bool or jnp.issubdtype(q.dtype, jnp.complexfloating):
+        raise TypeError(f"q: expected real joint values (radians or metres), got dtype {q.dtype}")
     if not jnp.issubdtype(q.dtype, jnp.floating):
         q = q.astype(jnp.result_type(float))
     if q.ndim == 0 or q.shape[-1] != chain.dof:
