@@ -12,6 +12,7 @@ import optax
 
 from diffkin import _rigid as rg
 from diffkin import kinematics
+from diffkin._checks import rigid_poses, rigid_tol
 from diffkin._rigid import is_concrete
 from diffkin.ik import _lm, _optax
 from diffkin.ik._implicit import implicit_q
@@ -176,19 +177,6 @@ def _best(s: _Seeds, num_targets: int, q0) -> _Seeds:
     return jax.tree.map(take, s)
 
 
-def _rigid_tol(dtype) -> float:
-    return 1e-9 if jnp.finfo(dtype).bits >= 64 else 1e-5
-
-
-def _rigid_poses(T: jax.Array) -> jax.Array:
-    """``(...,)`` whether each ``(..., 4, 4)`` pose is a rigid transform within :func:`_rigid_tol`."""
-    tol = _rigid_tol(T.dtype)
-    R = T[..., :3, :3]
-    gram = jnp.max(jnp.abs(jnp.swapaxes(R, -1, -2) @ R - jnp.eye(3, dtype=T.dtype)), axis=(-2, -1))
-    row = jnp.max(jnp.abs(T[..., 3, :] - jnp.asarray([0.0, 0.0, 0.0, 1.0], T.dtype)), axis=-1)
-    return (gram <= tol) & (row <= tol) & (jnp.abs(jnp.linalg.det(R) - 1.0) <= tol)
-
-
 def _check_args(chain, target, q0, num_seeds, method, max_iters, pos_tol, rot_tol, optimizer):
     """Host-side checks; returns the target array and its kind (``True`` for position targets)."""
     if not isinstance(chain, (DHChain, PoEChain)):
@@ -222,11 +210,11 @@ def _check_args(chain, target, q0, num_seeds, method, max_iters, pos_tol, rot_to
         raise ValueError(f"target: expected shape (..., 4, 4) for poses or (..., 3) for positions, got {target.shape}")
     batch = target.shape[:-1] if position_only else target.shape[:-2]
     if not position_only and is_concrete(target):
-        bad = ~np.asarray(_rigid_poses(target)) & np.all(np.isfinite(np.asarray(target)), axis=(-2, -1))
+        bad = ~np.asarray(rigid_poses(target)) & np.all(np.isfinite(np.asarray(target)), axis=(-2, -1))
         if np.any(bad):  # non-finite targets are not errors: they fail (success=False)
             i = tuple(int(k) for k in np.argwhere(bad)[0])
             raise ValueError(f"target[{', '.join(map(str, i))}]: expected a rigid transform (R^T R = I, det R = +1, "
-                             f"last row [0, 0, 0, 1], within {_rigid_tol(target.dtype):g}), "
+                             f"last row [0, 0, 0, 1], within {rigid_tol(target.dtype):g}), "
                              f"got {np.asarray(target)[i].tolist()}")
     if q0 is not None:
         q0_shape = jnp.shape(q0)
@@ -321,7 +309,7 @@ def _solve(chain, target, key, q0, *, num_seeds, method, max_iters, pos_tol, rot
     n = int(np.prod(batch, dtype=np.int64))
     flat = target.reshape((n,) + target.shape[len(batch):])
     valid = jnp.all(jnp.isfinite(flat.reshape(n, -1)), axis=-1)
-    valid = valid if position_only else valid & _rigid_poses(flat)  # a non-rigid traced target fails
+    valid = valid if position_only else valid & rigid_poses(flat)  # a non-rigid traced target fails
     safe = jnp.where(valid.reshape((n,) + (1,) * (flat.ndim - 1)), flat, jnp.eye(4, dtype=dtype)[:3, 3]
                      if position_only else jnp.eye(4, dtype=dtype))
     model = _cast(_detach(chain), dtype)
