@@ -1,7 +1,15 @@
-"""Frozen dataclasses registered as JAX pytrees.
+"""Frozen dataclasses registered as JAX pytrees, validated when built.
 
 Fields declared with :func:`static` are pytree metadata (hashed, part of the compiled
 structure); every other field is an array leaf that JAX can trace, batch and differentiate.
+
+Validation is one hook: a class may define ``_check(self, concrete: bool)``. It runs on every
+construction by the user (``Cls(...)``, ``obj.replace(...)``, the ``from_*`` builders, which end
+in ``Cls(...)``): it checks the static fields and the shapes of the leaves always, and their
+values only when ``concrete`` (no leaf is a tracer, e.g. not under ``jit``, ``grad``, ``vmap``).
+JAX's own rebuilding of instances (``tree_unflatten``: after a transformation, ``tree_map``, with
+tracers, batched leaves, ``None`` or ``object()`` placeholders) bypasses ``__init__`` and so the
+check: it costs nothing there and cannot break on leaves that are not the user's arrays.
 """
 
 from __future__ import annotations
@@ -19,16 +27,38 @@ def static(**kwargs: Any) -> Any:
     return dataclasses.field(metadata={"static": True}, **kwargs)
 
 
+def _post_init(self) -> None:
+    leaves = [getattr(self, f.name) for f in dataclasses.fields(self) if not f.metadata.get("static", False)]
+    self._check(concrete=not any(isinstance(x, jax.core.Tracer) for x in leaves))
+
+
 def pytree_dataclass(cls: type[T]) -> type[T]:
     """Make ``cls`` a frozen dataclass and register it as a pytree.
 
-    The class gains ``replace(**fields)``, returning a modified copy (no validation: it is
-    used inside traced code, e.g. ``jax.grad`` with respect to a field).
+    The class gains ``replace(**fields)``, returning a modified copy, validated as a new instance
+    (see the module docstring; traced values get the shape checks only).
     """
+    if hasattr(cls, "_check") and "__post_init__" not in cls.__dict__:
+        cls.__post_init__ = _post_init
     cls = dataclasses.dataclass(frozen=True, eq=False)(cls)
     fields = dataclasses.fields(cls)
-    meta = [f.name for f in fields if f.metadata.get("static", False)]
-    data = [f.name for f in fields if not f.metadata.get("static", False)]
-    jax.tree_util.register_dataclass(cls, data_fields=data, meta_fields=meta)
+    meta = tuple(f.name for f in fields if f.metadata.get("static", False))
+    data = tuple(f.name for f in fields if not f.metadata.get("static", False))
+
+    def flatten_with_keys(obj):
+        return [(jax.tree_util.GetAttrKey(n), getattr(obj, n)) for n in data], tuple(getattr(obj, n) for n in meta)
+
+    def flatten(obj):
+        return [getattr(obj, n) for n in data], tuple(getattr(obj, n) for n in meta)
+
+    def unflatten(aux, children):
+        obj = object.__new__(cls)  # no __init__, so no check: see the module docstring
+        for name, value in zip(meta, aux, strict=True):
+            object.__setattr__(obj, name, value)
+        for name, value in zip(data, children, strict=True):
+            object.__setattr__(obj, name, value)
+        return obj
+
+    jax.tree_util.register_pytree_with_keys(cls, flatten_with_keys, unflatten, flatten)
     cls.replace = lambda self, **changes: dataclasses.replace(self, **changes)
     return cls

@@ -7,6 +7,10 @@ Memory is ``O(chunk + grid)`` whatever the number of samples. Chunks are spread 
 with a :class:`jax.sharding.Mesh` and ``shard_map``; every device keeps a partial map and the
 partial maps are reduced at the end with integer sums, float maxima and logical ors, which
 do not depend on the order of reduction, so the map is identical for any number of devices.
+For that, each sample's bins must not depend on how its device's program is compiled: the
+per-device program receives its chunk index as data (it is the same program for any number of
+devices), and the binning uses no division (XLA's CPU division rounds differently in different
+compilations); see ``_flat_index`` and ``_orientation_bin``.
 
 Orientation bins are a fixed partition of SO(3) into ``orientation_bins = 6 * n_roll`` cells
 of equal measure: the tool z axis picks a face of the cube (its largest component and that
@@ -24,7 +28,10 @@ import dataclasses
 import functools
 import itertools
 import math
+import os
 import sys
+import zipfile
+import zlib
 from collections.abc import Sequence
 
 import jax
@@ -35,11 +42,15 @@ from jax.sharding import PartitionSpec as P
 
 from diffkin import _rigid as rg
 from diffkin import kinematics
-from diffkin._trig import atan2
+from diffkin._trig import atan2, sincos
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain, to_poe
 
 _AXIS = "devices"
+MAX_GRID_BYTES = 2 * 1024**3
+"""Largest memory of the maps of :func:`reachability` (an estimate: every device's counts, manipulability
+and orientation flags per voxel, their reduction and the host's copies); a finer grid is a ValueError
+naming ``voxel_size``. Raise it (``diffkin.workspace.MAX_GRID_BYTES = ...``) to allow more."""
 _INT32_MAX = 2**31 - 1
 _QUANTITIES = ("count", "manipulability", "dexterity")
 _AXES = ("x", "y", "z")
@@ -51,8 +62,10 @@ class ReachabilityMap:
 
     Voxel ``(i, j, k)`` is the box ``origin + voxel_size * ([i, i+1) x [j, j+1) x [k, k+1))`` in
     the chain's base frame; a sample whose end-effector position ``p`` (metres, base frame) has
-    ``floor((p - origin) / voxel_size) == (i, j, k)`` counts in that voxel. Samples outside the
-    grid count in no voxel: ``counts.sum() + n_outside == n_samples``.
+    ``floor((p - origin) / voxel_size) == (i, j, k)`` counts in that voxel (computed as
+    ``(p - origin) * (1 / voxel_size)`` in the computation's dtype, so a point within rounding of a
+    face may count on either side of it, the same side on any number of devices). Samples outside
+    the grid count in no voxel: ``counts.sum() + n_outside == n_samples``.
 
     Attributes:
         counts: ``(nx, ny, nz)`` int64, number of samples per voxel.
@@ -84,14 +97,39 @@ class ReachabilityMap:
 
     @classmethod
     def load(cls, path) -> ReachabilityMap:
-        """Read a map written by :meth:`save`."""
-        with np.load(path) as data:
-            return cls(
-                counts=data["counts"], manipulability=data["manipulability"], dexterity=data["dexterity"],
-                origin=data["origin"], voxel_size=float(data["voxel_size"]), n_samples=int(data["n_samples"]),
-                n_outside=int(data["n_outside"]), orientation_bins=int(data["orientation_bins"]),
-                chain_name=str(data["chain_name"]),
-            )
+        """Read a map written by :meth:`save` (``load("map")`` reads the ``map.npz`` that ``save("map")`` wrote).
+
+        Raises:
+            ValueError: a file that is empty, truncated, not a ``.npz`` archive, or lacks a field
+                of the map (the message names the file and the field).
+            FileNotFoundError: no such file.
+        """
+        path = os.fspath(path)
+        if not os.path.exists(path) and not path.endswith(".npz") and os.path.exists(path + ".npz"):
+            path += ".npz"  # as np.savez named it
+        unreadable = f"{path}: expected a .npz archive written by ReachabilityMap.save, could not read it"
+        with open(path, "rb") as file:  # closed here even when numpy fails half-way
+            try:
+                data = np.load(file, allow_pickle=False)
+            except (EOFError, OSError, ValueError, zipfile.BadZipFile) as err:
+                raise ValueError(f"{unreadable} ({type(err).__name__}: {err})") from err
+            if not isinstance(data, np.lib.npyio.NpzFile):
+                raise ValueError(f"{path}: expected a .npz archive written by ReachabilityMap.save, got a single array")
+            missing = [f.name for f in dataclasses.fields(cls) if f.name not in data.files]
+            if missing:
+                raise ValueError(f"{path}: not a complete reachability map, missing field(s) {', '.join(missing)}")
+            try:
+                fields = {name: data[name] for name in data.files}
+            except (EOFError, OSError, ValueError, zipfile.BadZipFile, zlib.error) as err:
+                raise ValueError(f"{unreadable} ({type(err).__name__}: {err})") from err
+        if fields["counts"].ndim != 3:
+            raise ValueError(f"{path}: field counts: expected a 3-d grid, got shape {fields['counts'].shape}")
+        return cls(
+            counts=fields["counts"], manipulability=fields["manipulability"], dexterity=fields["dexterity"],
+            origin=fields["origin"], voxel_size=float(fields["voxel_size"]), n_samples=int(fields["n_samples"]),
+            n_outside=int(fields["n_outside"]), orientation_bins=int(fields["orientation_bins"]),
+            chain_name=str(fields["chain_name"]),
+        )
 
 
 def _positive_int(value, name: str) -> int:
@@ -199,6 +237,14 @@ def _orientation_bin(R: rg.Mat3, n_roll: int) -> jax.Array:
     y_u = jnp.where(a == 0, R[1][1], jnp.where(a == 1, R[2][1], R[0][1]))
     roll = atan2(-y_u, x_u)  # [-pi, pi]
     sector = jnp.clip(jnp.floor((roll + jnp.pi) * (n_roll / (2 * jnp.pi))), 0, n_roll - 1).astype(jnp.int32)
+    if n_roll > 1:
+        # Settled by the side of the sector's edges that (x_u, -y_u) is on: products and sums, which
+        # round the same however XLA compiles them (atan2's division may not: see _flat_index).
+        width = 2 * np.pi / n_roll
+        start = sector.astype(x_u.dtype) * width - np.pi
+        (s0, c0), (s1, c1) = sincos(start), sincos(start + width)
+        sector = sector - ((c0 * -y_u - s0 * x_u) < 0) + ((c1 * -y_u - s1 * x_u) >= 0)
+        sector = jnp.clip(sector, 0, n_roll - 1)
     return (2 * a + (z_a < 0)) * n_roll + sector
 
 
@@ -225,11 +271,17 @@ def _manipulability(frames: rg.Frames, dof: int) -> jax.Array:
     return jnp.sqrt(det)
 
 
-def _flat_index(p: rg.Vec3, origin, voxel_size, shape) -> tuple[jax.Array, jax.Array]:
-    """Flat voxel index of positions given by entries, and whether they are inside the grid."""
+def _flat_index(p: rg.Vec3, origin, inv_voxel, shape) -> tuple[jax.Array, jax.Array]:
+    """Flat voxel index of positions given by entries, and whether they are inside the grid.
+
+    The cell is ``floor((p - origin) * inv_voxel)``: a subtraction and a product, which round the
+    same however XLA compiles them. (XLA's CPU backend computes a division by a reciprocal
+    estimate in some compilations and exactly in others: with ``/ voxel_size`` a sample on a
+    voxel face changed voxels with the number of devices.)
+    """
     flat, inside = 0, True
     for i, n in enumerate(shape):
-        cell = jnp.floor((p[i] - origin[i]) / voxel_size)  # the division has one use: XLA fuses it once
+        cell = jnp.floor((p[i] - origin[i]) * inv_voxel)
         inside = inside & (cell >= 0) & (cell < n)
         flat = flat * n + jnp.where(inside, cell, 0).astype(jnp.int32)
     return flat, inside
@@ -267,14 +319,14 @@ def _compiled(chain_key: _ChainKey, shape: tuple[int, int, int], n_bins: int, ch
         return (jnp.zeros((n_dev, nvox), jnp.int32), jnp.zeros((n_dev, nvox), dtype),
                 jnp.zeros((n_dev, nvox * n_bins), jnp.uint8))
 
-    def local_step(counts, best, seen, key, step, n_full, n_last, origin, voxel_size, n_slots):
-        c = step * n_dev + jax.lax.axis_index(_AXIS)
+    def local_step(counts, best, seen, key, chunk_index, n_full, n_last, origin, inv_voxel, n_slots):
+        c = chunk_index[0]  # this device's chunk: no axis_index, so one per-device program for any device count
         n_valid = jnp.where(c < n_full, chunk, jnp.where(c == n_full, n_last, 0))
         q = _uniform(jax.random.fold_in(key, c), lo, hi, chunk, dtype)
         frames = chain._frames(list(q))
         p = [jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in frames.ee.p]
         R = tuple(tuple(jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in row) for row in frames.ee.R)
-        flat, inside = _flat_index(p, origin, voxel_size, shape)
+        flat, inside = _flat_index(p, origin, inv_voxel, shape)
         slot = jnp.where(inside & (jnp.arange(chunk) < n_valid), flat * n_bins + _orientation_bin(R, n_bins // 6),
                          n_slots)  # out of range: dropped by the scatters
         # An identity (slot <= n_slots) by a runtime value, which XLA neither folds nor duplicates
@@ -288,7 +340,7 @@ def _compiled(chain_key: _ChainKey, shape: tuple[int, int, int], n_bins: int, ch
         return counts, best, seen, jnp.sum(n_valid)
 
     step = jax.jit(
-        jax.shard_map(local_step, mesh=mesh, in_specs=(P(_AXIS),) * 3 + (P(),) * 7,
+        jax.shard_map(local_step, mesh=mesh, in_specs=(P(_AXIS),) * 3 + (P(), P(_AXIS)) + (P(),) * 5,
                       out_specs=(P(_AXIS),) * 3 + (P(),), check_vma=False),
         donate_argnums=(0, 1, 2),
     )
@@ -351,7 +403,7 @@ def reachability(
             voxels per axis. Default: a cube centred on the base origin (at a voxel centre) that
             holds every reachable point, from an upper bound on the reach (the sum of the
             distances between consecutive joint axes, plus prismatic travel).
-        chunk: samples per device per step.
+        chunk: samples per device per step (at most ``n_samples``: a larger value is capped).
         devices: devices to use (all processes' devices in a multi-host run); default
             ``jax.devices()``.
         orientation_bins: cells of the SO(3) partition, a multiple of 6 (6 cube faces of the
@@ -374,6 +426,10 @@ def reachability(
         raise ValueError(f"orientation_bins: expected a multiple of 6 (6 cube faces x roll sectors), "
                          f"got {orientation_bins}")
     origin, voxel_size, shape = _grid(chain, voxel_size, bounds)
+    n_chunks = -(-n_samples // chunk)
+    if n_chunks > _INT32_MAX:
+        raise ValueError(f"n_samples: expected at most {_INT32_MAX} chunks of {chunk} samples, got {n_samples} samples")
+    chunk = min(chunk, n_samples)  # a larger chunk would only compute masked samples
     n_slots = math.prod(shape) * orientation_bins
     if n_slots >= _INT32_MAX:
         raise ValueError(f"voxel_size: grid of {shape} voxels x {orientation_bins} orientation bins exceeds 2**31 "
@@ -382,6 +438,16 @@ def reachability(
     if not devices or not all(isinstance(d, jax.Device) for d in devices):
         raise TypeError(f"devices: expected a non-empty sequence of jax.Device, got {devices!r}")
     dtype = jnp.dtype(dtype or jnp.result_type(float))
+    # Per voxel: every device's counts, best manipulability and orientation flags; the reduction's
+    # maximum of the flags and its three maps; the host's int64 counts and copies of the maps.
+    item = dtype.itemsize
+    grid_bytes = math.prod(shape) * (len(devices) * (4 + item + orientation_bins) + orientation_bins
+                                     + 2 * (8 + item) + 8)
+    if grid_bytes > MAX_GRID_BYTES:
+        raise ValueError(f"voxel_size: {voxel_size} m gives a grid of {shape} voxels x {orientation_bins} orientation "
+                         f"bins on {len(devices)} device(s), about {grid_bytes / 2**30:.1f} GiB of maps (limit "
+                         f"diffkin.workspace.MAX_GRID_BYTES = {MAX_GRID_BYTES / 2**30:.1f} GiB); expected a coarser "
+                         f"voxel_size, smaller bounds or fewer orientation_bins")
     mesh = Mesh(np.array(devices), (_AXIS,))
     zeros, step, reduce = _compiled(_ChainKey(chain), shape, orientation_bins, chunk, dtype, mesh)
 
@@ -389,10 +455,13 @@ def reachability(
     n_steps = -(-(n_full + (n_last > 0)) // len(devices))
     steps_per_flush = max(1, _INT32_MAX // (chunk * len(devices)))  # int32 device counts cannot overflow
     args = (jnp.asarray(n_full, jnp.int32), jnp.asarray(n_last, jnp.int32),
-            jnp.asarray(origin, dtype), jnp.asarray(voxel_size, dtype), jnp.asarray(n_slots, jnp.int32))
+            jnp.asarray(origin, dtype), jnp.asarray(1.0 / voxel_size, dtype), jnp.asarray(n_slots, jnp.int32))
+    sharded = NamedSharding(mesh, P(_AXIS))
     state, counts, bar, done = zeros(), np.zeros(shape, np.int64), _progress(n_samples, progress), None
     for s in range(n_steps):
-        *state, n_step = step(*state, key, s, *args)
+        chunks = np.arange(s * len(devices), (s + 1) * len(devices), dtype=np.int32)
+        chunks = jax.make_array_from_callback(chunks.shape, sharded, lambda i, chunks=chunks: chunks[i])
+        *state, n_step = step(*state, key, chunks, *args)
         if bar is not None:
             if done is not None:
                 bar.update(int(done))  # waits for the previous step only: one step stays in flight

@@ -266,3 +266,41 @@ def test_bad_arguments_raise_before_tracing():
             ik.solve(chain, **kwargs)
     with pytest.raises(TypeError, match="chain"):
         ik.solve("ur5", T)
+
+
+def test_non_rigid_targets_are_rejected_or_fail():
+    """Issue 18: a target whose rotation is not a rotation must not report success."""
+    chain = dk.robots.ur5()
+    T = _dh_fk(chain, random_q(chain, 3, seed=8))
+    scaled, nearly, last_row = T.copy(), T.copy(), T.copy()
+    scaled[1, :3, :3] *= 2.0
+    nearly[2, :3, :3] *= 1.001
+    last_row[0, 3] = [0.0, 0.0, 0.1, 1.0]
+    for bad, index in ((scaled, "1"), (nearly, "2"), (last_row, "0")):
+        for dtype in (np.float32, np.float64):
+            with pytest.raises(ValueError, match=rf"^target\[{index}\]: expected a rigid transform"):
+                ik.solve(chain, bad.astype(dtype), num_seeds=2, max_iters=2)
+    with pytest.raises(ValueError, match=r"^target\[1, 0\]: expected a rigid"):
+        ik.solve(chain, np.stack([T[:2], scaled[1:]])[:, :1].reshape(2, 1, 4, 4), num_seeds=2, max_iters=2)
+    with pytest.raises(TypeError, match=r"^target: expected real poses or positions, got dtype complex"):
+        ik.solve(chain, T.astype(complex))
+    with pytest.raises(TypeError, match=r"^target: expected float32 or float64, got float16"):
+        ik.solve(chain, T.astype(np.float16))
+    # Traced: success=False, finite outputs, for the bad ones; the good one still succeeds.
+    solve = jax.jit(lambda t: ik.solve(chain, t, key=jax.random.key(0), num_seeds=8, max_iters=30))
+    for dtype in (np.float32, np.float64):
+        targets = np.stack([T[0], scaled[1], nearly[2], last_row[0]]).astype(dtype)
+        res = solve(targets)
+        assert list(np.asarray(res.success)) == [True, False, False, False]
+        assert all(np.all(np.isfinite(np.asarray(x))) for x in res)
+
+
+def test_empty_batch_gives_empty_results():
+    chain = dk.robots.ur5()
+    for target, batch in ((np.zeros((0, 4, 4)), (0,)), (np.zeros((2, 0, 3), np.float32), (2, 0))):
+        res = ik.solve(chain, target)
+        assert res.q.shape == batch + (6,) and res.q.dtype == target.dtype
+        assert res.success.shape == res.pos_err.shape == res.rot_err.shape == res.iters.shape == batch
+        assert res.success.dtype == bool and res.iters.dtype == np.int32
+    res = jax.jit(lambda t: ik.solve(chain, t))(np.zeros((0, 4, 4), np.float32))
+    assert res.q.shape == (0, 6)

@@ -203,3 +203,124 @@ def test_planar_rejects_bad_lengths():
         dk.robots.planar([1.0, -1.0])
     with pytest.raises(ValueError, match="name: expected one of"):
         dk.robots.urdf_path("ur5")
+
+
+# ----- one validation hook: construction, replace, and not JAX's own rebuilding (issue 18) -----
+
+_SCALED = np.diag([2.0, 2.0, 2.0, 1.0])
+
+
+@pytest.mark.parametrize("changes, error, match", [
+    ({"a": np.full(7, np.nan)}, ValueError, r"^a: expected finite numbers"),
+    ({"d": np.array([0.3, 0.0, 0.4, 0.0, 0.4, 0.0, np.inf])}, ValueError, r"^d: expected finite"),
+    ({"lower": np.full(7, 1.0), "upper": np.zeros(7)}, ValueError, r"lower\[0\] = 1.0 > upper\[0\]"),
+    ({"lower": np.full(7, np.nan)}, ValueError, r"^lower: expected numbers, got NaN"),
+    ({"alpha": np.zeros(6)}, ValueError, r"^alpha: expected shape \(7,\), got \(6,\)"),
+    ({"joint_types": "RRR"}, ValueError, r"^(joint_names: expected 3 strings|a: expected shape \(3,\), got \(7,\))"),
+    ({"joint_types": "RRRRRRX"}, ValueError, r"joint_types\[6\]: expected 'R' or 'P'"),
+    ({"joint_types": ""}, ValueError, r"^joint_types: expected at least one joint"),
+    ({"base": _SCALED}, ValueError, r"^base: expected a rotation"),
+    ({"tool": np.eye(4) * 1.001}, ValueError, r"^tool: expected"),
+    ({"base": np.eye(3)}, ValueError, r"^base: expected shape \(4, 4\)"),
+    ({"modified": "False"}, TypeError, r"^modified: expected True or False"),
+    ({"joint_names": "abcdefg"}, TypeError, r"^joint_names: expected a tuple or list"),
+    ({"name": 3}, TypeError, r"^name: expected a string"),
+    ({"a": np.zeros(7, bool)}, TypeError, r"^a: expected a real floating-point array, got dtype bool"),
+    ({"d": np.zeros(7, complex)}, TypeError, r"^d: expected a real floating-point array, got dtype complex"),
+    ({"a": [0.0] * 7}, TypeError, r"^a: expected an array, got list"),
+    ({"theta_offset": None}, TypeError, r"^theta_offset: expected an array"),
+])
+def test_replace_and_direct_construction_validate_like_the_builder(changes, error, match):
+    chain = dk.robots.iiwa14()
+    with pytest.raises(error, match=match):
+        chain.replace(**changes)
+    fields = {f: getattr(chain, f) for f in ("a", "alpha", "d", "theta_offset", "lower", "upper", "base", "tool")}
+    with pytest.raises(error, match=match):
+        dk.DHChain(**{**fields, "joint_types": chain.joint_types, **changes})
+
+
+def test_replace_with_traced_values_checks_shapes_not_values():
+    chain = dk.robots.iiwa14()
+    q = np.zeros(7)
+    # Values are not checked on tracers (grad through a field, jit, vmap of fields) ...
+    g = jax.grad(lambda s: dk.fk(chain.replace(base=chain.base * s), q)[0, 3])(1.0)
+    assert np.isfinite(g)
+    out = jax.jit(lambda lo: chain.replace(lower=lo).lower)(np.full(7, 5.0))  # lower > upper, traced
+    assert out.shape == (7,)
+    batched = jax.vmap(lambda a: dk.fk(chain.replace(a=a), q))(np.zeros((3, 7)))
+    assert batched.shape == (3, 4, 4)
+    # ... but shapes are.
+    with pytest.raises(ValueError, match=r"^a: expected shape \(7,\), got \(6,\)"):
+        jax.jit(lambda a: chain.replace(a=a))(np.zeros(6))
+    with pytest.raises(TypeError, match=r"^a: expected a real floating-point array"):
+        jax.jit(lambda a: chain.replace(a=a))(np.zeros(7, np.int32))
+
+
+def test_jax_rebuilding_is_not_validated():
+    """tree_unflatten with placeholders, batched leaves from tree_map: no check, no error."""
+    chain = dk.robots.iiwa14()
+    leaves, treedef = jax.tree_util.tree_flatten(chain)
+    for placeholder in (None, object()):
+        rebuilt = jax.tree_util.tree_unflatten(treedef, [placeholder] * len(leaves))
+        assert rebuilt.a is placeholder and rebuilt.joint_types == chain.joint_types
+    stacked = jax.tree_util.tree_map(lambda x: np.stack([x, x]), chain)
+    assert stacked.base.shape == (2, 4, 4)
+    out = jax.vmap(dk.fk, in_axes=(0, None))(stacked, np.zeros(7))
+    np.testing.assert_allclose(out[0], dk.fk(chain, np.zeros(7)))
+    paths = [jax.tree_util.keystr(p) for p, _ in jax.tree_util.tree_flatten_with_path(chain)[0]]
+    assert paths[0] == ".a" and paths[-1] == ".tool"
+
+
+@pytest.mark.parametrize("changes, error, match", [
+    ({"screws": np.tile([0.0, 0, 0, 0, 0, 2.0], (7, 1))}, ValueError, r"^screws\[0\]: expected a unit screw"),
+    ({"screws": np.tile([0.5, 0, 0, 1.0, 0, 0], (7, 1))}, ValueError, r"^screws\[0\]: expected a revolute screw"),
+    ({"joint_types": "RRRRRRP"}, ValueError, r"^joint_types\[6\]: 'P' contradicts screws\[6\]"),
+    ({"home": _SCALED}, ValueError, r"^home: expected a rotation"),
+    ({"link_homes": np.tile(_SCALED, (7, 1, 1))}, ValueError, r"^link_homes\[0\]: expected a rotation"),
+    ({"link_homes": np.zeros((6, 4, 4))}, ValueError, r"^link_homes: expected shape \(7, 4, 4\)"),
+    ({"upper": np.full(7, -10.0)}, ValueError, r"lower\[0\] = .* > upper\[0\]"),
+    ({"joint_names": ("a",) * 7}, ValueError, r"^joint_names: expected distinct names"),
+    ({"screws": np.zeros((7, 6), complex)}, TypeError, r"^screws: expected a real floating-point array"),
+])
+def test_poe_replace_validates(changes, error, match):
+    chain = dk.load_urdf(IIWA_URDF)
+    with pytest.raises(error, match=match):
+        chain.replace(**changes)
+
+
+def test_from_screws_rejects_pitch_and_normalises_within_tolerance():
+    home = np.eye(4)
+    with pytest.raises(ValueError, match=r"^screws\[0\]: expected a revolute screw without pitch"):
+        dk.PoEChain.from_screws([[0.0, 0, 0.1, 0, 0, 1]], home)  # a helix: v . w = 0.1
+    w = np.array([0.0, 0.6, 0.8]) * (1 + 5e-7)
+    p = np.array([0.3, -0.2, 0.5])
+    chain = dk.PoEChain.from_screws([[*np.cross(p, w), *w]], home)  # [-w x p; w] with |w| = 1 + 5e-7
+    S = np.asarray(chain.screws)
+    np.testing.assert_allclose(np.linalg.norm(S[0, 3:]), 1.0, rtol=0, atol=1e-15)
+    assert abs(np.dot(S[0, :3], S[0, 3:])) < 1e-15
+    # The rotation about the unit axis through p, to rounding.
+    u, th = w / np.linalg.norm(w), 1.3
+    K = np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
+    R = np.eye(3) + np.sin(th) * K + (1 - np.cos(th)) * K @ K
+    T = np.asarray(dk.fk(chain, np.array([th])))
+    np.testing.assert_allclose(T[:3, :3], R, atol=1e-15)
+    np.testing.assert_allclose(T[:3, 3], p - R @ p, atol=1e-15)
+
+
+def test_bool_and_complex_tables_and_q_are_type_errors():
+    with pytest.raises(TypeError, match=r"^table: expected an array of real numbers, got dtype bool"):
+        dk.DHChain.from_table(np.ones((2, 4), bool))
+    with pytest.raises(TypeError, match=r"^table: expected an array of real numbers, got dtype complex"):
+        dk.DHChain.from_table(np.ones((2, 4), complex))
+    with pytest.raises(TypeError, match=r"^modified: expected True or False"):
+        dk.DHChain.from_table(np.ones((2, 4)), modified="False")
+    with pytest.raises(TypeError, match=r"^joint_names: expected a tuple or list"):
+        dk.DHChain.from_table(np.ones((3, 4)), joint_names="abc")
+    with pytest.raises(TypeError, match=r"^screws: expected an array of real numbers"):
+        dk.PoEChain.from_screws(np.ones((1, 6), complex), np.eye(4))
+    chain = dk.robots.iiwa14()
+    for q in (np.zeros(7, bool), np.zeros(7, complex)):
+        with pytest.raises(TypeError, match=r"^q: expected real joint values"):
+            dk.fk(chain, q)
+        with pytest.raises(TypeError, match=r"^q: expected real joint values"):
+            dk.jacobian(chain, q)

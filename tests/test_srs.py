@@ -498,3 +498,62 @@ def test_sample_self_motion_one_configuration_and_unreachable():
 def test_bad_input_is_rejected_on_the_host(call, error, words):
     with pytest.raises(error, match=words.replace("+", r"\+")):
         call(ARMS["iiwa14"])
+
+
+def _np_dh_fk(q, lengths):
+    """Independent NumPy FK of the SRS arm (standard DH, float64)."""
+    d_bs, d_se, d_ew, d_wf = lengths
+    alpha = [-np.pi / 2, np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, np.pi / 2, 0.0]
+    d = [d_bs, 0.0, d_se, 0.0, d_ew, 0.0, d_wf]
+    T = np.eye(4)
+    for i in range(7):
+        ct, st, ca, sa = np.cos(q[i]), np.sin(q[i]), np.cos(alpha[i]), np.sin(alpha[i])
+        T = T @ np.array([[ct, -st * ca, st * sa, 0.0], [st, ct * ca, -ct * sa, 0.0],
+                          [0.0, sa, ca, d[i]], [0.0, 0.0, 0.0, 1.0]])
+    return T
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_valid_means_valid(dtype):
+    """Issue 18: traced gc not +-1, non-rigid or non-finite targets, huge or non-finite psi."""
+    arm = ARMS["iiwa14"]
+    q_true = np.array([0.4, 0.7, -0.3, -1.1, 0.5, 0.9, 0.2])
+    T = np.asarray(dk.fk(arm.chain(), q_true), np.float64)
+    psi, gc = (np.asarray(x, np.float64) for x in srs.arm_angle(arm, q_true))
+    scaled, skew = T.copy(), T.copy()
+    scaled[:3, :3] *= 1.001
+    skew[3, :3] = [0.0, 0.1, 0.0]
+    nan_T = np.full((4, 4), np.nan)
+    cases = [  # (target, psi, gc, expected valid or None: valid only if reached)
+        (T, psi, gc, True),
+        (T, psi, gc * [0, 1, 1], False), (T, psi, gc * [1, 0.5, 1], False), (T, psi, gc * [1, 1, 2], False),
+        (scaled, psi, gc, False), (skew, psi, gc, False), (nan_T, psi, gc, False),
+        (np.where(np.eye(4) > 0, np.inf, T), psi, gc, False),
+        (T, np.nan, gc, False), (T, np.inf, gc, False), (T, psi, gc * [np.nan, 1, 1], False),
+        (T, 1e17, gc, None), (T, psi + 2e6 * np.pi, gc, None),
+    ]
+    targets = np.stack([c[0] for c in cases]).astype(dtype)
+    psis = np.array([c[1] for c in cases], dtype)
+    gcs = np.stack([np.broadcast_to(c[2], (3,)) for c in cases]).astype(dtype)
+    q, valid = _ik(arm, targets, psis, gcs)  # jitted: gc, target and psi are traced
+    q, valid = np.asarray(q), np.asarray(valid)
+    assert np.all(np.isfinite(q))
+    lengths = TABLE["iiwa14"]
+    for i, (_, _, _, expected) in enumerate(cases):
+        if expected is not None:
+            assert valid[i] == expected, (i, cases[i][1:])
+        if valid[i]:  # valid means the arm reaches the pose (independent float64 FK)
+            reached = _np_dh_fk(q[i].astype(np.float64), lengths)
+            np.testing.assert_allclose(reached, T, atol=1e-4 if dtype == np.float32 else 1e-9)
+    # Eager (concrete) calls check gc on the host.
+    with pytest.raises(ValueError, match=r"^gc: expected entries \+1 or -1, got 0.5"):
+        srs.ik(arm, T, psi, [1.0, 0.5, 1.0])
+    # The self-motion of a non-rigid, or non-finite, pose: nothing valid, everything finite.
+    for bad in (scaled, nan_T):
+        qs, ok = sample(arm, bad.astype(dtype), 16)
+        assert not np.any(np.asarray(ok)) and np.all(np.isfinite(np.asarray(qs)))
+    sample_gc = jax.jit(lambda T, g: srs.sample_self_motion(arm, T, 16, gc=g))
+    qs, ok = sample_gc(T.astype(dtype), (gc * [1, 0.5, 1]).astype(dtype))
+    assert not np.any(np.asarray(ok)) and np.all(np.isfinite(np.asarray(qs)))
+    qs, ok = sample_gc(T.astype(dtype), gc.astype(dtype))
+    assert np.all(np.asarray(ok))

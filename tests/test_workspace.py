@@ -238,3 +238,101 @@ def test_memory_does_not_grow_with_the_number_of_samples():
     result = _run(script, {"JAX_PLATFORMS": "cpu"})
     # Holding the 50 chunks' joint values and positions at once would take 50 * 2**17 * 5 * 4 B = 125 MiB.
     assert result["total"] == 50 * (1 << 17) and result["growth_kib"] < 12 * 1024
+
+
+# ----- issue 18: resource limits, load errors, device-count determinism -----
+
+
+def test_chunk_is_capped_and_fine_grids_are_refused(monkeypatch):
+    chain = dk.robots.planar([1.0, 0.5])
+    # chunk=10**8 for 1,000 samples: the chunk is capped (it would take ~12 GB and minutes otherwise).
+    m = ws.reachability(chain, 1000, key=KEY, voxel_size=0.25, chunk=10**8)
+    assert m.counts.sum() + m.n_outside == 1000
+    with pytest.raises(ValueError, match=r"^voxel_size: 0.008 m gives a grid .* GiB of maps"):
+        ws.reachability(dk.robots.ur5(), 1000, key=KEY, voxel_size=0.008)
+    monkeypatch.setattr(ws, "MAX_GRID_BYTES", 1000)
+    with pytest.raises(ValueError, match=r"^voxel_size: "):
+        ws.reachability(chain, 1000, key=KEY, voxel_size=0.25)
+    with pytest.raises(ValueError, match=r"^n_samples: expected at most"):
+        ws.reachability(chain, 10**20, key=KEY, voxel_size=0.25)
+
+
+def test_load_errors_name_the_file_and_the_problem(tmp_path):
+    m = ws.reachability(dk.robots.planar([1.0, 0.5]), 500, key=KEY, voxel_size=0.25, chunk=500)
+    m.save(tmp_path / "map")  # numpy writes map.npz ...
+    back = ws.ReachabilityMap.load(tmp_path / "map")  # ... and load finds it by the same name
+    np.testing.assert_array_equal(back.counts, m.counts)
+    (tmp_path / "empty.npz").write_bytes(b"")
+    whole = (tmp_path / "map.npz").read_bytes()
+    (tmp_path / "cut.npz").write_bytes(whole[: len(whole) // 2])
+    np.savez(tmp_path / "partial.npz", counts=m.counts, origin=m.origin)
+    np.save(tmp_path / "array.npy", m.counts)
+    cases = [("empty.npz", "could not read it"), ("cut.npz", "could not read it"),
+             ("partial.npz", "missing field.*manipulability"), ("array.npy", "got a single array")]
+    for name, what in cases:
+        with pytest.raises(ValueError, match=rf"{name}: .*{what}"):
+            ws.ReachabilityMap.load(tmp_path / name)
+    with pytest.raises(FileNotFoundError):
+        ws.ReachabilityMap.load(tmp_path / "nothing.npz")
+
+
+def test_voxel_and_sector_indices_do_not_depend_on_the_compilation():
+    """Positions on and next to voxel faces, roll angles next to sector edges: the same bins whether the
+    binning is compiled alone or fused after other arithmetic (the cause of maps that differed with the
+    number of devices: XLA's CPU division rounds differently in different compilations), and the voxel
+    cell is IEEE ``floor((p - origin) * (1 / voxel_size))``, as numpy computes it."""
+    dtype = np.float32
+    origin, inv, shape = np.array([-1.75, -1.75, -1.75], dtype), dtype(1 / 0.1), (35, 35, 35)
+    faces = (origin[0] + np.arange(36) * 0.1).astype(dtype)
+    x = np.concatenate([faces, np.nextafter(faces, np.inf), np.nextafter(faces, -np.inf), [0.85, 0.85000004],
+                        [np.nan, np.inf, -np.inf]]).astype(dtype)
+    P = [jnp.asarray(x), jnp.zeros_like(x), jnp.zeros_like(x)]
+    alone = jax.jit(lambda P: ws._flat_index(P, origin, inv, shape))
+    fused = jax.jit(lambda P, s: ws._flat_index([P[0] * s + 0.0 * P[1], P[1], P[2]], origin, inv, shape))
+    (flat_a, in_a), (flat_f, in_f) = alone(P), fused(P, jnp.ones(x.shape, dtype))
+    np.testing.assert_array_equal(np.asarray(flat_a), np.asarray(flat_f))
+    np.testing.assert_array_equal(np.asarray(in_a), np.asarray(in_f))
+    with np.errstate(invalid="ignore"):
+        cell = np.floor((x - origin[0]) * inv)  # float32 IEEE, no division
+    ok = (cell >= 0) & (cell < 35)
+    np.testing.assert_array_equal(np.asarray(in_a), ok)
+    np.testing.assert_array_equal(np.asarray(flat_a)[ok] // (35 * 35), cell[ok].astype(int))
+    # Roll sectors next to their edges: the same alone and fused; away from the edges, the exact sector.
+    n_roll = 8
+    edges = -np.pi + 2 * np.pi * np.arange(n_roll + 1) / n_roll
+    phi = np.concatenate([edges + d for d in (-1e-7, -3e-8, 0.0, 3e-8, 1e-7, 0.2, -0.2)])
+    phi = phi[(phi > -np.pi) & (phi < np.pi)]
+    c, s = np.cos(phi).astype(dtype), np.sin(phi).astype(dtype)
+    z, one = np.zeros_like(c), np.ones_like(c)
+    R = tuple(tuple(jnp.asarray(v) for v in row) for row in ((c, -s, z), (s, c, z), (z, z, one)))
+    bins_a = np.asarray(jax.jit(lambda R: ws._orientation_bin(R, n_roll))(R))
+    bins_f = np.asarray(jax.jit(lambda R, k: ws._orientation_bin(tuple(tuple(v * k for v in row) for row in R),
+                                                                 n_roll))(R, jnp.ones_like(R[0][0])))
+    np.testing.assert_array_equal(bins_a, bins_f)
+    far = np.abs(phi[:, None] - edges[None, :]).min(axis=1) > 1e-3
+    expected = np.floor((np.arctan2(s, c).astype(np.float64) + np.pi) / (2 * np.pi / n_roll)).astype(int)
+    np.testing.assert_array_equal(bins_a[far] - 4 * n_roll, expected[far])
+
+
+UR10_URDF = os.path.join(sys.prefix, "lib", f"python{sys.version_info[0]}.{sys.version_info[1]}", "site-packages",
+                         "cmeel.prefix", "share", "example-robot-data", "robots", "ur_description", "urdf",
+                         "ur10_robot.urdf")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.path.exists(UR10_URDF), reason="example-robot-data's UR10 URDF is not installed")
+def test_identical_maps_on_1_2_and_4_devices_ur10():
+    """The case of issue 18: 1 sample in 400,000 changed voxels between 1 and 2 or 4 devices (UR10, 10 cm)."""
+    script = f"""
+        import json, jax, numpy as np
+        import diffkin as dk
+        from diffkin import workspace as ws
+        chain, devices = dk.load_urdf({UR10_URDF!r}, "tool0"), jax.devices()
+        maps = [ws.reachability(chain, 400_000, key=jax.random.key(7), voxel_size=0.1, devices=devices[:k])
+                for k in (1, 2, 4)]
+        same = [all(np.array_equal(getattr(a, f), getattr(maps[0], f)) for f in ("counts", "manipulability",
+                "dexterity")) for a in maps]
+        print(json.dumps(dict(n_devices=len(devices), same=same)))
+    """
+    result = _run(script, {"XLA_FLAGS": "--xla_force_host_platform_device_count=4", "JAX_PLATFORMS": "cpu"})
+    assert result == dict(n_devices=4, same=[True, True, True])

@@ -12,6 +12,7 @@ import optax
 
 from diffkin import _rigid as rg
 from diffkin import kinematics
+from diffkin._checks import rigid_poses, rigid_tol
 from diffkin._rigid import is_concrete
 from diffkin.ik import _lm, _optax
 from diffkin.ik._implicit import implicit_q
@@ -194,6 +195,11 @@ def _check_args(chain, target, q0, num_seeds, method, max_iters, pos_tol, rot_to
         if not isinstance(optimizer, optax.GradientTransformation):
             raise TypeError(f"optimizer: expected an optax.GradientTransformation, got {type(optimizer).__name__}")
     target = jnp.asarray(target)
+    if target.dtype == bool or jnp.issubdtype(target.dtype, jnp.complexfloating):
+        raise TypeError(f"target: expected real poses or positions, got dtype {target.dtype}")
+    if jnp.issubdtype(target.dtype, jnp.floating) and jnp.finfo(target.dtype).bits < 32:
+        # float16 rounding (~5e-4 m at 1 m) exceeds the default tolerances: errors would read 0.
+        raise TypeError(f"target: expected float32 or float64, got {target.dtype} (cast it to float32)")
     if not jnp.issubdtype(target.dtype, jnp.floating):
         target = target.astype(jnp.result_type(float))
     if target.ndim >= 2 and target.shape[-2:] == (4, 4):
@@ -203,6 +209,13 @@ def _check_args(chain, target, q0, num_seeds, method, max_iters, pos_tol, rot_to
     else:
         raise ValueError(f"target: expected shape (..., 4, 4) for poses or (..., 3) for positions, got {target.shape}")
     batch = target.shape[:-1] if position_only else target.shape[:-2]
+    if not position_only and is_concrete(target):
+        bad = ~np.asarray(rigid_poses(target)) & np.all(np.isfinite(np.asarray(target)), axis=(-2, -1))
+        if np.any(bad):  # non-finite targets are not errors: they fail (success=False)
+            i = tuple(int(k) for k in np.argwhere(bad)[0])
+            raise ValueError(f"target[{', '.join(map(str, i))}]: expected a rigid transform (R^T R = I, det R = +1, "
+                             f"last row [0, 0, 0, 1], within {rigid_tol(target.dtype):g}), "
+                             f"got {np.asarray(target)[i].tolist()}")
     if q0 is not None:
         q0_shape = jnp.shape(q0)
         if len(q0_shape) == 0 or q0_shape[-1] != chain.dof:
@@ -273,12 +286,17 @@ def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str 
         ValueError: a bad target shape, ``q0`` of the wrong length or batch, an unknown method,
             ``num_seeds < 1``, ``max_iters < 0``, negative tolerances, ``optimizer`` without
             ``method="optax"``.
+        ValueError: also a concrete pose target that is not a rigid transform (within 1e-5 in
+            float32, 1e-9 in float64), naming its batch index; traced ones give ``success=False``.
         TypeError: a chain that is not a chain model, an optimizer that is not an optax
-            ``GradientTransformation``.
+            ``GradientTransformation``, a bool, complex or float16 target.
     """
     max_iters = _DEFAULT_ITERS[method] if max_iters is None and method in _METHODS else max_iters
     target, position_only, batch = _check_args(
         chain, target, q0, num_seeds, method, max_iters, pos_tol, rot_tol, optimizer)
+    if 0 in batch:  # no targets: empty results of the batch's shape
+        empty = lambda *shape, dtype=target.dtype: jnp.zeros(batch + shape, dtype)  # noqa: E731
+        return IKResult(empty(chain.dof), empty(dtype=bool), empty(), empty(), empty(dtype=jnp.int32))
     return _solve(chain, target, jax.random.key(0) if key is None else key, q0, num_seeds=num_seeds, method=method,
                   max_iters=int(max_iters), pos_tol=float(pos_tol), rot_tol=float(rot_tol),
                   respect_limits=bool(respect_limits), optimizer=optimizer, position_only=position_only, batch=batch)
@@ -291,6 +309,7 @@ def _solve(chain, target, key, q0, *, num_seeds, method, max_iters, pos_tol, rot
     n = int(np.prod(batch, dtype=np.int64))
     flat = target.reshape((n,) + target.shape[len(batch):])
     valid = jnp.all(jnp.isfinite(flat.reshape(n, -1)), axis=-1)
+    valid = valid if position_only else valid & rigid_poses(flat)  # a non-rigid traced target fails
     safe = jnp.where(valid.reshape((n,) + (1,) * (flat.ndim - 1)), flat, jnp.eye(4, dtype=dtype)[:3, 3]
                      if position_only else jnp.eye(4, dtype=dtype))
     model = _cast(_detach(chain), dtype)

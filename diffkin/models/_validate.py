@@ -2,13 +2,22 @@
 
 from __future__ import annotations
 
+import jax
 import numpy as np
 
 
 def float_array(value, name: str, shape: tuple[int, ...] | None = None, *, finite: bool = True) -> np.ndarray:
     """``value`` as a float64 array of ``shape``, with finite entries unless ``finite=False``."""
+    if isinstance(value, jax.core.Tracer):
+        raise TypeError(f"{name}: expected concrete numbers, got a traced value (build models outside jit/grad/vmap)")
     try:
-        arr = np.asarray(value, dtype=np.float64)
+        raw = np.asarray(value)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{name}: expected an array of numbers, got {type(value).__name__}") from err
+    if raw.dtype.kind in "bc":
+        raise TypeError(f"{name}: expected an array of real numbers, got dtype {raw.dtype}")
+    try:
+        arr = np.asarray(raw, dtype=np.float64)
     except (TypeError, ValueError) as err:
         raise TypeError(f"{name}: expected an array of numbers, got {type(value).__name__}") from err
     if shape is not None and arr.shape != shape:
@@ -66,9 +75,62 @@ def joint_names(value, dof: int) -> tuple[str, ...]:
     """``dof`` distinct joint names; ``None`` gives ``joint1 ... jointN``."""
     if value is None:
         return tuple(f"joint{i + 1}" for i in range(dof))
+    if isinstance(value, str) or not isinstance(value, (tuple, list)):
+        raise TypeError(f"joint_names: expected a tuple or list of {dof} strings, got {type(value).__name__}")
     names = tuple(value)
     if len(names) != dof or not all(isinstance(n, str) for n in names):
         raise ValueError(f"joint_names: expected {dof} strings, got {names!r}")
     if len(set(names)) != dof:
         raise ValueError(f"joint_names: expected distinct names, got {names!r}")
     return names
+
+
+def flag(value, name: str) -> bool:
+    """A Python ``bool`` (``numpy.bool_`` accepted); a string such as ``'False'`` is a TypeError."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name}: expected True or False, got {value!r} ({type(value).__name__})")
+    return bool(value)
+
+
+def text(value, name: str) -> str:
+    if not isinstance(value, str):
+        raise TypeError(f"{name}: expected a string, got {type(value).__name__}")
+    return value
+
+
+def leaf(value, name: str, shape: tuple[int, ...], concrete: bool, *, finite: bool = True) -> np.ndarray | None:
+    """Check an array field of a model: a real floating array of ``shape``.
+
+    Returns its values as float64 (finite unless ``finite=False``) when ``concrete``, else ``None``
+    (a traced leaf: only its dtype and shape are known).
+    """
+    if not hasattr(value, "shape") or not hasattr(value, "dtype"):
+        raise TypeError(f"{name}: expected an array, got {type(value).__name__} (use the from_* builders)")
+    if not np.issubdtype(value.dtype, np.floating):
+        raise TypeError(f"{name}: expected a real floating-point array, got dtype {value.dtype}")
+    if tuple(value.shape) != shape:
+        want = "(" + ", ".join(str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
+        raise ValueError(f"{name}: expected shape {want}, got {tuple(value.shape)}")
+    if not concrete:
+        return None
+    return float_array(value, name, shape, finite=finite)
+
+
+def tolerance(value) -> float:
+    """Tolerance of the rigidity and unit-length checks of a leaf: 1e-6 (float64), 1e-5 (float32 and below)."""
+    return 1e-6 if np.finfo(value.dtype).bits >= 64 else 1e-5
+
+
+def static_names(value, dof: int) -> None:
+    """``joint_names`` of a model: ``()`` (unnamed) or ``dof`` distinct strings."""
+    if value != ():
+        joint_names(value, dof)
+
+
+def dof_of(joint_types_value) -> int:
+    """The number of joints given by the static ``joint_types`` string (checked)."""
+    if not isinstance(joint_types_value, str):
+        raise TypeError(f"joint_types: expected a string of 'R'/'P' letters, got {type(joint_types_value).__name__}")
+    if not joint_types_value:
+        raise ValueError("joint_types: expected at least one joint, got ''")
+    return len(joint_types(joint_types_value, len(joint_types_value)))

@@ -54,6 +54,23 @@ class DHChain:
     def dof(self) -> int:
         return len(self.joint_types)
 
+    def _check(self, concrete: bool) -> None:
+        """Static fields and leaf shapes always; values (finite, limits, rigid base/tool) when concrete."""
+        dof = check.dof_of(self.joint_types)
+        check.flag(self.modified, "modified")
+        check.static_names(self.joint_names, dof)
+        check.text(self.name, "name")
+        for field in ("a", "alpha", "d", "theta_offset"):
+            check.leaf(getattr(self, field), field, (dof,), concrete)
+        lo = check.leaf(self.lower, "lower", (dof,), concrete, finite=False)
+        hi = check.leaf(self.upper, "upper", (dof,), concrete, finite=False)
+        if concrete:
+            check.limits(lo, hi, dof)
+        for field in ("base", "tool"):
+            value = getattr(self, field)
+            if check.leaf(value, field, (4, 4), concrete) is not None:
+                check.rigid_transform(value, field, tol=check.tolerance(value))
+
     @classmethod
     def from_table(
         cls,
@@ -84,6 +101,8 @@ class DHChain:
         Raises:
             ValueError: a table that is not ``(dof, 4)``, non-finite numbers, bad joint types,
                 ``lower > upper``, or a base/tool that is not a rigid transform.
+            TypeError: a bool or complex table, a ``modified`` that is not a bool, ``joint_names``
+                that is not a sequence of strings.
         """
         arr = check.float_array(table, "table", finite=False)
         if arr.ndim != 2 or arr.shape[1] != 4 or arr.shape[0] == 0:
@@ -100,7 +119,7 @@ class DHChain:
         return cls(
             a=f(arr[:, 0]), alpha=f(arr[:, 1]), d=f(arr[:, 2]), theta_offset=f(arr[:, 3]),
             lower=f(lo), upper=f(hi), base=f(base_T), tool=f(tool_T),
-            joint_types=types, modified=bool(modified),
+            joint_types=types, modified=check.flag(modified, "modified"),
             joint_names=check.joint_names(joint_names, dof), name=name,
         )
 

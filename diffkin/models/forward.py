@@ -41,6 +41,8 @@ def joint_values(model: Model, q) -> jax.Array:
     """``q`` as a float array of shape ``(..., dof)``; raises on a bad model or shape."""
     check(model)
     q = jnp.asarray(q)
+    if q.dtype == bool or jnp.issubdtype(q.dtype, jnp.complexfloating):
+        raise TypeError(f"q: expected real joint values (radians or metres), got dtype {q.dtype}")
     if not jnp.issubdtype(q.dtype, jnp.floating):
         q = q.astype(jnp.result_type(float))
     if q.ndim == 0 or q.shape[-1] != model.dof:

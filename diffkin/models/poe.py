@@ -41,6 +41,29 @@ class PoEChain:
     def dof(self) -> int:
         return len(self.joint_types)
 
+    def _check(self, concrete: bool) -> None:
+        """Static fields and leaf shapes always; values (unit screws, limits, rigid poses) when concrete."""
+        dof = check.dof_of(self.joint_types)
+        check.static_names(self.joint_names, dof)
+        check.text(self.name, "name")
+        S = check.leaf(self.screws, "screws", (dof, 6), concrete)
+        check.leaf(self.home, "home", (4, 4), concrete)
+        L = check.leaf(self.link_homes, "link_homes", (dof, 4, 4), concrete)
+        lo = check.leaf(self.lower, "lower", (dof,), concrete, finite=False)
+        hi = check.leaf(self.upper, "upper", (dof,), concrete, finite=False)
+        if not concrete:
+            return
+        tol = check.tolerance(self.screws)
+        for i, given in enumerate(_screw_types(S, tol)):
+            if given != self.joint_types[i]:
+                raise ValueError(
+                    f"joint_types[{i}]: {self.joint_types[i]!r} contradicts screws[{i}], which is {given!r}"
+                )
+        check.rigid_transform(self.home, "home", tol=check.tolerance(self.home))
+        for i in range(dof):
+            check.rigid_transform(L[i], f"link_homes[{i}]", tol=check.tolerance(self.link_homes))
+        check.limits(lo, hi, dof)
+
     @classmethod
     def from_screws(
         cls,
@@ -76,18 +99,16 @@ class PoEChain:
             raise ValueError(f"screws: expected shape (dof, 6) with rows [v; w], got {S.shape}")
         S = check.float_array(S, "screws")
         dof = S.shape[0]
-        inferred = ""
-        for i, (v, w) in enumerate(zip(S[:, :3], S[:, 3:], strict=True)):
-            nw, nv = np.linalg.norm(w), np.linalg.norm(v)
-            if abs(nw - 1.0) < 1e-6:
-                inferred += "R"
-            elif nw < 1e-12 and abs(nv - 1.0) < 1e-6:
-                inferred += "P"
+        inferred = "".join(_screw_types(S, 1e-6))
+        # Unit within tolerance: normalised exactly (|w| = 1, no pitch; or |v| = 1).
+        S = S.copy()
+        for i, kind in enumerate(inferred):
+            v, w = S[i, :3], S[i, 3:]
+            if kind == "R":  # the screw scaled to |w| = 1, its pitch (within tolerance) removed
+                v, w = v / np.linalg.norm(w), w / np.linalg.norm(w)
+                S[i, :3], S[i, 3:] = v - np.dot(v, w) * w, w
             else:
-                raise ValueError(
-                    f"screws[{i}]: expected a unit screw (|w| = 1, or w = 0 and |v| = 1), "
-                    f"got |w| = {nw:.6g}, |v| = {nv:.6g}"
-                )
+                S[i, :3], S[i, 3:] = v / np.linalg.norm(v), 0.0
         types = inferred if joint_types is None else check.joint_types(joint_types, dof)
         for i, (given, seen) in enumerate(zip(types, inferred, strict=True)):
             if given != seen:
@@ -125,6 +146,32 @@ class PoEChain:
             T = rg.compose(T, rg.screw_exp(v, w, q[i]))
             links.append(rg.compose(T, rg.from_matrix(L[i])))
         return rg.Frames(links, rg.compose(T, rg.from_matrix(self.home)), screws)
+
+
+def _screw_types(S: np.ndarray, tol: float) -> list[str]:
+    """``"R"``/``"P"`` of each screw row ``[v; w]``; raises on rows that are not unit screws.
+
+    Revolute: ``|w| = 1`` and no pitch (``v . w = 0``: the screw of a rotation about a line);
+    prismatic: ``w = 0`` and ``|v| = 1``; within ``tol``.
+    """
+    types = []
+    for i, (v, w) in enumerate(zip(S[:, :3], S[:, 3:], strict=True)):
+        nw, nv = np.linalg.norm(w), np.linalg.norm(v)
+        if abs(nw - 1.0) < tol:
+            pitch = float(np.dot(v, w))
+            if abs(pitch) > tol * max(1.0, nv):
+                raise ValueError(
+                    f"screws[{i}]: expected a revolute screw without pitch (v . w = 0), got v . w = {pitch:.6g}"
+                )
+            types.append("R")
+        elif nw < 1e-12 and abs(nv - 1.0) < tol:
+            types.append("P")
+        else:
+            raise ValueError(
+                f"screws[{i}]: expected a unit screw (|w| = 1, or w = 0 and |v| = 1), "
+                f"got |w| = {nw:.6g}, |v| = {nv:.6g}"
+            )
+    return types
 
 
 def to_poe(chain: DHChain) -> PoEChain:

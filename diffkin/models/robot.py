@@ -28,7 +28,7 @@ import numpy as np
 from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
 from diffkin.models import _validate as check
-from diffkin.models.poe import PoEChain
+from diffkin.models.poe import PoEChain, _screw_types
 
 
 @pytree_dataclass
@@ -75,6 +75,43 @@ class Robot:
     @property
     def dof(self) -> int:
         return len(self.joint_names)
+
+    def _check(self, concrete: bool) -> None:
+        """Static structure and leaf shapes always; values (unit screws, rigid poses, limits) when concrete."""
+        nj, nf, dof = len(self.tree_joints), len(self.frame_names), len(self.joint_names)
+        for name, value, size in (("parents", self.parents, nj), ("sources", self.sources, nj),
+                                  ("frame_bodies", self.frame_bodies, nf)):
+            if not isinstance(value, tuple) or len(value) != size or not all(isinstance(i, int) for i in value):
+                raise TypeError(f"{name}: expected a tuple of {size} ints, got {value!r}")
+        if not isinstance(self.joint_types, str) or len(self.joint_types) != nj or set(self.joint_types) - set("RP"):
+            raise ValueError(f"joint_types: expected {nj} letters 'R'/'P', got {self.joint_types!r}")
+        for j, parent in enumerate(self.parents):
+            if not 0 <= parent <= j:
+                raise ValueError(f"parents[{j}]: expected a body in [0, {j}] (parents come first), got {parent}")
+        if any(not 0 <= i < dof for i in self.sources) or any(not 0 <= b <= nj for b in self.frame_bodies):
+            raise ValueError(f"sources/frame_bodies: expected indices of q (< {dof}) and of bodies (<= {nj})")
+        for name, names in (("frame_names", self.frame_names), ("joint_names", self.joint_names),
+                            ("tree_joints", self.tree_joints)):
+            if len(set(names)) != len(names) or not all(isinstance(n, str) for n in names):
+                raise ValueError(f"{name}: expected distinct strings, got {names!r}")
+        check.flag(self.floating, "floating")
+        check.text(self.name, "name")
+        P = check.leaf(self.joint_poses, "joint_poses", (nj, 4, 4), concrete)
+        S = check.leaf(self.screws, "screws", (nj, 6), concrete)
+        check.leaf(self.multipliers, "multipliers", (nj,), concrete)
+        check.leaf(self.offsets, "offsets", (nj,), concrete)
+        F = check.leaf(self.frame_poses, "frame_poses", (nf, 4, 4), concrete)
+        lo = check.leaf(self.lower, "lower", (dof,), concrete, finite=False)
+        hi = check.leaf(self.upper, "upper", (dof,), concrete, finite=False)
+        if not concrete:
+            return
+        for j, kind in enumerate(_screw_types(S, check.tolerance(self.screws))):
+            if kind != self.joint_types[j]:
+                raise ValueError(f"joint_types[{j}]: {self.joint_types[j]!r} contradicts screws[{j}] ({kind!r})")
+        for name, poses, leaf in (("joint_poses", P, self.joint_poses), ("frame_poses", F, self.frame_poses)):
+            for i, T in enumerate(poses):
+                check.rigid_transform(T, f"{name}[{i}]", tol=check.tolerance(leaf))
+        check.limits(lo, hi, dof)
 
     @property
     def mimic(self) -> dict[str, tuple[str, float, float]]:

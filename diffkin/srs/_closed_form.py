@@ -27,8 +27,14 @@ import jax
 import jax.numpy as jnp
 
 from diffkin import _rigid as rg
+from diffkin import kinematics
+from diffkin._checks import rigid_poses
 from diffkin._trig import atan2, sincos
 from diffkin.srs._arm import SRSArm, broadcast_batch, check_arm, float_input, gc_input, pose_input
+
+POSE_TOL = {False: 1e-4, True: 1e-9}
+"""Largest entry of ``fk(q) - target`` (rotation entries, and position in metres) of a valid solution:
+float32 (key ``False``), float64 (``True``); far above the closed form's rounding, far below a wrong solution."""
 
 CHUNK = 4096
 """Problems per step of :func:`ik` on large batches: the intermediates of one step stay in cache."""
@@ -330,7 +336,23 @@ def _solve(arm: SRSArm, target, psi, gc) -> tuple[jax.Array, jax.Array]:
     shape = jnp.broadcast_shapes(*(x.shape for x in q))
     q = [jnp.broadcast_to(x, shape) for x in q]
     valid = geometry.reachable & within_limits(arm, q)
-    return jnp.stack(q, axis=-1), jnp.broadcast_to(valid, shape)
+    q = jnp.stack(q, axis=-1)
+    valid = jnp.broadcast_to(valid & _checked(arm, target, psi, gc, q), shape)
+    return jnp.where(jnp.isfinite(q), q, 0.0), valid
+
+
+def _checked(arm: SRSArm, target, psi, gc, q) -> jax.Array:
+    """Whether the inputs are what the closed form assumes and ``q`` reaches ``target``.
+
+    ``gc`` entries exactly ``+-1``, ``target`` rigid (:func:`diffkin._checks.rigid_poses`), ``psi``
+    finite, ``q`` finite, and the forward kinematics of ``q`` within :data:`POSE_TOL` (position,
+    metres, and rotation entries) of ``target``.
+    """
+    ok = jnp.all(jnp.abs(gc) == 1.0, axis=-1) & rigid_poses(target) & jnp.isfinite(psi)
+    ok = ok & jnp.all(jnp.isfinite(q), axis=-1)
+    T = kinematics.fk(arm.chain(), jnp.where(jnp.isfinite(q), q, 0.0))
+    err = jnp.max(jnp.abs(T[..., :3, :] - target[..., :3, :]), axis=(-2, -1))
+    return ok & (err <= POSE_TOL[jnp.finfo(q.dtype).bits >= 64])
 
 
 def arm_angle(arm: SRSArm, q: jax.Array) -> tuple[jax.Array, jax.Array]:

@@ -1,0 +1,27 @@
+"""Traceable validity checks shared by the solvers (no raising: they give a boolean per problem)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+
+def rigid_tol(dtype) -> float:
+    """Tolerance of :func:`rigid_poses`: 1e-9 in float64, 1e-5 in float32."""
+    return 1e-9 if jnp.finfo(dtype).bits >= 64 else 1e-5
+
+
+def rigid_poses(T: jax.Array) -> jax.Array:
+    """``(...,)`` whether each ``(..., 4, 4)`` pose is a rigid transform within :func:`rigid_tol`.
+
+    ``|R^T R - I|``, ``|det R - 1|`` and the last row's distance from ``[0, 0, 0, 1]`` (max norms);
+    false for non-finite poses.
+    """
+    tol = rigid_tol(T.dtype)
+    R = T[..., :3, :3]
+    gram = jnp.max(jnp.abs(jnp.swapaxes(R, -1, -2) @ R - jnp.eye(3, dtype=T.dtype)), axis=(-2, -1))
+    row = jnp.max(jnp.abs(T[..., 3, :] - jnp.asarray([0.0, 0.0, 0.0, 1.0], T.dtype)), axis=-1)
+    det = (R[..., 0, 0] * (R[..., 1, 1] * R[..., 2, 2] - R[..., 1, 2] * R[..., 2, 1])
+           - R[..., 0, 1] * (R[..., 1, 0] * R[..., 2, 2] - R[..., 1, 2] * R[..., 2, 0])
+           + R[..., 0, 2] * (R[..., 1, 0] * R[..., 2, 1] - R[..., 1, 1] * R[..., 2, 0]))
+    return (gram <= tol) & (row <= tol) & (jnp.abs(det - 1.0) <= tol)
