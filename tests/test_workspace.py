@@ -198,6 +198,7 @@ def _run(script: str, env: dict) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_identical_maps_on_1_3_and_4_devices(tmp_path):
     script = f"""
         import json, jax, numpy as np
