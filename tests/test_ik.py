@@ -335,3 +335,14 @@ def test_import_and_lm_without_optax_subprocess():
             "print(bool(dk.ik.solve(chain, T, num_seeds=4).success))")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0 and res.stdout.strip() == "True", res.stderr[-2000:]
+
+
+def test_traced_tolerances_share_one_compilation():
+    chain = dk.robots.planar([1.0, 1.0])
+    T = np.asarray(dk.fk(chain, jnp.array([[0.3, 0.5], [0.1, -0.4], [1.0, 1.0]])))
+    solve = jax.jit(lambda t, tol: ik.solve(chain, t, num_seeds=4, pos_tol=tol, rot_tol=tol))
+    loose = solve(T, 1e-3)
+    assert np.all(loose.success)
+    assert _compilations(lambda: solve(T, 1e-12)) == []
+    tight = solve(T, 1e-12)  # the traced value is used: more iterations for a tighter tolerance
+    assert np.all(np.asarray(tight.iters) >= np.asarray(loose.iters)) and np.any(tight.iters > loose.iters)

@@ -186,6 +186,10 @@ def _check_args(chain, target, q0, num_seeds, method, max_iters, pos_tol, rot_to
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
             raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
     for name, value in (("pos_tol", pos_tol), ("rot_tol", rot_tol)):
+        if isinstance(value, jax.Array) and value.shape == () and not jnp.issubdtype(value.dtype, jnp.complexfloating):
+            if not is_concrete(value):
+                continue  # a traced tolerance (a jit argument): its value is not known here
+            value = value.item()
         if not isinstance(value, (int, float, np.floating, np.integer)) or not value >= 0:
             raise ValueError(f"{name}: expected a non-negative number, got {value!r}")
     if method == "optax":
@@ -262,8 +266,9 @@ def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str 
         method: ``"lm"`` (default) or ``"optax"``.
         max_iters: iterations per seed (static); default 10 for LM, 1000 for optax. Each
             iteration is one forward pass.
-        pos_tol: success tolerance on the position error, metres.
-        rot_tol: success tolerance on the rotation angle error, radians.
+        pos_tol: success tolerance on the position error, metres (may be a traced scalar: one
+            compilation serves every tolerance).
+        rot_tol: success tolerance on the rotation angle error, radians (may be traced).
         respect_limits: keep every iterate (and the result) within ``[chain.lower, chain.upper]``.
         optimizer: an ``optax.GradientTransformation`` for ``method="optax"``; default
             ``optax.adam(1e-2)``.
