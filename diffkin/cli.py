@@ -205,13 +205,18 @@ def cache_dir(option: str | None = None, disabled: bool = False) -> Path | None:
     return Path(base) / "diffkin" / "jax"
 
 
-def _use_cache(folder: Path | None) -> None:
-    """Point JAX's persistent compilation cache at ``folder`` (compilations of 0.1 s or more)."""
+def _use_cache(folder: Path | None, chosen: bool = True) -> None:
+    """Point JAX's persistent compilation cache at ``folder`` (compilations of 0.1 s or more).
+
+    A folder that cannot be created is an error if the user ``chosen`` it, else the cache stays off.
+    """
     if folder is None:
         return
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as e:
+        if not chosen:
+            return
         raise CLIError(f"--cache-dir: cannot create {str(folder)!r}: {e.strerror}") from None
     import jax
 
@@ -1011,7 +1016,8 @@ def main(argv: list[str] | None = None) -> int:
     """
     try:
         args = build_parser().parse_args(argv)
-        _use_cache(cache_dir(args.cache_dir, args.no_cache))
+        _use_cache(cache_dir(args.cache_dir, args.no_cache),
+                   chosen=args.cache_dir is not None or bool(os.environ.get("DIFFKIN_CACHE_DIR")))
         return args.func(args)
     except SystemExit as e:  # --help, --version
         return e.code if isinstance(e.code, int) else 0
