@@ -337,12 +337,17 @@ def test_import_and_lm_without_optax_subprocess():
     assert res.returncode == 0 and res.stdout.strip() == "True", res.stderr[-2000:]
 
 
-def test_traced_tolerances_share_one_compilation():
+def test_tolerances_are_traced():
+    """New tolerances reuse the compiled solver (the shapes and settings of the test above), and a traced
+    tolerance (a jit argument) is accepted."""
     chain = dk.robots.planar([1.0, 1.0])
     T = np.asarray(dk.fk(chain, jnp.array([[0.3, 0.5], [0.1, -0.4], [1.0, 1.0]])))
-    solve = jax.jit(lambda t, tol: ik.solve(chain, t, num_seeds=4, pos_tol=tol, rot_tol=tol))
-    loose = solve(T, 1e-3)
+    loose = ik.solve(chain, T, key=jax.random.key(0), num_seeds=4, pos_tol=1e-3, rot_tol=1e-3)
     assert np.all(loose.success)
-    assert _compilations(lambda: solve(T, 1e-12)) == []
-    tight = solve(T, 1e-12)  # the traced value is used: more iterations for a tighter tolerance
-    assert np.all(np.asarray(tight.iters) >= np.asarray(loose.iters)) and np.any(tight.iters > loose.iters)
+    key = jax.random.key(0)
+    tight = []
+    assert _compilations(lambda: tight.append(ik.solve(chain, T, key=key, num_seeds=4, pos_tol=1e-12,
+                                                       rot_tol=1e-12)) or tight[0].q) == []
+    assert np.all(tight[0].iters >= loose.iters) and np.any(tight[0].iters > loose.iters)  # the value is used
+    jaxpr = jax.make_jaxpr(lambda tol: ik.solve(chain, T, num_seeds=4, pos_tol=tol, rot_tol=tol).q)(1e-3)
+    assert jaxpr.out_avals[0].shape == (3, 2)
