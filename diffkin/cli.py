@@ -557,7 +557,7 @@ def cmd_demo(args) -> int:
 
     # IK
     _say(f"IK      {n_ik:,} random reachable targets, LM, 32 seeds, in jitted chunks of {_IK_CHUNK}: compiling "
-         "(the longest wait; cached for later runs) ...")
+         f"(the longest wait{'; cached for later runs' if folder else ''}) ...")
     q_t = jax.random.uniform(jax.random.key(1), (n_ik, chain.dof), jnp.float64, chain.lower, chain.upper)
     targets = np.asarray(fk(q_t))
     start = time.perf_counter()
