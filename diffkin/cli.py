@@ -502,7 +502,7 @@ def _plot_self_motion(name: str, q: np.ndarray, path: Path) -> None:
            ylabel="joint angle / its limit (rad / rad; -1 lower, +1 upper limit)")
     ax.set_title(f"{name} self-motion: every configuration with the flange pose of q, along the arm angle psi\n"
                  f"q = {' '.join(f'{v:+.2f}' for v in q)} rad (a random in-limit configuration: IK target 0 "
-                 f"of the demo)\nshown: q's own global configuration (signs of joints 2, 4, 6 = {signs}); each of "
+                 f"of the demo)\nshown: q's own global configuration (signs of joints 2, 4, 6 = {signs});\neach of "
                  f"the other 7 has a self-motion of its own; {valid.mean():.0%} of arm angles within all limits",
                  fontsize="medium")
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, fontsize="small")

@@ -469,7 +469,7 @@ def plot_slice(reach_map: ReachabilityMap, axis: str = "y", value: float = 0.0, 
     }[quantity]
     ax.set(xlabel=f"{_AXES[u]} (m)", ylabel=f"{_AXES[v]} (m)", aspect="equal",
            title=f"{m.chain_name} {what}\nslab {axis} in [{slab[0]:.3g}, {slab[1]:.3g}) m ({m.voxel_size:g} m "
-           f"voxels), {m.n_samples:,} samples uniform in joint space; blank: none reached")
+           f"voxels)\n{m.n_samples:,} samples uniform in joint space; blank: none reached")
     ax.title.set_fontsize("medium")
     if path is not None:
         ax.figure.savefig(path, dpi=120)
