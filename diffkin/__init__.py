@@ -1,7 +1,7 @@
 """diffkin: differentiable robot kinematics in JAX.
 
 The public names of the API contract: models, forward kinematics, Jacobians, and the
-``robots``, ``ik``, ``srs`` and ``workspace`` modules. They are imported on first use
+``robots``, ``ik``, ``se3``, ``srs`` and ``workspace`` modules. They are imported on first use
 (``dk.fk``, ``from diffkin import fk``), so that ``import diffkin`` alone does not import JAX and
 the ``diffkin`` command answers ``--help`` and usage errors at once.
 """
@@ -12,12 +12,12 @@ import importlib
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
-    from diffkin import ik, robots, srs, workspace
+    from diffkin import ik, robots, se3, srs, workspace
     from diffkin.kinematics import fk, jacobian, link_poses, manipulability
     from diffkin.models import DHChain, PoEChain, Robot, load_robot, load_urdf, to_poe
 
 _HOMES = {
-    "ik": None, "robots": None, "srs": None, "workspace": None,  # submodules
+    "ik": None, "robots": None, "se3": None, "srs": None, "workspace": None,  # submodules
     "viewer": None,  # optional: needs viser and trimesh (pip install "diffkin[viewer]")
     "fk": "diffkin.kinematics", "jacobian": "diffkin.kinematics", "link_poses": "diffkin.kinematics",
     "manipulability": "diffkin.kinematics",
@@ -27,7 +27,7 @@ _HOMES = {
 
 __all__ = [
     "DHChain", "PoEChain", "Robot", "fk", "jacobian", "link_poses", "load_robot", "load_urdf", "manipulability",
-    "ik", "robots", "srs", "to_poe", "workspace",
+    "ik", "robots", "se3", "srs", "to_poe", "workspace",
 ]
 __version__ = "0.1.0"
 

@@ -9,7 +9,9 @@
 
 ``ROBOT_OR_URDF`` is a built-in robot (``iiwa7``, ``iiwa14``, ``panda``, ``ur5``, ``puma560``) or a
 URDF file. Every computation runs in float64 (``jax_enable_x64`` is switched on by :func:`main`).
-User errors print one line ``diffkin: error: ...`` to stderr and exit with status 2.
+User errors (and a missing optional dependency) print one line ``diffkin: error: ...`` to stderr and
+exit with status 2; Ctrl-C exits with status 130. Compiled programs are kept in JAX's persistent
+compilation cache (``--cache-dir``, ``--no-cache``, ``DIFFKIN_CACHE_DIR``; see :func:`cache_dir`).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import importlib.util
 import json
 import math
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -29,6 +32,16 @@ import numpy as np
 ROBOTS = ("iiwa7", "iiwa14", "panda", "ur5", "puma560")
 SRS_ROBOTS = ("iiwa7", "iiwa14")
 _IK_CHUNK = 64  # targets per jitted IK call: one compilation serves every batch size
+_CACHE_OFF = ("", "0", "off", "false", "no", "none")  # DIFFKIN_CACHE_DIR values that disable the cache
+_CACHE_MIN_SECONDS = 0.1  # compilations at least this long are cached (JAX's default, 1 s, skips FK)
+_MAX_SAMPLES = 10**12  # reachability samples (int32 chunk counters; weeks of CPU time already)
+_SEED_RANGE = (-(2**63), 2**63 - 1)  # jax.random.key takes a 64-bit integer
+# Python parameter names in messages of diffkin's functions, and the flags that set them
+_FLAGS = {"end_link": "--end-link", "base_link": "--base-link", "voxel_size": "--voxel", "n_samples": "--samples",
+          "num_seeds": "--seeds", "pos_tol": "--pos-tol", "rot_tol": "--rot-tol", "q0": "--q0"}
+# the extra that provides each optional module
+_EXTRAS = {"optax": "ik", "matplotlib": "plot", "tqdm": "progress", "torch": "validate",
+           "pytorch_kinematics": "validate", "pinocchio": "validate"}
 
 
 class CLIError(Exception):
@@ -36,10 +49,49 @@ class CLIError(Exception):
 
 
 class _Parser(argparse.ArgumentParser):
-    """An ``ArgumentParser`` whose usage errors are one line on stderr and exit status 2."""
+    """An ``ArgumentParser`` whose usage errors are one line on stderr and exit status 2.
+
+    Negative numbers in scientific notation (``-1e-3``, ``-2.5E+2``) are values, not options
+    (argparse's own pattern knows only ``-1`` and ``-1.5``).
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
     def error(self, message):
         raise CLIError(message)
+
+
+class _IntermixedParser(_Parser):
+    """A subcommand parser that takes options between positionals (``fk URDF --end-link L q1 ...``)."""
+
+    _inside = False
+
+    def parse_known_args(self, args=None, namespace=None):
+        if self._inside:  # parse_known_intermixed_args calls back here
+            return super().parse_known_args(args, namespace)
+        self._inside = True
+        try:
+            return self.parse_known_intermixed_args(args, namespace)
+        finally:
+            self._inside = False
+
+
+def _need(module: str, what: str, extra: str = "demo"):
+    """Import an optional dependency, or a one-line CLIError naming the extra that installs it."""
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise CLIError(f"{what} needs {module}, which is not installed: pip install 'diffkin[{extra}]' "
+                       f"(or pip install {module})") from None
+
+
+def _flags(message: str) -> str:
+    """A message of diffkin's library with its Python parameter names replaced by the CLI's flags."""
+    for name, flag in _FLAGS.items():
+        message = re.sub(rf"(?<![\w'\"-]){name}\b(?!['\"])", flag, message)  # not a quoted link name
+    return message
 
 
 # --------------------------------------------------------------------------------------------- helpers
@@ -56,14 +108,49 @@ def _finite(text: str) -> float:
     return value
 
 
-def _positive_int(text: str) -> int:
-    """argparse type: an int >= 1 (underscores allowed, as in ``1_000_000``)."""
+def _integer(text: str) -> int:
+    """An int from ``1000``, ``1_000`` or an integral ``1e3``; ArgumentTypeError otherwise."""
     try:
-        value = int(text)
+        return int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid integer: {text!r}") from None
+        pass
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if math.isfinite(value) and value == int(value):
+        return int(value)
+    raise argparse.ArgumentTypeError(f"invalid integer: {text!r}")
+
+
+def _positive_int(text: str, most: int = 10**9) -> int:
+    """argparse type: an int in ``[1, most]`` (underscores allowed, as in ``1_000_000``; ``1e6``)."""
+    value = _integer(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    if value > most:
+        raise argparse.ArgumentTypeError(f"expected at most {most:,}, got {text!r}")
+    return value
+
+
+def _samples(text: str) -> int:
+    """argparse type: a number of reachability samples, ``1 .. 10**12``."""
+    return _positive_int(text, _MAX_SAMPLES)
+
+
+def _seed(text: str) -> int:
+    """argparse type: a PRNG seed, a 64-bit signed integer."""
+    value = _integer(text)
+    if not _SEED_RANGE[0] <= value <= _SEED_RANGE[1]:
+        raise argparse.ArgumentTypeError(f"expected a seed in [-2**63, 2**63 - 1], got {text!r}")
+    return value
+
+
+def _tolerance(text: str) -> float:
+    """argparse type: a finite float >= 0."""
+    value = _finite(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative number, got {text!r}")
     return value
 
 
@@ -97,6 +184,45 @@ def _jax():
 
     jax.config.update("jax_enable_x64", True)
     return jax
+
+
+def cache_dir(option: str | None = None, disabled: bool = False) -> Path | None:
+    """The folder of JAX's persistent compilation cache for this run, or ``None`` (no cache).
+
+    In order: ``--no-cache`` (``disabled``) turns it off; ``--cache-dir`` (``option``) names it;
+    else the environment variable ``DIFFKIN_CACHE_DIR`` names it (empty, ``0``, ``off``, ``false``,
+    ``no`` or ``none`` turn it off); else ``$XDG_CACHE_HOME/diffkin/jax`` (default
+    ``~/.cache/diffkin/jax``).
+    """
+    if disabled:
+        return None
+    if option is not None:
+        return Path(option).expanduser()
+    env = os.environ.get("DIFFKIN_CACHE_DIR")
+    if env is not None:
+        return None if env.strip().lower() in _CACHE_OFF else Path(env).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "diffkin" / "jax"
+
+
+def _use_cache(folder: Path | None, chosen: bool = True) -> None:
+    """Point JAX's persistent compilation cache at ``folder`` (compilations of 0.1 s or more).
+
+    A folder that cannot be created is an error if the user ``chosen`` it, else the cache stays off.
+    """
+    if folder is None:
+        return
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        if not chosen:
+            return
+        raise CLIError(f"--cache-dir: cannot create {str(folder)!r}: {e.strerror}") from None
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", str(folder))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", _CACHE_MIN_SECONDS)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
 
 def _robot_key(spec: str, end_link: str | None, base_link: str | None) -> tuple:
@@ -186,9 +312,9 @@ def pose_from_quaternion(position, quat) -> np.ndarray:
         CLIError: a quaternion of (near) zero norm.
     """
     q = np.asarray(quat, dtype=np.float64)
-    norm = np.linalg.norm(q)
+    norm = float(np.linalg.norm(q))
     if norm < 1e-12:
-        raise CLIError(f"--pose: the quaternion (qw qx qy qz) must not be zero, got {list(q)}")
+        raise CLIError(f"--pose: the quaternion (qw qx qy qz) must not be zero, got {' '.join(f'{v:g}' for v in q)}")
     w, x, y, z = q / norm
     T = np.eye(4)
     T[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
@@ -254,19 +380,36 @@ def _pose_errors(T, T_ref) -> tuple[float, float]:
 
 
 @functools.lru_cache(maxsize=16)
-def _ik_fn(key: tuple, num_seeds: int, with_q0: bool):
-    """A jitted ``dk.ik.solve`` of one robot on ``_IK_CHUNK`` targets (compiled once per target kind)."""
+def _ik_fn(key: tuple, num_seeds: int):
+    """A jitted ``dk.ik.solve`` of one robot on ``_IK_CHUNK`` targets (compiled once per target kind).
+
+    Its arguments are ``(targets, key, q0 or None, pos_tol, rot_tol)``; the tolerances are traced.
+    """
     jax = _jax()
     import diffkin as dk
 
     chain = _chain_for(key)
-    if with_q0:
-        return jax.jit(lambda T, k, q0: dk.ik.solve(chain, T, key=k, q0=q0, num_seeds=num_seeds))
-    return jax.jit(lambda T, k: dk.ik.solve(chain, T, key=k, num_seeds=num_seeds))
+    return jax.jit(lambda T, k, q0, pos_tol, rot_tol: dk.ik.solve(chain, T, key=k, q0=q0, num_seeds=num_seeds,
+                                                                   pos_tol=pos_tol, rot_tol=rot_tol))
 
 
-def solve_ik(key: tuple, targets: np.ndarray, *, num_seeds: int = 32, q0=None, seed: int = 1):
+def _bar(total: int, show: bool | None, **kwargs):
+    """A tqdm progress bar on stderr, or ``None``: without tqdm, ``show=False``, or (``None``) off a terminal."""
+    if show is False or (show is None and not sys.stderr.isatty()):
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    return tqdm(total=total, file=sys.stderr, **kwargs)
+
+
+def solve_ik(key: tuple, targets: np.ndarray, *, num_seeds: int = 32, q0=None, seed: int = 1,
+             pos_tol: float = 1e-5, rot_tol: float = 1e-4, progress: bool | None = False):
     """Batched IK of ``(n, 4, 4)`` or ``(n, 3)`` targets in fixed-size jitted chunks.
+
+    Args:
+        progress: a tqdm bar over the targets; ``None``: only on a terminal.
 
     Returns:
         ``dict`` of numpy arrays ``q (n, dof)``, ``success``, ``pos_err``, ``rot_err``, ``iters`` ``(n,)``.
@@ -274,16 +417,23 @@ def solve_ik(key: tuple, targets: np.ndarray, *, num_seeds: int = 32, q0=None, s
     jax = _jax()
     targets = np.asarray(targets, dtype=np.float64)
     n = targets.shape[0]
-    fn = _ik_fn(key, num_seeds, q0 is not None)
+    fn = _ik_fn(key, num_seeds)
+    q0 = None if q0 is None else np.asarray(q0, dtype=np.float64)
+    tolerances = np.float64(pos_tol), np.float64(rot_tol)
+    bar = _bar(n, progress, desc="IK", unit="target") if n > _IK_CHUNK else None
     parts = []
     for c, start in enumerate(range(0, n, _IK_CHUNK)):
         chunk = targets[start:start + _IK_CHUNK]
         pad = _IK_CHUNK - chunk.shape[0]
         chunk = np.concatenate([chunk, np.repeat(chunk[-1:], pad, axis=0)]) if pad else chunk
         k = jax.random.fold_in(jax.random.key(seed), c)
-        res = fn(chunk, k) if q0 is None else fn(chunk, k, np.asarray(q0, dtype=np.float64))
+        res = fn(chunk, k, q0, *tolerances)
         parts.append({f: np.asarray(getattr(res, f))[:_IK_CHUNK - pad] for f in ("q", "success", "pos_err",
                                                                                "rot_err", "iters")})
+        if bar is not None:
+            bar.update(_IK_CHUNK - pad)
+    if bar is not None:
+        bar.close()
     return {f: np.concatenate([p[f] for p in parts]) for f in parts[0]}
 
 
@@ -320,9 +470,10 @@ def _timed(fn, *args):
 def _plot_self_motion(name: str, q: np.ndarray, path: Path) -> None:
     """Plot the self-motion through ``q`` of the iiwa ``name``: its joints along the arm angle.
 
-    One panel for the global configuration of ``q``: each joint as a fraction of its range
-    (-1 lower, +1 upper limit, drawn) against the arm angle ``psi``, the arm angles whose solution
-    is within every limit shaded, ``q``'s own arm angle dotted.
+    One panel for the global configuration of ``q`` (the branch ``q`` itself lies on): each joint
+    angle divided by its limit (rad / rad; -1 lower, +1 upper limit, drawn) against the arm angle
+    ``psi`` (rad), the arm angles whose solution is within every limit shaded, ``q``'s own arm
+    angle dotted. The title gives ``q`` and the signs of joints 2, 4 and 6.
 
     Args:
         name: ``iiwa7`` or ``iiwa14``.
@@ -338,25 +489,37 @@ def _plot_self_motion(name: str, q: np.ndarray, path: Path) -> None:
     lower, upper = np.asarray(arm.lower), np.asarray(arm.upper)
     frac = (2 * qs - (lower + upper)) / (upper - lower)
     frac[1:][np.abs(np.diff(frac, axis=0)) > 1] = np.nan  # do not draw the +-pi wraps of a joint
-    fig = Figure(figsize=(9, 5), layout="constrained")
+    fig = Figure(figsize=(10, 6), layout="constrained")
     ax = fig.add_subplot()
     ax.fill_between(psi, -1, 1, where=valid, color="tab:green", alpha=0.15, lw=0, label="within all limits")
     for j in range(7):
-        ax.plot(psi, frac[:, j], lw=1.5, label=f"joint {j + 1}")
+        ax.plot(psi, frac[:, j], lw=1.5, label=f"joint {j + 1} (limits ±{upper[j]:.2f} rad)")
     for limit in (-1, 1):
         ax.axhline(limit, color="k", ls="--", lw=1)
-    ax.axvline(psi0, color="k", ls=":", lw=1, label="arm angle of q")
-    signs = ", ".join(f"{int(g):+d}" for g in gc)
+    ax.axvline(psi0, color="k", ls=":", lw=1, label=f"arm angle of q ({float(psi0):+.2f} rad)")
+    signs = " ".join(f"{int(g):+d}" for g in gc)
     ax.set(xlim=(-np.pi, np.pi), ylim=(-1.6, 1.6), xlabel="arm angle psi (rad)",
-           ylabel="joint position in its range (-1 lower, +1 upper limit)",
-           title=f"{name} self-motion of one pose, global configuration ({signs}): "
-           f"{valid.mean():.0%} of arm angles feasible")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=5, fontsize="small")
+           ylabel="joint angle / its limit (rad / rad; -1 lower, +1 upper limit)")
+    ax.set_title(f"{name} self-motion: every configuration with the flange pose of q, along the arm angle psi\n"
+                 f"q = {' '.join(f'{v:+.2f}' for v in q)} rad (a random in-limit configuration: IK target 0 "
+                 f"of the demo)\nshown: q's own global configuration (signs of joints 2, 4, 6 = {signs});\neach of "
+                 f"the other 7 has a self-motion of its own; {valid.mean():.0%} of arm angles within all limits",
+                 fontsize="medium")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, fontsize="small")
     fig.savefig(path, dpi=120)
 
 
+def _say(text: str = "", end: str = "\n") -> None:
+    print(text, end=end, flush=True)
+
+
 def cmd_demo(args) -> int:
-    """The main job on the built-in iiwa14: FK and its check, batched IK, self-motion, reachability, plots."""
+    """The main job on the built-in iiwa14: FK and its check, batched IK, self-motion, reachability, plots.
+
+    Each stage prints a line as it starts and its figures as it finishes (compile times apart);
+    the long ones show a progress bar on a terminal (with tqdm).
+    """
+    _need("matplotlib", "diffkin demo")
     jax = _jax()
     import jax.numpy as jnp
 
@@ -368,47 +531,55 @@ def cmd_demo(args) -> int:
     except OSError as e:
         raise CLIError(f"--out: cannot create {str(out)!r}: {e.strerror}") from None
     quick = args.quick
+    show = False if args.no_progress else None
     n_fk, n_ik, n_sm = (2_000, 50, 200) if quick else (100_000, 1_000, 500)
     n_ws, voxel = (20_000, 0.2) if quick else (500_000, 0.05)
     t_all = time.perf_counter()
     chain = load_robot("iiwa14")
     key = ("iiwa14",)
-    lines = [f"diffkin {dk.__version__} demo{' (quick)' if quick else ''}: {chain.name}, standard DH, "
-             f"{chain.dof} joints, float64, jax {jax.__version__} on {jax.devices()[0].platform}"]
+    _say(f"diffkin {dk.__version__} demo{' (quick)' if quick else ''}: {chain.name}, standard DH, "
+         f"{chain.dof} joints, float64, jax {jax.__version__} on {jax.devices()[0].platform}")
+    folder = jax.config.jax_compilation_cache_dir
+    _say(f"        compiled programs cached in {folder} (a second run compiles less)" if folder else
+         "        persistent compilation cache off: every run compiles afresh")
 
     # FK
+    _say(f"FK      {n_fk:,} random configurations, jitted dk.fk ...")
     q = jax.random.uniform(jax.random.key(0), (n_fk, chain.dof), jnp.float64, chain.lower, chain.upper)
     fk = jax.jit(lambda q: dk.fk(chain, q))
     T, t_first = _timed(fk, q)
     T, t_fk = _timed(fk, q)
     pos_e, rot_e = _pose_errors(T, dh_fk_numpy(chain, np.asarray(q)))
     fk_ok = pos_e < 1e-9 and rot_e < 1e-9
-    lines.append(f"FK      {n_fk:,} random configs (jit): {t_fk * 1e3:.2f} ms warm ({n_fk / t_fk / 1e6:.2f} M/s), "
-                 f"first call {t_first:.2f} s")
-    lines.append(f"        FK check vs numpy DH product Rz(theta) Tz(d) Tx(a) Rx(alpha): max position error "
-                 f"{pos_e:.1e} m, max rotation error {rot_e:.1e} rad: {'OK' if fk_ok else 'FAILED'}")
+    _say(f"        {t_fk * 1e3:.2f} ms warm ({n_fk / t_fk / 1e6:.2f} M/s); compile and first call {t_first:.2f} s")
+    _say(f"        FK check vs numpy DH product Rz(theta) Tz(d) Tx(a) Rx(alpha): max position error "
+         f"{pos_e:.1e} m, max rotation error {rot_e:.1e} rad: {'OK' if fk_ok else 'FAILED'}")
 
     # IK
+    _say(f"IK      {n_ik:,} random reachable targets, LM, 32 seeds, in jitted chunks of {_IK_CHUNK}: compiling "
+         f"(the longest wait{'; cached for later runs' if folder else ''}) ...")
     q_t = jax.random.uniform(jax.random.key(1), (n_ik, chain.dof), jnp.float64, chain.lower, chain.upper)
     targets = np.asarray(fk(q_t))
     start = time.perf_counter()
     res = solve_ik(key, targets[:1])
     t_compile = time.perf_counter() - start
+    _say(f"        compiled in {t_compile:.1f} s; solving ...")
     start = time.perf_counter()
-    res = solve_ik(key, targets)
+    res = solve_ik(key, targets, progress=show)
     t_ik = time.perf_counter() - start
     ok = res["success"]
     check_pos, check_rot = _pose_errors(dh_fk_numpy(chain, res["q"][ok]), targets[ok]) if ok.any() else (0.0, 0.0)
-    lines.append(f"IK      {n_ik:,} random reachable targets, LM, 32 seeds: success {ok.mean():.1%} "
-                 f"({ok.sum():,}/{n_ik:,}) at 1e-5 m / 1e-4 rad in {t_ik:.2f} s ({n_ik / t_ik:,.0f} targets/s; "
-                 f"compile {t_compile:.1f} s)")
+    _say(f"IK      success {ok.mean():.1%} ({ok.sum():,}/{n_ik:,}) at 1e-5 m / 1e-4 rad in {t_ik:.2f} s "
+         f"({n_ik / t_ik:,.0f} targets/s; compile {t_compile:.1f} s)")
     med_pos, med_rot = np.median(res["pos_err"]), np.median(res["rot_err"])
-    lines.append(f"        median pos_err {med_pos:.1e} m, rot_err {med_rot:.1e} rad;"
-                 f" successes re-checked with numpy FK: max {check_pos:.1e} m, {check_rot:.1e} rad")
+    _say(f"        median pos_err {med_pos:.1e} m, rot_err {med_rot:.1e} rad;"
+         f" successes re-checked with numpy FK: max {check_pos:.1e} m, {check_rot:.1e} rad")
 
     # self-motion of one pose
+    _say(f"SRS     self-motion of target 0 (dk.srs.sample_self_motion, {n_sm} samples) ...")
     arm, sampler, _, arm_angle = _srs_fns("iiwa14")
     pose = targets[0]
+    _, t_sm_first = _timed(sampler(n_sm, False), pose)
     (qs, valid), t_sm = _timed(sampler(n_sm, False), pose)
     qs, valid = np.asarray(qs), np.asarray(valid)
     psi, gc = (np.asarray(x) for x in arm_angle(qs))
@@ -416,19 +587,28 @@ def cmd_demo(args) -> int:
     sm_pos, sm_rot = _pose_errors(dh_fk_numpy(chain, qs_v), pose) if valid.any() else (0.0, 0.0)
     n_gc = len({tuple(g) for g in gc_v.astype(int)})
     psi_range = f"psi in [{psi_v.min():+.3f}, {psi_v.max():+.3f}] rad" if valid.any() else "no feasible arm angle"
-    lines.append(f"SRS     self-motion of target 0 (dk.srs.sample_self_motion): {int(valid.sum())}/{n_sm} valid "
-                 f"samples over {n_gc} global configurations, {psi_range}, max FK error {sm_pos:.1e} m / "
-                 f"{sm_rot:.1e} rad ({t_sm:.2f} s incl. compile)")
+    _say(f"        {int(valid.sum())}/{n_sm} valid samples over {n_gc} global configurations, {psi_range}, max FK "
+         f"error {sm_pos:.1e} m / {sm_rot:.1e} rad ({t_sm * 1e3:.2f} ms warm; compile and first call "
+         f"{t_sm_first:.2f} s)")
 
     # reachability
+    _say(f"Reach   reachability map, {n_ws:,} samples uniform in joint space, voxel {voxel:g} m: compiling ...")
     start = time.perf_counter()
-    wmap = dk.workspace.reachability(chain, n_ws, key=jax.random.key(2), voxel_size=voxel, progress=False)
+    dk.workspace.reachability(chain, 1, key=jax.random.key(2), voxel_size=voxel, progress=False)
+    t_ws_compile = time.perf_counter() - start
+    start = time.perf_counter()
+    wmap = dk.workspace.reachability(chain, n_ws, key=jax.random.key(2), voxel_size=voxel, progress=show)
     t_ws = time.perf_counter() - start
-    reached = int((wmap.counts > 0).sum())
-    lines.append(f"Reach   {n_ws:,} samples, voxel {voxel:g} m, grid {'x'.join(map(str, wmap.counts.shape))}: "
-                 f"{reached:,} voxels reached ({reached * voxel**3:.2f} m^3), {t_ws:.2f} s incl. compile")
+    half = dk.workspace.reachability(chain, n_ws // 2, key=jax.random.key(2), voxel_size=voxel, progress=False)
+    reached, reached_half = int((wmap.counts > 0).sum()), int((half.counts > 0).sum())
+    _say(f"        grid {'x'.join(map(str, wmap.counts.shape))}: {reached:,} voxels reached in {t_ws:.2f} s "
+         f"(compile {t_ws_compile:.1f} s)")
+    _say(f"        reached volume {reached * voxel**3:.2f} m^3 ({n_ws // 2:,} samples: {reached_half * voxel**3:.2f} "
+         f"m^3): a lower bound on the workspace volume that grows with the samples")
 
     # plots
+    _say("Plots   drawing ...")
+    start = time.perf_counter()
     pngs = []
     for quantity in ("count", "manipulability"):
         path = out / f"reachability_{quantity}_y0.png"
@@ -436,10 +616,8 @@ def cmd_demo(args) -> int:
         pngs.append(path.name)
     _plot_self_motion("iiwa14", np.asarray(q_t[0]), out / "self_motion.png")
     pngs.append("self_motion.png")
-
-    lines.append(f"Plots   {', '.join(pngs)}")
-    lines.append(f"Done in {time.perf_counter() - t_all:.1f} s; wrote {out.resolve()}")
-    print("\n".join(lines))
+    _say(f"        {', '.join(pngs)} in {time.perf_counter() - start:.1f} s")
+    _say(f"Done in {time.perf_counter() - t_all:.1f} s; wrote {out.resolve()}")
     return 0 if fk_ok else 1
 
 
@@ -481,9 +659,14 @@ def cmd_info(args) -> int:
             lines.append(f"{i + 1:>2}  " + " ".join(f"{v:>9.5f}" for v in screw))
     home = np.asarray(dk.fk(chain, np.zeros(chain.dof)))
     home = _clean(home)
+    outside = [i for i in range(chain.dof) if not lower[i] <= 0.0 <= upper[i]]
     lines += ["", f"home pose (q = 0): position {_fmt(home[:3, 3])} m, "
               f"quaternion (w x y z) {_fmt(quaternion(home[:3, :3]))}",
               np.array2string(home, precision=6, suppress_small=True)]
+    if outside:
+        joints = ", ".join(f"{i + 1} ({names[i]}: [{lower[i]:.4g}, {upper[i]:.4g}])" for i in outside)
+        lines.append(f"note: q = 0 is outside the limits of joint{'s' if len(outside) > 1 else ''} {joints}: "
+                     "the home pose is not a reachable configuration")
     print("\n".join(lines))
     return 0
 
@@ -497,7 +680,14 @@ def _read_configs(path: str) -> np.ndarray:
         if p.suffix == ".npy":
             data = np.load(p, allow_pickle=False)
         else:
-            data = np.loadtxt(p, delimiter="," if p.suffix == ".csv" else None, ndmin=2)
+            delimiter = "," if p.suffix == ".csv" else None
+            first = next((line for line in p.read_text().splitlines() if line.strip()), "")
+            try:  # a non-numeric first line is a header (``q1,q2,...``): skipped
+                [float(v) for v in first.replace(",", " ").split()]
+                header = False
+            except ValueError:
+                header = True
+            data = np.loadtxt(p, delimiter=delimiter, ndmin=2, skiprows=1 if header else 0)
         return np.asarray(data, dtype=np.float64)
     except (OSError, ValueError, TypeError) as e:
         raise CLIError(f"--q-file: cannot read {path!r}: {e}") from None
@@ -519,10 +709,18 @@ def cmd_fk(args) -> int:
         raise CLIError("joint values must be finite")
     if args.format == "npy" and args.output is None:
         raise CLIError("--format npy needs --output FILE")
+    if args.output is not None:
+        output = Path(args.output)
+        if args.format == "npy" and output.suffix != ".npy":
+            output = output.with_name(output.name + ".npy")  # where np.save writes it
+        if output.is_dir():
+            raise CLIError(f"--output: {str(output)!r} is a directory; expected a file name")
+        if not output.parent.is_dir():
+            raise CLIError(f"--output: no such directory {str(output.parent)!r}")
     T = np.asarray(jax.jit(lambda q: dk.fk(chain, q))(q))
     if args.format == "npy":
-        np.save(args.output, T)
-        print(f"wrote {T.shape} poses to {args.output}")
+        np.save(output, T)
+        print(f"wrote {T.shape} poses to {output}")
         return 0
     qs, Ts = q.reshape(-1, chain.dof), T.reshape(-1, 4, 4)
     if args.format == "json":
@@ -538,8 +736,8 @@ def cmd_fk(args) -> int:
                           + _indent(np.array2string(_clean(Ti), precision=6, suppress_small=True)))
         text = "\n".join(blocks)
     if args.output:
-        Path(args.output).write_text(text + "\n")
-        print(f"wrote {len(Ts)} poses to {args.output}")
+        output.write_text(text + "\n")
+        print(f"wrote {len(Ts)} poses to {output}")
     else:
         print(text)
     return 0
@@ -581,19 +779,26 @@ def cmd_ik(args) -> int:
     key = _robot_key(args.robot, args.end_link, args.base_link)
     chain = load_robot(args.robot, args.end_link, args.base_link)
     T = pose_from_quaternion(args.pose[:3], args.pose[3:]) if args.pose else np.asarray(args.position)
+    if args.pose and abs(np.linalg.norm(args.pose[3:]) - 1) > 1e-6:
+        print(f"diffkin: note: the quaternion's norm is {np.linalg.norm(args.pose[3:]):.7g}, not 1: normalised",
+              file=sys.stderr, flush=True)
     if not args.all and (args.psi is not None or args.gc is not None or args.samples is not None):
         raise CLIError("--psi, --gc and --samples go with --all")
     if args.all:
         if args.q0 is not None:
             raise CLIError("--q0 does not apply to --all")
+        if args.pos_tol != 1e-5 or args.rot_tol != 1e-4:
+            raise CLIError("--pos-tol and --rot-tol do not apply to --all (exact solutions)")
         args.samples = 16 if args.samples is None else args.samples
         return _ik_all(args, T)
     if args.q0 is not None and len(args.q0) != chain.dof:
         raise CLIError(f"--q0: {chain.name or args.robot} has {chain.dof} joints, got {len(args.q0)} values")
-    res = solve_ik(key, T[None], num_seeds=args.seeds, q0=args.q0, seed=args.seed)
+    res = solve_ik(key, T[None], num_seeds=args.seeds, q0=args.q0, seed=args.seed, pos_tol=args.pos_tol,
+                   rot_tol=args.rot_tol)
     ok = bool(res["success"][0])
     what = "pose" if T.shape == (4, 4) else "position (orientation free)"
-    print(f"{chain.name or args.robot}: IK of a {what}, LM, {args.seeds} seeds{' + q0' if args.q0 else ''}")
+    print(f"{chain.name or args.robot}: IK of a {what}, LM, {args.seeds} seeds{' + q0' if args.q0 else ''}, "
+          f"tolerances {args.pos_tol:g} m / {args.rot_tol:g} rad")
     print(f"q        {_fmt(res['q'][0], 10)} rad")
     print(f"success  {ok}")
     print(f"pos_err  {res['pos_err'][0]:.3e} m")
@@ -612,21 +817,34 @@ def cmd_workspace(args) -> int:
 
     chain = load_robot(args.robot, args.end_link, args.base_link)
     out = Path(args.out)
-    if not out.parent.is_dir():
-        raise CLIError(f"--out: no such directory {str(out.parent)!r}")
-    if args.plot and not Path(args.plot).parent.is_dir():
-        raise CLIError(f"--plot: no such directory {str(Path(args.plot).parent)!r}")
+    if out.is_dir():
+        raise CLIError(f"--out: {str(out)!r} is a directory; expected a file name such as {str(out / 'map.npz')!r}")
+    saved = out if out.suffix == ".npz" else out.with_name(out.name + ".npz")  # where np.savez writes
+    for flag, path in (("--out", saved), ("--plot", args.plot and Path(args.plot))):
+        if path and path.is_dir():
+            raise CLIError(f"{flag}: {str(path)!r} is a directory; expected a file name such as "
+                           f"{str(path / ('map.npz' if flag == '--out' else 'slice.png'))!r}")
+        if path and not path.parent.is_dir():
+            raise CLIError(f"{flag}: no such directory {str(path.parent)!r}")
+    if args.plot:
+        _need("matplotlib", "--plot", "plot")
+        origin, voxel, shape = dk.workspace._grid(chain, args.voxel, None)  # the map's grid, known in advance
+        a = "xyz".index(args.axis)
+        lo, hi = origin[a], origin[a] + voxel * shape[a]
+        if not lo <= args.value < hi:
+            raise CLIError(f"--value: the slice {args.axis} = {args.value:g} m is outside the grid: expected "
+                           f"{args.axis} in [{lo:.4g}, {hi:.4g}) m")
     start = time.perf_counter()
     wmap = dk.workspace.reachability(chain, args.samples, key=jax.random.key(args.seed), voxel_size=args.voxel,
                                      progress=not args.no_progress)
     seconds = time.perf_counter() - start
-    wmap.save(out)
-    saved = out if out.suffix == ".npz" else out.with_name(out.name + ".npz")
+    wmap.save(saved)
     reached = int((wmap.counts > 0).sum())
     print(f"{chain.name or args.robot}: {args.samples:,} samples in {seconds:.2f} s "
           f"({args.samples / seconds / 1e6:.2f} M/s incl. compile), voxel {wmap.voxel_size:g} m, "
           f"grid {'x'.join(map(str, wmap.counts.shape))}, origin {_fmt(wmap.origin, 4)} m")
-    print(f"reached {reached:,} voxels ({reached * wmap.voxel_size**3:.3f} m^3), {wmap.n_outside:,} samples outside; "
+    print(f"reached {reached:,} voxels ({reached * wmap.voxel_size**3:.3f} m^3 of voxels reached: a lower bound of "
+          f"the workspace volume that grows with --samples), {wmap.n_outside:,} samples outside; "
           f"max manipulability {wmap.manipulability.max():.4g}; saved {saved}")
     if args.plot:
         dk.workspace.plot_slice(wmap, args.axis, args.value, args.quantity, path=args.plot)
@@ -655,6 +873,11 @@ def _load_bench():
         module = importlib.util.module_from_spec(spec)
         sys.modules[spec.name] = module  # dataclasses look their module up there
         spec.loader.exec_module(module)
+    except ModuleNotFoundError as e:
+        sys.modules.pop("_diffkin_bench", None)
+        name = (e.name or "a package").split(".")[0]
+        raise CLIError(f"bench needs {name}, which is not installed: pip install -e '.[test]' "
+                       f"(or pip install {name})") from None
     finally:
         sys.path.remove(str(exp))
     return module
@@ -709,23 +932,31 @@ def build_parser() -> argparse.ArgumentParser:
     from diffkin import __version__
 
     parser.add_argument("--version", action="version", version=f"diffkin {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_IntermixedParser)
+    common = _Parser(add_help=False)
+    cache = common.add_argument_group("compilation cache")
+    cache.add_argument("--cache-dir", metavar="DIR", help="JAX's persistent compilation cache (default "
+                       "$DIFFKIN_CACHE_DIR, else $XDG_CACHE_HOME/diffkin/jax or ~/.cache/diffkin/jax; "
+                       "DIFFKIN_CACHE_DIR=off disables it)")
+    cache.add_argument("--no-cache", action="store_true", help="compile without the persistent cache")
+    add_parser = functools.partial(sub.add_parser, parents=[common])
 
-    p = sub.add_parser("demo", help="FK check, batched IK, iiwa self-motion and a reachability map with plots",
+    p = add_parser("demo", help="FK check, batched IK, iiwa self-motion and a reachability map with plots",
                        description="The main job on the built-in iiwa14: random batched FK (jitted) checked against "
                        "a numpy DH product, batched IK of 1,000 targets, the arm-angle self-motion of one pose, a "
                        "reachability map; prints a report and writes PNG plots.")
     p.add_argument("--out", default="diffkin-demo", metavar="DIR", help="folder for the PNGs (default ./diffkin-demo)")
     p.add_argument("--quick", action="store_true", help="small sizes (50 IK targets, tiny map)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("info", help="joints, limits, DH or screw table, home pose",
+    p = add_parser("info", help="joints, limits, DH or screw table, home pose",
                        description="Joints, types, limits, the DH table (DHChain) or the space-frame screw table "
                        "(PoEChain, URDFs) and the home pose (FK at q = 0) of a robot.")
     _add_robot(p)
     p.set_defaults(func=cmd_info)
 
-    p = sub.add_parser("fk", help="end-effector poses of configurations",
+    p = add_parser("fk", help="end-effector poses of configurations",
                        description="End-effector poses (base frame) of joint configurations (radians / metres).")
     _add_robot(p)
     p.add_argument("q", nargs="*", type=_finite, metavar="q", help="joint values q1 ... qn")
@@ -734,7 +965,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", metavar="FILE", help="write to FILE (required for npy: an (..., 4, 4) array)")
     p.set_defaults(func=cmd_fk)
 
-    p = sub.add_parser("ik", help="inverse kinematics of one pose or position",
+    p = add_parser("ik", help="inverse kinematics of one pose or position",
                        description="Inverse kinematics of one target: batched Levenberg-Marquardt from random seeds "
                        "(dk.ik.solve), or with --all every exact iiwa solution along the arm angle (dk.srs). "
                        "Exit status 1 if no solution was found.")
@@ -744,21 +975,27 @@ def build_parser() -> argparse.ArgumentParser:
                         help="target position (m) and orientation quaternion (w x y z)")
     target.add_argument("--position", nargs=3, type=_finite, metavar=("X", "Y", "Z"),
                         help="target position (m), orientation free")
-    p.add_argument("--seeds", type=_positive_int, default=32, metavar="N", help="random seeds (default 32)")
+    p.add_argument("--seeds", type=functools.partial(_positive_int, most=4096), default=32, metavar="N",
+                   help="random seeds (default 32)")
     p.add_argument("--q0", nargs="+", type=_finite, metavar="Q", help="warm start: one value per joint")
-    p.add_argument("--seed", type=int, default=1, help="PRNG seed of the random seeds (default 1)")
+    p.add_argument("--pos-tol", type=_tolerance, default=1e-5, metavar="M",
+                   help="success tolerance on the position error, m (default 1e-5)")
+    p.add_argument("--rot-tol", type=_tolerance, default=1e-4, metavar="RAD",
+                   help="success tolerance on the rotation error, rad (default 1e-4)")
+    p.add_argument("--seed", type=_seed, default=1, help="PRNG seed of the random seeds (default 1)")
     p.add_argument("--all", action="store_true", help="iiwa7/iiwa14: exact solutions along the self-motion (dk.srs)")
     p.add_argument("--psi", type=_finite, metavar="PSI", help="with --all: one arm angle (rad), via dk.srs.ik")
     p.add_argument("--gc", nargs=3, type=_sign, metavar=("G2", "G4", "G6"),
                    help="with --all: one global configuration (signs of joints 2, 4, 6; default all eight)")
-    p.add_argument("--samples", type=_positive_int, metavar="N", help="with --all: number of samples (default 16)")
+    p.add_argument("--samples", type=functools.partial(_positive_int, most=10**6), metavar="N",
+                   help="with --all: number of samples (default 16)")
     p.set_defaults(func=cmd_ik)
 
-    p = sub.add_parser("workspace", help="reachability map (.npz) and optional slice plot",
+    p = add_parser("workspace", help="reachability map (.npz) and optional slice plot",
                        description="Reachability, manipulability and dexterity map of uniformly sampled "
                        "configurations (dk.workspace.reachability), saved with ReachabilityMap.save.")
     _add_robot(p)
-    p.add_argument("--samples", type=_positive_int, default=1_000_000, metavar="N",
+    p.add_argument("--samples", type=_samples, default=1_000_000, metavar="N",
                    help="configurations to sample (default 1,000,000)")
     p.add_argument("--voxel", type=_positive_float, default=0.05, metavar="V", help="voxel edge, m (default 0.05)")
     p.add_argument("--out", required=True, metavar="MAP.npz", help="where to save the map")
@@ -767,11 +1004,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--value", type=_finite, default=0.0, help="slice position along --axis, m (default 0)")
     p.add_argument("--quantity", choices=("count", "manipulability", "dexterity"), default="count",
                    help="plotted quantity (default count)")
-    p.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
+    p.add_argument("--seed", type=_seed, default=0, help="PRNG seed (default 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_workspace)
 
-    p = sub.add_parser("bench", help="benchmark suite vs pytorch-kinematics (source checkout)",
+    p = add_parser("bench", help="benchmark suite vs pytorch-kinematics (source checkout)",
                        description="The benchmark suite experiments/bench.py (source checkout only): FK, Jacobians, "
                        "IK, the iiwa closed form, self-motion sampling and reachability maps of the iiwa14, timed for "
                        "diffkin and, where installed and where it has the feature, pytorch-kinematics; prints one "
@@ -807,20 +1044,31 @@ def main(argv: list[str] | None = None) -> int:
 
     Returns:
         The exit status: 0 success, 1 a result that failed (no IK solution, failed FK check),
-        2 a user error (reported as one line on stderr).
+        2 a user error or a missing optional dependency (reported as one line on stderr), 130
+        interrupted (Ctrl-C; called without ``argv``, the process exits at once with ``os._exit``).
     """
     try:
         args = build_parser().parse_args(argv)
+        _use_cache(cache_dir(args.cache_dir, args.no_cache),
+                   chosen=args.cache_dir is not None or bool(os.environ.get("DIFFKIN_CACHE_DIR")))
         return args.func(args)
     except SystemExit as e:  # --help, --version
         return e.code if isinstance(e.code, int) else 0
     except BrokenPipeError:  # output piped into head & co.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
-    except (CLIError, ValueError, TypeError, OSError) as e:
+    except ModuleNotFoundError as e:  # an optional dependency this command needs
+        name = (e.name or "a package").split(".")[0]
+        print(f"diffkin: error: this command needs {name}, which is not installed: "
+              f"pip install 'diffkin[{_EXTRAS.get(name, 'demo')}]' (or pip install {name})", file=sys.stderr)
+        return 2
+    except (CLIError, ImportError, ValueError, TypeError, OSError, OverflowError) as e:
         message = " ".join(str(e).split()) or type(e).__name__
-        print(f"diffkin: error: {message}", file=sys.stderr)
+        print(f"diffkin: error: {message if isinstance(e, CLIError) else _flags(message)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("diffkin: interrupted", file=sys.stderr)
+        print("\ndiffkin: interrupted", file=sys.stderr, flush=True)
+        if argv is None:  # the program, not a test: JAX's threads may crash a normal exit (status 139)
+            sys.stdout.flush()
+            os._exit(130)
         return 130

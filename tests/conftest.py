@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 
 jax.config.update("jax_enable_x64", True)
+# The CLI's persistent compilation cache stays off in tests (and their subprocesses) unless a test asks.
+os.environ["DIFFKIN_CACHE_DIR"] = "off"
 
 import diffkin as dk  # noqa: E402
 

@@ -36,6 +36,7 @@ def assert_user_error(capsys, *argv, match=""):
     return lines[0]
 
 
+@pytest.mark.slow
 def test_help_subprocess():
     res = subprocess.run([sys.executable, "-m", "diffkin", "--help"], capture_output=True, text=True, timeout=60)
     assert res.returncode == 0, res.stderr
@@ -49,6 +50,7 @@ def test_subcommand_help(capsys, command):
     assert code == 0 and "usage: diffkin " + command in out
 
 
+@pytest.mark.slow
 def test_demo_quick(capsys, tmp_path):
     code, out, err = run(capsys, "demo", "--quick", "--out", tmp_path / "demo")
     assert code == 0, err
@@ -137,6 +139,7 @@ def test_workspace(capsys, tmp_path):
     assert (tmp_path / "slice.png").is_file() and "reached" in out
 
 
+@pytest.mark.slow
 def test_cli_does_not_import_jax():
     """``diffkin --help`` and usage errors stay fast: the package and the CLI import JAX only when used."""
     code = "import sys, diffkin.cli; assert 'jax' not in sys.modules, 'jax imported'; print(diffkin.fk.__name__)"
@@ -144,16 +147,18 @@ def test_cli_does_not_import_jax():
     assert res.returncode == 0 and res.stdout.strip() == "fk", res.stderr
 
 
+@pytest.mark.slow
 def test_bench_quick(capsys, tmp_path):
     code, out, err = run(capsys, "bench", "--quick", "--only", "fk", "--out", tmp_path / "bench.md")
     assert code == 0, err
     assert "| work | batch | dtype | diffkin | pytorch-kinematics | pk / diffkin | notes |" in out
     rows = [line for line in out.splitlines() if line.startswith("| FK |")]
     assert [r.split(" | ")[1:3] for r in rows] == [[b, d] for b in ("1", "1,000") for d in ("float32", "float64")]
-    assert all(re.search(r"\| \*\*[\d.]+x\*\* \|", r) for r in rows), rows
+    assert all(re.search(r"\| (\*\*[\d.]+x\*\*|\d+x \(implausible: busy machine\? rerun\)) \|", r) for r in rows), rows
     assert (tmp_path / "bench.md").read_text().strip() in out
 
 
+@pytest.mark.slow
 def test_bench_without_pytorch_kinematics(capsys, monkeypatch):
     monkeypatch.syspath_prepend(str(cli.experiments_dir()))
     import _bench
@@ -180,7 +185,7 @@ def test_bench_needs_source_checkout(capsys, monkeypatch, tmp_path):
     (["fk", "iiwa14", "--q-file", "/nonexistent/q.npy"], "no such file"),
     (["fk", "iiwa14", "0", "0", "0", "0", "0", "0", "0", "--format", "npy"], "--output"),
     (["ik", "iiwa14"], "one of the arguments --pose --position is required"),
-    (["ik", "iiwa14", "--pose", "0", "0", "0.5", "0", "0", "0", "0"], "quaternion"),
+    (["ik", "iiwa14", "--pose", "0", "0", "0.5", "0", "0", "0", "0"], "must not be zero, got 0 0 0 0"),
     (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--seeds", "0"], "positive integer"),
     (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--q0", "0", "0"], "--q0"),
     (["ik", "panda", "--pose", "0.5", "0", "0.5", "1", "0", "0", "0", "--all"], "iiwa7 or iiwa14"),
@@ -189,6 +194,11 @@ def test_bench_needs_source_checkout(capsys, monkeypatch, tmp_path):
     (["ik", "iiwa14", "--pose", "0.5", "0", "0.5", "1", "0", "0", "0", "--all", "--gc", "1", "0", "1"], "+1 or -1"),
     (["workspace", "iiwa14", "--samples", "10", "--voxel", "-1", "--out", "m.npz"], "positive number"),
     (["workspace", "iiwa14", "--out", "/nonexistent/dir/m.npz"], "no such directory"),
+    (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--seed", str(2**80)], "--seed: expected a seed"),
+    (["workspace", "iiwa14", "--samples", "1e20", "--out", "m.npz"], "--samples: expected at most"),
+    (["workspace", "iiwa14", "--samples", "2.5", "--out", "m.npz"], "invalid integer: '2.5'"),
+    (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--pos-tol", "-1"], "non-negative"),
+    (["ik", "iiwa14", "--pose", "0.5", "0", "0.5", "1", "0", "0", "0", "--all", "--rot-tol", "0.1"], "--all"),
     (["bench", "--only", "fk,nope"], "unknown part 'nope'"),
     (["bench", "--write", "--out", "x.md"], "not allowed with"),
     (["bench", "--out", "/nonexistent/dir/b.md"], "no such directory"),
@@ -211,3 +221,151 @@ def test_user_errors_from_files_and_diffkin(capsys, tmp_path):
     # a ValueError raised by diffkin itself: the slice plane outside the grid
     assert_user_error(capsys, "workspace", "iiwa14", "--samples", 100, "--voxel", 0.2, "--out", tmp_path / "m.npz",
                       "--plot", tmp_path / "s.png", "--value", 9, "--no-progress", match="value")
+
+
+# --------------------------------------------------------------------------------------------- issue 14
+
+
+def test_options_between_positionals_and_negative_scientific_numbers(capsys):
+    path = os.path.join(DATA, "ur5.urdf")
+    q = [0.0, -1e-3, 0.0, -1.5, 0.0, -2.5e-1]
+    code, out, err = run(capsys, "fk", path, "--end-link", "tool0", "0", "-1e-3", "0", "-1.5", "0", "-2.5E-1",
+                         "--format", "json")
+    assert code == 0, err
+    pose = json.loads(out)["poses"][0]
+    assert pose["q"] == q
+    np.testing.assert_allclose(pose["T"], dk.fk(dk.load_urdf(path, "tool0"), np.asarray(q)), atol=1e-12)
+
+
+def test_quaternion_not_of_unit_norm_is_normalised_and_said(capsys):
+    code, out, err = run(capsys, "ik", "iiwa14", "--pose", 0.5, 0.1, 0.6, 0, 2, 0, 0)  # the pose of test_ik_pose
+    assert code == 0 and "success  True" in out
+    assert "norm is 2, not 1: normalised" in err
+
+
+def test_ik_tolerances(capsys):
+    code, out, _ = run(capsys, "ik", "iiwa14", "--pose", 0.5, 0.1, 0.6, 0, 1, 0, 0, "--pos-tol", "1e-3",
+                       "--rot-tol", "1e-2")
+    assert code == 0 and "tolerances 0.001 m / 0.01 rad" in out
+    assert float(out.split("pos_err")[1].split()[0]) <= 1e-3
+
+
+def test_errors_name_flags_not_parameters(capsys):
+    line = assert_user_error(capsys, "info", os.path.join(DATA, "ur5.urdf"), "--end-link", "nolink")
+    assert line.startswith("diffkin: error: --end-link: unknown link 'nolink'") and "'base_link'" in line
+
+
+def test_bad_slice_is_reported_before_the_map_is_computed(capsys, tmp_path, monkeypatch):
+    monkeypatch.setattr(dk.workspace, "reachability", lambda *a, **k: pytest.fail("map computed"))
+    line = assert_user_error(capsys, "workspace", "iiwa14", "--samples", 10**9, "--out", tmp_path / "m.npz",
+                             "--plot", tmp_path / "s.png", "--value", 9)
+    assert "--value" in line and "outside the grid" in line
+    assert not (tmp_path / "m.npz").exists()
+
+
+def test_output_paths(capsys, tmp_path):
+    assert_user_error(capsys, "workspace", "iiwa14", "--samples", 100, "--out", tmp_path, match="is a directory")
+    assert not tmp_path.with_name(tmp_path.name + ".npz").exists()
+    code, out, _ = run(capsys, "fk", "iiwa14", *[0.0] * 7, "--format", "npy", "--output", tmp_path / "poses")
+    assert code == 0 and out.strip().endswith(str(tmp_path / "poses.npy")) and (tmp_path / "poses.npy").is_file()
+
+
+def test_q_file_csv_with_header(capsys, tmp_path):
+    (tmp_path / "q.csv").write_text("q1,q2,q3,q4,q5,q6,q7\n0,0,0,0,0,0,0\n0.1,0,0,0,0,0,0\n")
+    code, out, err = run(capsys, "fk", "iiwa14", "--q-file", tmp_path / "q.csv")
+    assert code == 0, err
+    assert "config 0" in out and "config 1" in out and "config 2" not in out
+
+
+def test_info_says_home_is_outside_the_limits(capsys):
+    code, out, _ = run(capsys, "info", "panda")
+    assert code == 0 and "q = 0 is outside the limits of joint 4 (panda_joint4" in out
+    code, out, _ = run(capsys, "info", "iiwa14")
+    assert code == 0 and "outside the limits" not in out
+
+
+@pytest.mark.parametrize("argv, module, extra", [
+    (["demo", "--quick"], "matplotlib", "demo"),
+    (["workspace", "iiwa14", "--samples", "100", "--out", "m.npz", "--plot", "s.png"], "matplotlib", "plot"),
+])
+def test_missing_optional_dependency_is_one_line(capsys, monkeypatch, tmp_path, argv, module, extra):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setitem(sys.modules, module, None)  # import raises ImportError
+    line = assert_user_error(capsys, *argv, match=f"pip install 'diffkin[{extra}]'")
+    assert module in line and not (tmp_path / "m.npz").exists()
+
+
+def test_bench_without_a_dependency_is_one_line(capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "_bench", None)  # as if experiments/_bench.py could not import
+    assert_user_error(capsys, "bench", "--quick", match="bench needs _bench")
+
+
+def test_implausible_bench_ratios_are_marked():
+    bench = cli._load_bench()
+    assert bench._ratio(42.0) == "**42x**"
+    assert bench._ratio(850.0) == "850x (implausible: busy machine? rerun)"
+
+
+def test_cache_dir_choice(monkeypatch, tmp_path):
+    monkeypatch.delenv("DIFFKIN_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cli.cache_dir() == tmp_path / "xdg" / "diffkin" / "jax"
+    assert cli.cache_dir(str(tmp_path / "opt")) == tmp_path / "opt"
+    assert cli.cache_dir(str(tmp_path / "opt"), disabled=True) is None
+    for off in ("", "0", "off", "OFF"):
+        monkeypatch.setenv("DIFFKIN_CACHE_DIR", off)
+        assert cli.cache_dir() is None
+    monkeypatch.setenv("DIFFKIN_CACHE_DIR", str(tmp_path / "env"))
+    assert cli.cache_dir() == tmp_path / "env" and cli.cache_dir(str(tmp_path / "opt")) == tmp_path / "opt"
+
+
+def _diffkin(*argv, env=None, timeout=300):
+    return subprocess.run([sys.executable, "-m", "diffkin", *map(str, argv)], capture_output=True, text=True,
+                          timeout=timeout, env={**os.environ, **(env or {})})
+
+
+@pytest.mark.slow
+def test_cli_writes_the_persistent_cache(tmp_path):
+    res = _diffkin("fk", "iiwa14", *[0.1] * 7, "--cache-dir", tmp_path / "cache")
+    assert res.returncode == 0, res.stderr
+    assert any((tmp_path / "cache").iterdir()), "no cache files written"
+    res = _diffkin("fk", "iiwa14", *[0.1] * 7, env={"DIFFKIN_CACHE_DIR": str(tmp_path / "env")})
+    assert res.returncode == 0 and any((tmp_path / "env").iterdir()), res.stderr
+    res = _diffkin("fk", "iiwa14", *[0.1] * 7, "--no-cache", env={"DIFFKIN_CACHE_DIR": str(tmp_path / "no")})
+    assert res.returncode == 0 and not (tmp_path / "no").exists(), res.stderr
+
+
+@pytest.mark.slow
+def test_without_optional_dependencies_subprocess(tmp_path):
+    """As after ``pip install -e .`` alone: each command runs or says in one line which extra to install."""
+    hide = ("import sys\nfor m in ('optax', 'matplotlib', 'tqdm', 'torch', 'pytorch_kinematics', 'pinocchio'):\n"
+            "    sys.modules[m] = None\nfrom diffkin.cli import main\nsys.exit(main())\n")
+    script = tmp_path / "bare.py"
+    script.write_text(hide)
+
+    def bare(*argv):
+        return subprocess.run([sys.executable, str(script), *map(str, argv)], capture_output=True, text=True,
+                              timeout=300, cwd=tmp_path)
+
+    for argv, extra in ((["demo", "--quick"], "demo"),
+                        (["workspace", "iiwa14", "--samples", 100, "--out", "m.npz", "--plot", "s.png"], "plot")):
+        res = bare(*argv)
+        assert res.returncode == 2 and res.stderr.count("\n") == 1 and f"diffkin[{extra}]" in res.stderr, res.stderr
+    res = bare("workspace", "iiwa14", "--samples", 1000, "--voxel", 0.2, "--out", "m.npz")
+    assert res.returncode == 0 and (tmp_path / "m.npz").is_file(), res.stderr
+    res = bare("bench", "--quick", "--only", "fk")
+    assert res.returncode == 0 and "| FK |" in res.stdout, res.stderr[-2000:]
+
+
+@pytest.mark.slow
+def test_ctrl_c_exits_130(tmp_path):
+    import signal
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "diffkin", "demo", "--quick", "--out", tmp_path / "demo"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(4)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, (proc.returncode, err[-2000:])
+    assert err.strip().splitlines()[-1] == "diffkin: interrupted" and "Traceback" not in err

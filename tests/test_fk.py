@@ -28,6 +28,7 @@ def _pin_q(model, chain, q):
     return qp
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(URDF_ROBOTS))
 def test_fk_and_link_poses_match_pinocchio(name, urdf_chains):
     chain = urdf_chains[name]
@@ -48,6 +49,7 @@ def test_fk_and_link_poses_match_pinocchio(name, urdf_chains):
     assert err_T < 1e-10 and err_links < 1e-10
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(URDF_ROBOTS))
 def test_fk_and_link_poses_match_pytorch_kinematics(name, urdf_chains):
     path, end = URDF_ROBOTS[name]

@@ -1,6 +1,9 @@
 """dk.ik.solve: round trips checked by independent FK (pytorch-kinematics / NumPy DH, float64), limits,
 warm starts, position targets, honest failure, the 2R closed form, implicit gradients, input checks."""
 
+import subprocess
+import sys
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -72,7 +75,7 @@ def _case(kind, name, urdf_chains):
     return urdf_chains[name], _pk_fk(name)
 
 
-@pytest.mark.parametrize("kind", ["builtin", "urdf"])
+@pytest.mark.parametrize("kind", ["builtin", pytest.param("urdf", marks=pytest.mark.slow)])  # urdf: vs pk
 @pytest.mark.parametrize("name", ROBOTS)
 def test_round_trip_success_rate_float32(kind, name, urdf_chains):
     """1,000 poses of random in-limit configurations, float32, default settings: >= 99.5 % success,
@@ -93,6 +96,7 @@ def test_round_trip_success_rate_float32(kind, name, urdf_chains):
     assert success.mean() >= 0.995, f"{kind} {name}: success {success.mean():.4f}"
 
 
+@pytest.mark.slow
 def test_position_only_targets(urdf_chains):
     chain, fk64 = urdf_chains["iiwa14"], _pk_fk("iiwa14")
     target = fk64(random_q(chain, 200, seed=2))[:, :3, 3]
@@ -228,6 +232,7 @@ def test_implicit_gradient_redundant_arm_moves_the_end_effector_as_the_target():
     np.testing.assert_allclose(dq, np.linalg.pinv(np.asarray(J)) @ (np.asarray(J) @ np.asarray(dq)), atol=1e-10)
 
 
+@pytest.mark.slow
 def test_optax_method_reaches_loose_tolerance(urdf_chains):
     """Default Adam, 1,000 steps: a first-order method settles to ~1e-3 m (see the bench for the trade-off)."""
     chain, fk64 = urdf_chains["iiwa14"], _pk_fk("iiwa14")
@@ -304,3 +309,83 @@ def test_empty_batch_gives_empty_results():
         assert res.success.dtype == bool and res.iters.dtype == np.int32
     res = jax.jit(lambda t: ik.solve(chain, t))(np.zeros((0, 4, 4), np.float32))
     assert res.q.shape == (0, 6)
+
+
+def _compilations(fn) -> list[str]:
+    """The programs XLA compiled while running ``fn()`` (from ``jax.log_compiles``)."""
+    import logging
+
+    class Collect(logging.Handler):
+        def __init__(self):
+            super().__init__(logging.DEBUG)
+            self.names = []
+
+        def emit(self, record):
+            message = record.getMessage()
+            if message.startswith("Compiling "):
+                self.names.append(message.split(" with ")[0])
+
+    handler, logger = Collect(), logging.getLogger("jax")
+    logger.addHandler(handler)
+    try:
+        with jax.log_compiles():
+            jax.block_until_ready(fn())
+    finally:
+        logger.removeHandler(handler)
+    return handler.names
+
+
+def test_eager_solve_compiles_once_per_shape():
+    """A second eager call with new values of the same shapes (and an equal, new chain) compiles nothing;
+    jitted, the same. (Each eager call used to rebuild its loop closures and recompile them.)"""
+    chain = dk.robots.planar([1.0, 1.0])
+    T = np.asarray(dk.fk(chain, jnp.array([[0.3, 0.5], [0.1, -0.4], [1.0, 1.0]])))
+    first = ik.solve(chain, T, key=jax.random.key(0), num_seeds=4)
+    assert np.all(first.success)
+    T2, key2 = T * 0.99, jax.random.key(1)  # built before counting
+    again = dk.robots.planar([1.0, 1.0])
+    assert _compilations(lambda: ik.solve(again, T2, key=key2, num_seeds=4, pos_tol=2e-5)) == []
+    solve = jax.jit(lambda t, k: ik.solve(chain, t, key=k, num_seeds=4))
+    solve(T, key2)
+    assert _compilations(lambda: solve(T2, key2)) == []
+    # a different chain (by value) or shape compiles anew
+    assert _compilations(lambda: ik.solve(dk.robots.planar([1.0, 0.5]), T2, key=key2, num_seeds=4)) != []
+
+
+def test_lm_needs_no_optax(monkeypatch):
+    """Without optax, LM works and method='optax' names the extra to install."""
+    monkeypatch.setitem(sys.modules, "optax", None)  # import optax raises ImportError
+    monkeypatch.delitem(sys.modules, "diffkin.ik._optax", raising=False)
+    chain = dk.robots.planar([1.0, 1.0])
+    T = np.asarray(dk.fk(chain, jnp.array([[0.3, 0.5], [0.1, -0.4], [1.0, 1.0]])))
+    assert np.all(ik.solve(chain, T, key=jax.random.key(0), num_seeds=4).success)
+    with pytest.raises(ImportError, match=r"diffkin\[ik\]"):
+        ik.solve(chain, T, method="optax")
+
+
+@pytest.mark.slow
+def test_import_and_lm_without_optax_subprocess():
+    """A fresh interpreter without optax imports diffkin.ik and solves with LM."""
+    code = ("import sys; sys.modules['optax'] = None\n"
+            "import jax.numpy as jnp, diffkin as dk\n"
+            "chain = dk.robots.planar([1.0, 1.0])\n"
+            "T = dk.fk(chain, jnp.array([0.3, 0.5]))\n"
+            "print(bool(dk.ik.solve(chain, T, num_seeds=4).success))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0 and res.stdout.strip() == "True", res.stderr[-2000:]
+
+
+def test_tolerances_are_traced():
+    """New tolerances reuse the compiled solver (the shapes and settings of the test above), and a traced
+    tolerance (a jit argument) is accepted."""
+    chain = dk.robots.planar([1.0, 1.0])
+    T = np.asarray(dk.fk(chain, jnp.array([[0.3, 0.5], [0.1, -0.4], [1.0, 1.0]])))
+    loose = ik.solve(chain, T, key=jax.random.key(0), num_seeds=4, pos_tol=1e-3, rot_tol=1e-3)
+    assert np.all(loose.success)
+    key = jax.random.key(0)
+    tight = []
+    assert _compilations(lambda: tight.append(ik.solve(chain, T, key=key, num_seeds=4, pos_tol=1e-12,
+                                                       rot_tol=1e-12)) or tight[0].q) == []
+    assert np.all(tight[0].iters >= loose.iters) and np.any(tight[0].iters > loose.iters)  # the value is used
+    jaxpr = jax.make_jaxpr(lambda tol: ik.solve(chain, T, num_seeds=4, pos_tol=tol, rot_tol=tol).q)(1e-3)
+    assert jaxpr.out_avals[0].shape == (3, 2)

@@ -17,6 +17,7 @@ PIN_FRAME = {"world": pin.LOCAL_WORLD_ALIGNED, "space": pin.WORLD, "body": pin.L
 N = 100
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(URDF_ROBOTS))
 def test_jacobians_match_pinocchio(name, urdf_chains):
     chain = urdf_chains[name]
@@ -40,6 +41,7 @@ def test_jacobians_match_pinocchio(name, urdf_chains):
     assert max(worst.values()) < 1e-10, worst
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(URDF_ROBOTS))
 def test_world_jacobian_matches_pytorch_kinematics(name, urdf_chains):
     path, end = URDF_ROBOTS[name]

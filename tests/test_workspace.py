@@ -152,10 +152,20 @@ def test_save_load_and_plot_slice(tmp_path):
         np.testing.assert_array_equal(getattr(back, name), getattr(m, name))
     assert (back.voxel_size, back.n_samples, back.n_outside, back.orientation_bins, back.chain_name) == (
         m.voxel_size, m.n_samples, m.n_outside, m.orientation_bins, "planar2R")
+    labels = {"count": "samples per voxel", "manipulability": "Yoshikawa", "dexterity": "(of 48)"}
     for quantity in ("count", "manipulability", "dexterity"):
         path = tmp_path / f"{quantity}.png"
-        ws.plot_slice(m, axis="z", value=0.0, quantity=quantity, path=path)
+        ax = ws.plot_slice(m, axis="z", value=0.0, quantity=quantity, path=path)
         assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 5000
+        # the plot says what it shows: the slab, the samples, the Jacobian, the dexterity scale
+        title, image = ax.get_title(), ax.images[0]
+        assert "slab z in [-0.125, 0.125) m" in title and "4,000 samples uniform in joint space" in title, title
+        assert labels[quantity] in image.colorbar.ax.get_ylabel()
+        if quantity == "manipulability":
+            assert "world Jacobian of the end effector" in title
+        if quantity == "dexterity":
+            assert image.get_clim() == (0, 48)
+    ws.plot_slice(reach_map=m, axis="z")  # the parameter no longer shadows the builtin map
     with pytest.raises(ValueError, match="quantity"):
         ws.plot_slice(m, quantity="volume")
     with pytest.raises(ValueError, match="axis"):
@@ -198,6 +208,7 @@ def _run(script: str, env: dict) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_identical_maps_on_1_3_and_4_devices(tmp_path):
     script = f"""
         import json, jax, numpy as np
@@ -336,3 +347,8 @@ def test_identical_maps_on_1_2_and_4_devices_ur10():
     """
     result = _run(script, {"XLA_FLAGS": "--xla_force_host_platform_device_count=4", "JAX_PLATFORMS": "cpu"})
     assert result == dict(n_devices=4, same=[True, True, True])
+
+
+def test_voxel_size_defaults_to_the_clis():
+    m = ws.reachability(dk.robots.planar([0.3, 0.2]), 1000, key=KEY, chunk=1000)
+    assert m.voxel_size == 0.05

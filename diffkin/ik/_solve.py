@@ -3,18 +3,18 @@
 from __future__ import annotations
 
 import functools
+import importlib
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 
 from diffkin import _rigid as rg
 from diffkin import kinematics
 from diffkin._checks import rigid_poses, rigid_tol
 from diffkin._rigid import is_concrete
-from diffkin.ik import _lm, _optax
+from diffkin.ik import _lm
 from diffkin.ik._implicit import implicit_q
 from diffkin.ik._problem import ROT_WEIGHT, Eval, Problem, evaluate
 from diffkin.ik._result import IKResult
@@ -187,11 +187,19 @@ def _check_args(chain, target, q0, num_seeds, method, max_iters, pos_tol, rot_to
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
             raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
     for name, value in (("pos_tol", pos_tol), ("rot_tol", rot_tol)):
+        if isinstance(value, jax.Array) and value.shape == () and not jnp.issubdtype(value.dtype, jnp.complexfloating):
+            if not is_concrete(value):
+                continue  # a traced tolerance (a jit argument): its value is not known here
+            value = value.item()
         if not isinstance(value, (int, float, np.floating, np.integer)) or not value >= 0:
             raise ValueError(f"{name}: expected a non-negative number, got {value!r}")
+    if method == "optax":
+        _optax_module()  # ImportError with the extra to install, before tracing
     if optimizer is not None:
         if method != "optax":
             raise ValueError(f"optimizer: only used with method='optax', got method={method!r}")
+        import optax
+
         if not isinstance(optimizer, optax.GradientTransformation):
             raise TypeError(f"optimizer: expected an optax.GradientTransformation, got {type(optimizer).__name__}")
     target = jnp.asarray(target)
@@ -271,8 +279,9 @@ def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str 
         method: ``"lm"`` (default) or ``"optax"``.
         max_iters: iterations per seed (static); default 10 for LM, 1000 for optax. Each
             iteration is one forward pass.
-        pos_tol: success tolerance on the position error, metres.
-        rot_tol: success tolerance on the rotation angle error, radians.
+        pos_tol: success tolerance on the position error, metres (may be a traced scalar: one
+            compilation serves every tolerance).
+        rot_tol: success tolerance on the rotation angle error, radians (may be traced).
         respect_limits: keep every iterate (and the result) within ``[chain.lower, chain.upper]``.
         optimizer: an ``optax.GradientTransformation`` for ``method="optax"``; default
             ``optax.adam(1e-2)``.
@@ -297,13 +306,63 @@ def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str 
     if 0 in batch:  # no targets: empty results of the batch's shape
         empty = lambda *shape, dtype=target.dtype: jnp.zeros(batch + shape, dtype)  # noqa: E731
         return IKResult(empty(chain.dof), empty(dtype=bool), empty(), empty(), empty(dtype=jnp.int32))
-    return _solve(chain, target, jax.random.key(0) if key is None else key, q0, num_seeds=num_seeds, method=method,
-                  max_iters=int(max_iters), pos_tol=float(pos_tol), rot_tol=float(rot_tol),
-                  respect_limits=bool(respect_limits), optimizer=optimizer, position_only=position_only, batch=batch)
+    known, traced = _split_chain(chain)
+    return _solve(known, traced, target, jax.random.key(0) if key is None else key,
+                  None if q0 is None else jnp.asarray(q0), jnp.asarray(pos_tol, target.dtype),
+                  jnp.asarray(rot_tol, target.dtype), num_seeds=int(num_seeds), method=method,
+                  max_iters=int(max_iters), respect_limits=bool(respect_limits), optimizer=optimizer,
+                  position_only=position_only, batch=tuple(batch))
 
 
-def _solve(chain, target, key, q0, *, num_seeds, method, max_iters, pos_tol, rot_tol, respect_limits, optimizer,
-           position_only, batch) -> IKResult:
+class _KnownLeaves:
+    """The concrete leaves of a chain (and its structure), hashed and compared by value.
+
+    It is a static argument of the jitted :func:`_solve`: equal chains (by structure and
+    numbers) share one compilation, and their numbers stay trace-time constants that the
+    forward pass folds (as for a chain closed over by ``jit``).
+    """
+
+    def __init__(self, treedef, leaves: tuple):
+        self.treedef, self.leaves = treedef, leaves
+        self._key = (treedef, tuple(None if x is None else (np.asarray(x).dtype.str, np.shape(x),
+                                                           bool(getattr(x, "weak_type", False)),
+                                                           np.asarray(x).tobytes()) for x in leaves))
+        self._hash = hash(self._key)
+
+    def __hash__(self):
+        return self._hash
+
+    def __eq__(self, other):
+        return isinstance(other, _KnownLeaves) and self._key == other._key
+
+
+def _split_chain(chain) -> tuple[_KnownLeaves, tuple]:
+    """``(concrete leaves, traced leaves)`` of ``chain``, each with ``None`` in the other's slots."""
+    leaves, treedef = jax.tree_util.tree_flatten(chain)
+    known = tuple(x if is_concrete(x) else None for x in leaves)
+    traced = tuple(None if is_concrete(x) else x for x in leaves)
+    return _KnownLeaves(treedef, known), traced
+
+
+def _optax_module():
+    """``diffkin.ik._optax`` (which needs optax), or an ImportError naming the extra to install."""
+    try:
+        return importlib.import_module("diffkin.ik._optax")
+    except ImportError as e:
+        raise ImportError("method='optax' needs optax: pip install 'diffkin[ik]' (or pip install optax)") from e
+
+
+@functools.partial(jax.jit, static_argnames=("known", "num_seeds", "method", "max_iters", "respect_limits",
+                                             "optimizer", "position_only", "batch"))
+def _solve(known: _KnownLeaves, traced: tuple, target, key, q0, pos_tol, rot_tol, *, num_seeds, method, max_iters,
+           respect_limits, optimizer, position_only, batch) -> IKResult:
+    """The solver, compiled once per chain (by value), shapes and static settings.
+
+    Every closure (loop bodies, rounds) is built here, inside the trace, so that repeated eager
+    calls of :func:`solve` hit jit's cache instead of retracing and recompiling.
+    """
+    chain = jax.tree_util.tree_unflatten(
+        known.treedef, [t if k is None else k for k, t in zip(known.leaves, traced, strict=True)])
     dtype = target.dtype
     dof = chain.dof
     n = int(np.prod(batch, dtype=np.int64))
@@ -323,6 +382,7 @@ def _solve(chain, target, key, q0, *, num_seeds, method, max_iters, pos_tol, rot
     if method == "lm":
         init, step_fn = _lm.init, _lm.step
     else:
+        _optax = _optax_module()
         opt = _optax.default_optimizer() if optimizer is None else optimizer
         init, step_fn = functools.partial(_optax.init, opt), functools.partial(_optax.step, opt)
 

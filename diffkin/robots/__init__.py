@@ -127,3 +127,6 @@ def urdf_path(name: str) -> str:
     if name not in _URDFS:
         raise ValueError(f"name: expected one of {_URDFS}, got {name!r}")
     return str(resources.files("diffkin.robots") / "urdf" / f"{name}.urdf")
+
+
+__all__ = ["iiwa7", "iiwa14", "panda", "planar", "puma560", "ur5", "urdf_path"]

@@ -1,0 +1,28 @@
+"""What users look for: the license, type information, public names reachable as attributes."""
+
+import os
+import tomllib
+
+import diffkin as dk
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def test_license_and_typing_marker():
+    with open(os.path.join(ROOT, "LICENSE")) as f:
+        text = f.read()
+    assert text.startswith("MIT License") and "diffkin developers" in text
+    with open(os.path.join(ROOT, "pyproject.toml"), "rb") as f:
+        project = tomllib.load(f)
+    assert project["project"]["license"] == "MIT"
+    assert "py.typed" in project["tool"]["setuptools"]["package-data"]["diffkin"]
+    assert os.path.isfile(os.path.join(os.path.dirname(dk.__file__), "py.typed"))
+    extras = project["project"]["optional-dependencies"]
+    assert {"demo", "ik", "plot", "progress", "validate", "test"} <= set(extras)
+    assert "slow" in " ".join(project["tool"]["pytest"]["ini_options"]["markers"])
+
+
+def test_public_names():
+    assert dk.se3.vee is not None and "se3" in dk.__all__ and "se3" in dir(dk)
+    assert all(callable(getattr(dk.robots, name)) for name in dk.robots.__all__)
+    assert {"iiwa14", "panda", "planar", "urdf_path"} <= set(dk.robots.__all__)
