@@ -342,7 +342,8 @@ def test_eager_solve_compiles_once_per_shape():
     T = np.asarray(dk.fk(chain, jnp.array([[0.3, 0.5], [0.1, -0.4], [1.0, 1.0]])))
     first = ik.solve(chain, T, key=jax.random.key(0), num_seeds=4)
     assert np.all(first.success)
-    T2, key2 = T * 0.99, jax.random.key(1)  # built before counting
+    T2 = np.asarray(dk.fk(chain, jnp.array([[0.2, 0.6], [-0.3, 0.9], [0.7, -1.1]])))  # new values, before counting
+    key2 = jax.random.key(1)
     again = dk.robots.planar([1.0, 1.0])
     assert _compilations(lambda: ik.solve(again, T2, key=key2, num_seeds=4, pos_tol=2e-5)) == []
     solve = jax.jit(lambda t, k: ik.solve(chain, t, key=k, num_seeds=4))
