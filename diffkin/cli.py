@@ -1,14 +1,16 @@
 """The ``diffkin`` command line: demo, robot info, FK, IK, workspace maps and the benchmark suite.
 
     diffkin demo [--out DIR] [--quick]
-    diffkin info ROBOT_OR_URDF [--end-link L] [--base-link B]
-    diffkin fk ROBOT_OR_URDF q1 ... qn | --q-file configs.npy [--format text|json|npy] [--output FILE]
-    diffkin ik ROBOT_OR_URDF --pose x y z qw qx qy qz | --position x y z [--seeds N] [--q0 ...] [--all ...]
-    diffkin workspace ROBOT_OR_URDF --samples N --voxel V --out map.npz [--plot slice.png]
+    diffkin info ROBOT_OR_FILE [--end-link L] [--base-link B]
+    diffkin fk ROBOT_OR_FILE q1 ... qn | --q-file configs.npy [--format text|json|npy] [--output FILE]
+    diffkin ik ROBOT_OR_FILE --pose x y z qw qx qy qz | --position x y z [--seeds N] [--q0 ...] [--all ...]
+    diffkin workspace ROBOT_OR_FILE --samples N --voxel V --out map.npz [--plot slice.png]
     diffkin bench [--quick] [--only fk,jacobian,ik,srs,workspace] [--write | --out PATH]
 
-``ROBOT_OR_URDF`` is a built-in robot (``iiwa7``, ``iiwa14``, ``panda``, ``ur5``, ``puma560``) or a
-URDF file. Every computation runs in float64 (``jax_enable_x64`` is switched on by :func:`main`).
+``ROBOT_OR_FILE`` is a built-in robot (``iiwa7``, ``iiwa14``, ``panda``, ``ur5``, ``puma560``) or a
+URDF or MJCF file (``info`` prints its tree; ``fk --frame NAME`` any frame of it; the other commands use
+the chain from the root to ``--end-link``). Every computation runs in float64 (``jax_enable_x64`` is
+switched on by :func:`main`).
 User errors (and a missing optional dependency) print one line ``diffkin: error: ...`` to stderr and
 exit with status 2; Ctrl-C exits with status 130. Compiled programs are kept in JAX's persistent
 compilation cache (``--cache-dir``, ``--no-cache``, ``DIFFKIN_CACHE_DIR``; see :func:`cache_dir`).
@@ -226,17 +228,25 @@ def _use_cache(folder: Path | None, chosen: bool = True) -> None:
 
 
 def _robot_key(spec: str, end_link: str | None, base_link: str | None) -> tuple:
-    """A hashable key of a robot argument (URDF files by absolute path and modification time)."""
+    """A hashable key of a robot argument (files by absolute path and modification time)."""
     if spec in ROBOTS:
         if end_link is not None or base_link is not None:
-            raise CLIError(f"--end-link/--base-link apply to URDF files only, not to the built-in robot {spec!r}")
+            raise CLIError(f"--end-link/--base-link apply to URDF and MJCF files, not to the built-in robot {spec!r}")
         return (spec,)
     path = Path(spec)
     if not path.is_file():
-        raise CLIError(f"unknown robot {spec!r}: expected one of {', '.join(ROBOTS)} or the path of a URDF file")
+        raise CLIError(f"unknown robot {spec!r}: expected one of {', '.join(ROBOTS)} or a URDF or MJCF file path")
     if not os.access(path, os.R_OK):
         raise CLIError(f"cannot read {spec!r}")
     return (str(path.resolve()), path.stat().st_mtime_ns, end_link, base_link)
+
+
+@functools.lru_cache(maxsize=16)
+def _tree_for(path: str, _mtime: int):
+    """The whole robot (``dk.Robot``) of a URDF or MJCF file."""
+    import diffkin as dk
+
+    return dk.load_robot(path)
 
 
 @functools.lru_cache(maxsize=16)
@@ -245,24 +255,45 @@ def _chain_for(key: tuple):
 
     if len(key) == 1:
         return getattr(dk.robots, key[0])()
-    path, _, end_link, base_link = key
-    return dk.load_urdf(path, end_link, base_link=base_link)
+    path, mtime, end_link, base_link = key
+    robot = _tree_for(path, mtime)
+    for flag, name in (("--end-link", end_link), ("--base-link", base_link)):
+        if name is not None and name not in robot.frame_names:
+            raise CLIError(f"{flag}: unknown link {name!r}; the robot's links and frames are {list(robot.frame_names)}")
+    return robot.chain(end_link or _single_end(robot), base_link)
+
+
+def _single_end(robot) -> str:
+    """The end frame of a robot whose tree has one leaf body: its last frame (the deepest fixed link)."""
+    parents = set(robot.parents)
+    leaves = [b for b in range(len(robot.parents) + 1) if b not in parents and b > 0] or [0]
+    if len(leaves) > 1:
+        ends = [robot.frame_names[max(f for f, b in enumerate(robot.frame_bodies) if b == leaf)] for leaf in leaves]
+        raise CLIError(f"the robot is a tree with {len(leaves)} branches: choose --end-link, e.g. one of {ends}")
+    return robot.frame_names[max(f for f, b in enumerate(robot.frame_bodies) if b == leaves[0])]
+
+
+def _tree(spec: str):
+    """The ``dk.Robot`` of a URDF or MJCF path (``None`` for a built-in robot name)."""
+    key = _robot_key(spec, None, None)
+    return None if len(key) == 1 else _tree_for(key[0], key[1])
 
 
 def load_robot(spec: str, end_link: str | None = None, base_link: str | None = None):
-    """The chain of a built-in robot name or a URDF path.
+    """The chain of a built-in robot name, or of one path of a URDF or MJCF file's tree.
 
     Args:
-        spec: ``iiwa7``, ``iiwa14``, ``panda``, ``ur5``, ``puma560`` or a URDF file path.
-        end_link: end link of a URDF chain (default: the single leaf).
-        base_link: base link of a URDF chain (default: the root).
+        spec: ``iiwa7``, ``iiwa14``, ``panda``, ``ur5``, ``puma560`` or a URDF/MJCF file path.
+        end_link: end frame of the chain (default: the last frame of the single leaf).
+        base_link: base frame of the chain (default: the root).
 
     Returns:
-        A ``DHChain`` (built-in robots) or ``PoEChain`` (URDF).
+        A ``DHChain`` (built-in robots) or ``PoEChain`` (``robot.chain(end_link, base_link)``).
 
     Raises:
-        CLIError: an unknown name, a missing or unreadable file, link options with a built-in robot.
-        ValueError: a malformed URDF (from :func:`diffkin.load_urdf`).
+        CLIError: an unknown name, a missing or unreadable file, link options with a built-in robot,
+            a tree with several leaves and no ``end_link``.
+        ValueError: a malformed file (from :func:`diffkin.load_robot`) or an unknown frame.
     """
     _jax()
     return _chain_for(_robot_key(spec, end_link, base_link))
@@ -624,10 +655,45 @@ def cmd_demo(args) -> int:
 # --------------------------------------------------------------------------------------------- info, fk
 
 
+def _tree_lines(robot, spec: str) -> list[str]:
+    """The tree of a ``dk.Robot``: joints with their parents, mimic couplings, and frames per body."""
+    body_name = {0: robot.frame_names[0]}
+    for f, b in enumerate(robot.frame_bodies):
+        body_name.setdefault(b, robot.frame_names[f])
+    kind = "floating root" if robot.floating else "fixed root"
+    lines = [f"{robot.name or spec}: Robot (tree), {robot.dof} actuated joints, {len(robot.mimic)} mimic, "
+             f"{len(robot.frame_names)} frames, {kind} {robot.frame_names[0]!r}", "",
+             f"{'q':>3}  {'joint':<28} {'type':<10} {'parent -> child':<44} limits or coupling"]
+    lower, upper = np.asarray(robot.lower), np.asarray(robot.upper)
+    for j, name in enumerate(robot.tree_joints):
+        link = f"{body_name.get(robot.parents[j], '?')} -> {body_name.get(j + 1, '(internal)')}"
+        kind = "revolute" if robot.joint_types[j] == "R" else "prismatic"
+        if name in robot.mimic:
+            source, m, o = robot.mimic[name]
+            index, what = "", f"mimic: {m:g} * {source} + {o:g}"
+        else:
+            i = robot.sources[j]
+            index, what = str(i), f"[{lower[i]:.4g}, {upper[i]:.4g}] {'rad' if kind == 'revolute' else 'm'}"
+        lines.append(f"{index:>3}  {name:<28} {kind:<10} {link:<44} {what}")
+    lines += ["", "frames (by body): " + "; ".join(
+        ", ".join(robot.frame_names[f] for f, b in enumerate(robot.frame_bodies) if b == body)
+        for body in sorted(set(robot.frame_bodies)))]
+    return lines
+
+
 def cmd_info(args) -> int:
-    """Joints, limits, the DH or screw table and the home pose of a robot."""
+    """The tree of a URDF/MJCF file; joints, limits, the DH or screw table and the home pose of a chain."""
     import diffkin as dk
 
+    tree = _tree(args.robot) if args.end_link is None and args.base_link is None else None
+    if tree is not None:
+        print("\n".join(_tree_lines(tree, args.robot)))
+        try:
+            end = _single_end(tree)
+        except CLIError as e:
+            print(f"\n{e} (then info shows that chain)")
+            return 0
+        print(f"\nthe chain from the root to {end!r}:\n")
     chain = load_robot(args.robot, args.end_link, args.base_link)
     is_dh = isinstance(chain, dk.DHChain)
     kind = ("modified (Craig) DH" if chain.modified else "standard DH") if is_dh else "product of exponentials"
@@ -698,7 +764,19 @@ def cmd_fk(args) -> int:
     jax = _jax()
     import diffkin as dk
 
-    chain = load_robot(args.robot, args.end_link, args.base_link)
+    if args.frame is not None:
+        if args.end_link is not None or args.base_link is not None:
+            raise CLIError("--frame: give either --frame (a frame of the whole robot) or --end-link/--base-link")
+        tree = _tree(args.robot)
+        if tree is None:
+            raise CLIError(f"--frame: applies to URDF and MJCF files, not to the built-in robot {args.robot!r}")
+        if args.frame not in tree.frame_names:
+            raise CLIError(f"--frame: unknown frame {args.frame!r}; the robot's frames are {list(tree.frame_names)}")
+        model, pose = tree, functools.partial(dk.fk, tree, frames=args.frame)
+    else:
+        model = load_robot(args.robot, args.end_link, args.base_link)
+        pose = functools.partial(dk.fk, model)
+    chain = model
     if (args.q_file is None) == (not args.q):
         raise CLIError("fk: give the joint values either on the command line or with --q-file (one of the two)")
     q = np.asarray(args.q, dtype=np.float64) if args.q else _read_configs(args.q_file)
@@ -717,7 +795,7 @@ def cmd_fk(args) -> int:
             raise CLIError(f"--output: {str(output)!r} is a directory; expected a file name")
         if not output.parent.is_dir():
             raise CLIError(f"--output: no such directory {str(output.parent)!r}")
-    T = np.asarray(jax.jit(lambda q: dk.fk(chain, q))(q))
+    T = np.asarray(jax.jit(pose)(q))
     if args.format == "npy":
         np.save(output, T)
         print(f"wrote {T.shape} poses to {output}")
@@ -919,10 +997,10 @@ def cmd_view(args) -> int:
 
 
 def _add_robot(p: argparse.ArgumentParser) -> None:
-    p.add_argument("robot", metavar="ROBOT_OR_URDF",
-                   help=f"built-in robot ({', '.join(ROBOTS)}) or the path of a URDF file")
-    p.add_argument("--end-link", metavar="L", help="URDF end link (default: the single leaf)")
-    p.add_argument("--base-link", metavar="B", help="URDF base link (default: the root)")
+    p.add_argument("robot", metavar="ROBOT_OR_FILE",
+                   help=f"built-in robot ({', '.join(ROBOTS)}) or the path of a URDF or MJCF file")
+    p.add_argument("--end-link", metavar="L", help="end frame of the chain in a file's tree (default: the single leaf)")
+    p.add_argument("--base-link", metavar="B", help="base frame of the chain (default: the root)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -961,6 +1039,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_robot(p)
     p.add_argument("q", nargs="*", type=_finite, metavar="q", help="joint values q1 ... qn")
     p.add_argument("--q-file", metavar="FILE", help=".npy (or .txt/.csv) file of (n,) or (N, n) joint values")
+    p.add_argument("--frame", metavar="NAME", help="a frame of a file's whole robot (q: its actuated joints, "
+                   "`diffkin info FILE` lists them), instead of a chain's end effector")
     p.add_argument("--format", choices=("text", "json", "npy"), default="text", help="output format (default text)")
     p.add_argument("--output", metavar="FILE", help="write to FILE (required for npy: an (..., 4, 4) array)")
     p.set_defaults(func=cmd_fk)

@@ -177,7 +177,7 @@ def test_bench_needs_source_checkout(capsys, monkeypatch, tmp_path):
 
 @pytest.mark.parametrize("argv, match", [
     (["info", "nosuchrobot"], "unknown robot 'nosuchrobot'"),
-    (["info", "iiwa14", "--end-link", "x"], "URDF files only"),
+    (["info", "iiwa14", "--end-link", "x"], "apply to URDF and MJCF files"),
     (["fk", "iiwa14", "0.1", "0.2"], "7 joint values"),
     (["fk", "iiwa14", "0.1", "zero", "0", "0", "0", "0", "0"], "invalid number: 'zero'"),
     (["fk", "iiwa14", "nan", "0", "0", "0", "0", "0", "0"], "finite"),
@@ -369,3 +369,22 @@ def test_ctrl_c_exits_130(tmp_path):
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, (proc.returncode, err[-2000:])
     assert err.strip().splitlines()[-1] == "diffkin: interrupted" and "Traceback" not in err
+
+
+def test_info_and_fk_of_whole_robots(capsys):
+    """A file's tree: ``info`` lists joints, mimic couplings and frames; ``fk --frame`` poses any frame."""
+    panda = os.path.join(DATA, "panda.urdf")
+    code, out, _ = run(capsys, "info", panda)
+    assert code == 0 and "Robot (tree), 8 actuated joints, 1 mimic, 13 frames" in out
+    assert "mimic: 1 * panda_finger_joint1 + 0" in out and "choose --end-link" in out
+    code, out, _ = run(capsys, "info", os.path.join(DATA, "iiwa14.xml"))  # MJCF, one branch: the chain too
+    assert code == 0 and "Robot (tree), 7 actuated joints" in out and "PoEChain" in out
+    q = ["0.1", "-0.2", "0.3", "-1.2", "0.4", "1.1", "0.2", "0.03"]
+    code, out, _ = run(capsys, "fk", panda, "--frame", "panda_rightfinger", *q, "--format", "json")
+    robot = dk.load_robot(panda)
+    T = np.asarray(dk.fk(robot, np.array(q, float), "panda_rightfinger"))
+    assert code == 0 and np.allclose(json.loads(out)["poses"][0]["T"], T, atol=1e-12)
+    code, _, err = run(capsys, "fk", panda, "--frame", "hand", *q)
+    assert code == 2 and "unknown frame 'hand'" in err
+    code, _, err = run(capsys, "fk", "iiwa14", "--frame", "x", *q[:7])
+    assert code == 2 and "applies to URDF and MJCF files" in err
