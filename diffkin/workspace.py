@@ -45,6 +45,7 @@ from diffkin import kinematics
 from diffkin._trig import atan2, sincos
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain, to_poe
+from diffkin.models.robot import Robot
 
 _AXIS = "devices"
 MAX_GRID_BYTES = 2 * 1024**3
@@ -140,16 +141,22 @@ def _positive_int(value, name: str) -> int:
     return int(value)
 
 
-def _check_chain(chain) -> None:
+def _as_chain(chain):
+    """A chain as given, or the chain of a ``(robot, frame_name)`` pair (:meth:`Robot.chain` from the root)."""
+    if isinstance(chain, tuple) and len(chain) == 2 and isinstance(chain[0], Robot):
+        robot, frame = chain
+        return robot.chain(frame)
     if not isinstance(chain, (DHChain, PoEChain)):
-        raise TypeError(f"chain: expected a DHChain or PoEChain, got {type(chain).__name__}")
+        raise TypeError(f"chain: expected a DHChain, PoEChain or (Robot, frame_name), got {type(chain).__name__}")
+    return chain
 
 
 def _joint_ranges(chain) -> tuple[np.ndarray, np.ndarray]:
     """``(lo, hi)`` sampling ranges: the limits, one turn ``[-pi, pi)`` for unlimited revolute joints."""
-    _check_chain(chain)
+    if not isinstance(chain, (DHChain, PoEChain, Robot)):
+        raise TypeError(f"chain: expected a DHChain, PoEChain or Robot, got {type(chain).__name__}")
     lo, hi = np.asarray(chain.lower, np.float64), np.asarray(chain.upper, np.float64)
-    for i, kind in enumerate(chain.joint_types):
+    for i, kind in enumerate(chain.actuated_types if isinstance(chain, Robot) else chain.joint_types):
         if kind == "P" and not (np.isfinite(lo[i]) and np.isfinite(hi[i])):
             raise ValueError(f"chain.lower/upper[{i}]: expected finite limits for prismatic joint {i}, "
                              f"got [{lo[i]}, {hi[i]}]")
@@ -170,7 +177,7 @@ def sample_configs(chain, n: int, key, *, dtype=None) -> jax.Array:
     jax.random.fold_in(key, c))``.
 
     Args:
-        chain: a :class:`DHChain` or :class:`PoEChain`.
+        chain: a :class:`DHChain`, :class:`PoEChain` or :class:`Robot` (its actuated joints).
         n: number of configurations.
         key: a JAX PRNG key.
         dtype: float dtype; default the default float (float32, or float64 with x64).
@@ -394,7 +401,9 @@ def reachability(
     compiled once per chain, grid shape, chunk, orientation bins, dtype and device set.
 
     Args:
-        chain: a :class:`DHChain` or :class:`PoEChain` with concrete (not traced) numbers.
+        chain: a :class:`DHChain` or :class:`PoEChain` with concrete (not traced) numbers, or a
+            ``(robot, frame_name)`` pair: the map of that frame of a :class:`Robot`, in its root
+            frame (the path's joints only; see :meth:`Robot.chain`).
         n_samples: number of configurations.
         key: a JAX PRNG key.
         voxel_size: voxel edge, metres (default 0.05, as the ``diffkin workspace`` command).
@@ -418,7 +427,7 @@ def reachability(
     Raises:
         ValueError, TypeError: bad arguments (named in the message).
     """
-    _check_chain(chain)
+    chain = _as_chain(chain)
     n_samples = _positive_int(n_samples, "n_samples")
     chunk = _positive_int(chunk, "chunk")
     orientation_bins = _positive_int(orientation_bins, "orientation_bins")

@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import DATA
 
 import diffkin as dk
 from diffkin import workspace as ws
@@ -352,3 +353,18 @@ def test_identical_maps_on_1_2_and_4_devices_ur10():
 def test_voxel_size_defaults_to_the_clis():
     m = ws.reachability(dk.robots.planar([0.3, 0.2]), 1000, key=KEY, chunk=1000)
     assert m.voxel_size == 0.05
+
+
+def test_a_frame_of_a_whole_robot():
+    """``(robot, frame_name)``: the map of the path's chain; ``sample_configs`` of a robot samples its q."""
+    robot = dk.load_robot(os.path.join(DATA, "panda.urdf"))
+    chain = robot.chain("panda_hand_tcp")
+    of_robot = ws.reachability((robot, "panda_hand_tcp"), 2000, key=KEY, voxel_size=0.2, chunk=1000)
+    of_chain = ws.reachability(chain, 2000, key=KEY, voxel_size=0.2, chunk=1000)
+    np.testing.assert_array_equal(of_robot.counts, of_chain.counts)
+    assert of_robot.counts.sum() == 2000
+    q = ws.sample_configs(robot, 100, KEY)
+    assert q.shape == (100, robot.dof)
+    assert np.all((q >= robot.lower) & (q <= robot.upper))
+    with pytest.raises(TypeError, match=r"chain: expected a DHChain, PoEChain or \(Robot, frame_name\)"):
+        ws.reachability(robot, 10, key=KEY)

@@ -114,6 +114,12 @@ class Robot:
         check.limits(lo, hi, dof)
 
     @property
+    def actuated_types(self) -> str:
+        """``"R"``/``"P"`` of each entry of ``q`` (:attr:`joint_types` is per tree joint)."""
+        kinds = {name: kind for name, kind in zip(self.tree_joints, self.joint_types, strict=True)}
+        return "".join(kinds[name] for name in self.joint_names)
+
+    @property
     def mimic(self) -> dict[str, tuple[str, float, float]]:
         """``{joint: (source, multiplier, offset)}`` of the joints that follow another (host values)."""
         m, o = np.asarray(self.multipliers, np.float64), np.asarray(self.offsets, np.float64)
