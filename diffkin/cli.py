@@ -1101,7 +1101,7 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--out", metavar="PATH", help="also write the table to PATH")
     p.set_defaults(func=cmd_bench)
 
-    p = sub.add_parser("view", help="interactive 3D viewer in the browser (viser; pip install 'diffkin[viewer]')",
+    p = add_parser("view", help="interactive 3D viewer in the browser (viser; pip install 'diffkin[viewer]')",
                        description="Serve an interactive 3D view of a robot (viser): meshes or link cylinders, joint "
                        "sliders, draggable IK targets, the iiwa arm angle, a reachability map, batched results. "
                        "Prints the URL; runs until Ctrl-C.")

@@ -515,11 +515,9 @@ def show(model, *, source=None, ends: Sequence[str] | None = None, arm=None, q0=
         if viewer.missing:
             print(f"  {len(viewer.missing)} mesh(es) not found or unreadable, drawn as skeleton: "
                   f"{', '.join(sorted(set(viewer.missing))[:5])}", flush=True)
-    if block:
+    if block:  # until Ctrl-C: the KeyboardInterrupt goes on to the caller (the CLI exits with 130)
         try:
             threading.Event().wait()
-        except KeyboardInterrupt:
-            pass
         finally:
             viewer.stop()
     return viewer
