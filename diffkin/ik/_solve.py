@@ -20,6 +20,7 @@ from diffkin.ik._problem import ROT_WEIGHT, Eval, Problem, evaluate
 from diffkin.ik._result import IKResult
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain
+from diffkin.models.robot import Robot
 
 _METHODS = ("lm", "optax")
 _DEFAULT_ITERS = {"lm": 10, "optax": 1000}
@@ -180,7 +181,8 @@ def _best(s: _Seeds, num_targets: int, q0) -> _Seeds:
 def _check_args(chain, target, q0, num_seeds, method, max_iters, pos_tol, rot_tol, optimizer):
     """Host-side checks; returns the target array and its kind (``True`` for position targets)."""
     if not isinstance(chain, (DHChain, PoEChain)):
-        raise TypeError(f"chain: expected a DHChain or PoEChain, got {type(chain).__name__}")
+        hint = " (for a frame of a whole robot, solve robot.chain(frame_name))" if isinstance(chain, Robot) else ""
+        raise TypeError(f"chain: expected a DHChain or PoEChain{hint}, got {type(chain).__name__}")
     if method not in _METHODS:
         raise ValueError(f"method: expected one of {_METHODS}, got {method!r}")
     for name, value, low in (("num_seeds", num_seeds, 1), ("max_iters", max_iters, 0)):
