@@ -286,3 +286,14 @@ def test_a_robot_without_joints():
     assert robot.dof == 0 and robot.frame_names == ("a", "b")
     np.testing.assert_allclose(dk.fk(robot, np.zeros((2, 0)), "b")[:, :3, 3], [[1, 2, 3]] * 2)
     assert dk.jacobian(robot, np.zeros(0), "b").shape == (6, 0)
+
+
+def test_a_float32_model_with_float64_q_warns():
+    """A model built before x64 was switched on holds float32 numbers: float64 FK is then only ~1e-7 exact."""
+    with jax.enable_x64(False):
+        chain32, robot32 = dk.robots.iiwa14(), dk.load_robot(PANDA)
+    for model, frame in ((chain32, ()), (robot32, ("panda_hand",))):
+        with pytest.warns(UserWarning, match="built before jax_enable_x64"):
+            dk.fk(model, np.zeros(model.dof), *frame)
+    dk.fk(dk.robots.iiwa14(), np.zeros(7))  # float64 model: no warning (warnings are errors in the tests)
+    dk.fk(chain32, np.zeros(7, np.float32))  # float32 q: no warning

@@ -19,6 +19,8 @@ Structure (joint types, counts, names, parents) is static; concrete numbers fold
 
 from __future__ import annotations
 
+import warnings
+
 import jax
 import jax.numpy as jnp
 
@@ -48,6 +50,10 @@ def joint_values(model: Model, q) -> jax.Array:
     if q.ndim == 0 or q.shape[-1] != model.dof:
         kind = "robot" if isinstance(model, Robot) else "chain"
         raise ValueError(f"q: expected shape (..., {model.dof}) for a {model.dof}-joint {kind}, got {q.shape}")
+    if q.dtype == jnp.float64 and any(rg.is_concrete(x) and x.dtype == jnp.float32 for x in jax.tree.leaves(model)):
+        warnings.warn("the model's numbers are float32 (it was built before jax_enable_x64 was switched on): "
+                      "float64 results are only accurate to ~1e-7; build the model after enabling x64",
+                      stacklevel=3)
     return q
 
 
