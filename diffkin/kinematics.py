@@ -18,7 +18,10 @@ def _joint_values(chain: Chain, q) -> jax.Array:
     """``q`` as a float array of shape ``(..., dof)``; raises on a bad chain or shape."""
     if not isinstance(chain, (DHChain, PoEChain)):
         raise TypeError(f"chain: expected a DHChain or PoEChain, got {type(chain).__name__}")
-    q = jnp.asarray(q)
+    try:
+        q = jnp.asarray(q)
+    except OverflowError as err:
+        raise ValueError(f"q: expected joint values within the float range, got {q!r:.80}") from err
     if q.dtype == bool or jnp.issubdtype(q.dtype, jnp.complexfloating):
         raise TypeError(f"q: expected real joint values (radians or metres), got dtype {q.dtype}")
     if not jnp.issubdtype(q.dtype, jnp.floating):
