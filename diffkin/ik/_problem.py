@@ -75,7 +75,8 @@ def evaluate(problem: Problem, q: jax.Array) -> Eval:
     columns = kinematics._world_from_space(frames.screws, ee.p)
     e_p = [rg.add(problem.p[i], -ee.p[i]) for i in range(3)]
     J = [[v[i] for v, _ in columns] for i in range(3)]
-    pos_err = jnp.sqrt(rg.add(*(rg.mul(e, e) for e in e_p)))
+    # Capped at the largest float: a target ~1e154 m away would square to inf (issue 18: outputs stay finite).
+    pos_err = jnp.minimum(jnp.sqrt(rg.add(*(rg.mul(e, e) for e in e_p))), jnp.finfo(dtype).max)
     if problem.R is None:
         r, rot_err = e_p, jnp.zeros(shape, dtype)
     else:

@@ -204,7 +204,10 @@ def _check_args(chain, target, q0, num_seeds, method, max_iters, pos_tol, rot_to
 
         if not isinstance(optimizer, optax.GradientTransformation):
             raise TypeError(f"optimizer: expected an optax.GradientTransformation, got {type(optimizer).__name__}")
-    target = jnp.asarray(target)
+    try:
+        target = jnp.asarray(target)
+    except OverflowError as err:
+        raise ValueError(f"target: expected numbers within the float range, got {target!r:.80}") from err
     if target.dtype == bool or jnp.issubdtype(target.dtype, jnp.complexfloating):
         raise TypeError(f"target: expected real poses or positions, got dtype {target.dtype}")
     if jnp.issubdtype(target.dtype, jnp.floating) and jnp.finfo(target.dtype).bits < 32:
@@ -227,7 +230,7 @@ def _check_args(chain, target, q0, num_seeds, method, max_iters, pos_tol, rot_to
                              f"last row [0, 0, 0, 1], within {rigid_tol(target.dtype):g}), "
                              f"got {np.asarray(target)[i].tolist()}")
     if q0 is not None:
-        q0_shape = jnp.shape(q0)
+        q0_shape = np.shape(q0)
         if len(q0_shape) == 0 or q0_shape[-1] != chain.dof:
             raise ValueError(f"q0: expected shape (..., {chain.dof}) for a {chain.dof}-joint chain, got {q0_shape}")
         try:

@@ -18,6 +18,8 @@ def float_array(value, name: str, shape: tuple[int, ...] | None = None, *, finit
         raise TypeError(f"{name}: expected an array of real numbers, got dtype {raw.dtype}")
     try:
         arr = np.asarray(raw, dtype=np.float64)
+    except OverflowError as err:
+        raise ValueError(f"{name}: expected numbers within the float64 range, got {value!r:.80}") from err
     except (TypeError, ValueError) as err:
         raise TypeError(f"{name}: expected an array of numbers, got {type(value).__name__}") from err
     if shape is not None and arr.shape != shape:

@@ -42,7 +42,10 @@ def check(model, name: str = "chain") -> None:
 def joint_values(model: Model, q) -> jax.Array:
     """``q`` as a float array of shape ``(..., dof)``; raises on a bad model or shape."""
     check(model)
-    q = jnp.asarray(q)
+    try:
+        q = jnp.asarray(q)
+    except OverflowError as err:
+        raise ValueError(f"q: expected joint values within the float range, got {q!r:.80}") from err
     if q.dtype == bool or jnp.issubdtype(q.dtype, jnp.complexfloating):
         raise TypeError(f"q: expected real joint values (radians or metres), got dtype {q.dtype}")
     if not jnp.issubdtype(q.dtype, jnp.floating):
