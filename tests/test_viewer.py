@@ -337,16 +337,24 @@ def test_browser_draws_the_robot(viewer_of, tmp_path):
     """
     viewer = viewer_of("iiwa14")
     viewer.set_q(np.array([0.4, 0.6, 0.0, -1.3, 0.0, 0.8, 0.0]))
-    robot = _screenshot(viewer.url, tmp_path / "viewer.png")
-    for handle in (*viewer.frames.values(), *viewer.skeleton.values(), *viewer.targets.values()):
-        handle.visible = False
-    empty = _screenshot(viewer.url, tmp_path / "empty.png")
+    handles = (*viewer.frames.values(), *viewer.skeleton.values(), *viewer.targets.values())
+    canvas = (slice(160, 768), slice(0, 680))  # below the WebGL notice, left of the GUI panel
+    # A loaded machine can take the screenshot before the scene has arrived over the websocket:
+    # up to three tries of the pair, each judged as a whole.
+    for _ in range(3):
+        for handle in handles:
+            handle.visible = True
+        robot = _screenshot(viewer.url, tmp_path / "viewer.png")
+        for handle in handles:
+            handle.visible = False
+        empty = _screenshot(viewer.url, tmp_path / "empty.png")
+        assert robot.shape == empty.shape == (768, 1024, 3)
+        changed = (np.abs(robot[canvas] - empty[canvas]).max(-1) > 30).sum()
+        if changed > 0.01 * robot.shape[0] * robot.shape[1]:
+            break
     if os.environ.get("DIFFKIN_ARTIFACTS"):
         os.makedirs(os.environ["DIFFKIN_ARTIFACTS"], exist_ok=True)
         for name in ("viewer.png", "empty.png"):
             shutil.copy(tmp_path / name, os.path.join(os.environ["DIFFKIN_ARTIFACTS"], name))
-    assert robot.shape == empty.shape == (768, 1024, 3)
-    canvas = (slice(160, 768), slice(0, 680))  # below the WebGL notice, left of the GUI panel
-    changed = (np.abs(robot[canvas] - empty[canvas]).max(-1) > 30).sum()
     assert changed > 0.01 * robot.shape[0] * robot.shape[1], changed
     assert robot[canvas].std() > 5  # not a blank canvas
