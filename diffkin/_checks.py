@@ -1,4 +1,5 @@
-"""Traceable validity checks shared by the solvers (no raising: they give a boolean per problem)."""
+"""Checks shared by the functions: host-side input conversion (raising), and traceable validity checks
+(no raising: they give a boolean per problem)."""
 
 from __future__ import annotations
 
@@ -25,3 +26,19 @@ def rigid_poses(T: jax.Array) -> jax.Array:
            - R[..., 0, 1] * (R[..., 1, 0] * R[..., 2, 2] - R[..., 1, 2] * R[..., 2, 0])
            + R[..., 0, 2] * (R[..., 1, 0] * R[..., 2, 1] - R[..., 1, 1] * R[..., 2, 0]))
     return (gram <= tol) & (row <= tol) & (jnp.abs(det - 1.0) <= tol)
+
+
+def real_array(value, name: str, what: str) -> jax.Array:
+    """``value`` as a real floating array (integers cast to the default float); raises on the host.
+
+    Raises:
+        ValueError: numbers beyond the float range.
+        TypeError: bool or complex values.
+    """
+    try:
+        x = jnp.asarray(value)
+    except OverflowError as err:
+        raise ValueError(f"{name}: expected {what} within the float range, got {value!r:.80}") from err
+    if x.dtype == bool or jnp.issubdtype(x.dtype, jnp.complexfloating):
+        raise TypeError(f"{name}: expected real {what}, got dtype {x.dtype}")
+    return x if jnp.issubdtype(x.dtype, jnp.floating) else x.astype(jnp.result_type(float))

@@ -12,7 +12,7 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin import kinematics
-from diffkin._checks import rigid_poses, rigid_tol
+from diffkin._checks import real_array, rigid_poses, rigid_tol
 from diffkin._rigid import is_concrete
 from diffkin.ik import _lm
 from diffkin.ik._implicit import implicit_q
@@ -204,17 +204,10 @@ def _check_args(chain, target, q0, num_seeds, method, max_iters, pos_tol, rot_to
 
         if not isinstance(optimizer, optax.GradientTransformation):
             raise TypeError(f"optimizer: expected an optax.GradientTransformation, got {type(optimizer).__name__}")
-    try:
-        target = jnp.asarray(target)
-    except OverflowError as err:
-        raise ValueError(f"target: expected numbers within the float range, got {target!r:.80}") from err
-    if target.dtype == bool or jnp.issubdtype(target.dtype, jnp.complexfloating):
-        raise TypeError(f"target: expected real poses or positions, got dtype {target.dtype}")
-    if jnp.issubdtype(target.dtype, jnp.floating) and jnp.finfo(target.dtype).bits < 32:
+    target = real_array(target, "target", "poses or positions")
+    if jnp.finfo(target.dtype).bits < 32:
         # float16 rounding (~5e-4 m at 1 m) exceeds the default tolerances: errors would read 0.
         raise TypeError(f"target: expected float32 or float64, got {target.dtype} (cast it to float32)")
-    if not jnp.issubdtype(target.dtype, jnp.floating):
-        target = target.astype(jnp.result_type(float))
     if target.ndim >= 2 and target.shape[-2:] == (4, 4):
         position_only = False
     elif target.ndim >= 1 and target.shape[-1] == 3:

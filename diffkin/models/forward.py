@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 
 from diffkin import _rigid as rg
+from diffkin._checks import real_array
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain
 from diffkin.models.robot import Robot
@@ -42,14 +43,7 @@ def check(model, name: str = "chain") -> None:
 def joint_values(model: Model, q) -> jax.Array:
     """``q`` as a float array of shape ``(..., dof)``; raises on a bad model or shape."""
     check(model)
-    try:
-        q = jnp.asarray(q)
-    except OverflowError as err:
-        raise ValueError(f"q: expected joint values within the float range, got {q!r:.80}") from err
-    if q.dtype == bool or jnp.issubdtype(q.dtype, jnp.complexfloating):
-        raise TypeError(f"q: expected real joint values (radians or metres), got dtype {q.dtype}")
-    if not jnp.issubdtype(q.dtype, jnp.floating):
-        q = q.astype(jnp.result_type(float))
+    q = real_array(q, "q", "joint values (radians or metres)")
     if q.ndim == 0 or q.shape[-1] != model.dof:
         kind = "robot" if isinstance(model, Robot) else "chain"
         raise ValueError(f"q: expected shape (..., {model.dof}) for a {model.dof}-joint {kind}, got {q.shape}")
