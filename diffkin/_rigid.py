@@ -165,11 +165,25 @@ def materialize(entries: list[Entry]) -> jax.Array:
     return jax.lax.optimization_barrier(stack(entries, shape, dtype, axis=0))
 
 
+def _matrix_entries(A: Rigid) -> list[Entry]:
+    """The 16 entries of ``A``'s 4x4 matrix, row by row."""
+    return [e for i in range(3) for e in (*A.R[i], A.p[i])] + [0.0, 0.0, 0.0, 1.0]
+
+
 def to_matrix(A: Rigid, shape: tuple[int, ...], dtype) -> jax.Array:
     """The ``shape + (4, 4)`` matrix of ``A``."""
-    rows = [list(A.R[i]) + [A.p[i]] for i in range(3)] + [[0.0, 0.0, 0.0, 1.0]]
-    flat = stack([e for row in rows for e in row], shape, dtype)
-    return flat.reshape(shape + (4, 4))
+    return stack(_matrix_entries(A), shape, dtype).reshape(shape + (4, 4))
+
+
+def to_matrices(poses: list[Rigid], shape: tuple[int, ...], dtype) -> jax.Array:
+    """The ``shape + (len(poses), 4, 4)`` matrices of ``poses``, written by one stack.
+
+    One stack of every entry, not a stack of per-pose matrices: all 60 link poses of a humanoid
+    (Talos) at batch 100,000 took 308 ms the second way and 166 ms this way (float32, 2 CPU cores;
+    ``experiments/bench_robots.py``); stacking on a leading axis and transposing took 344 ms.
+    """
+    flat = stack([e for A in poses for e in _matrix_entries(A)], shape, dtype)
+    return flat.reshape(shape + (len(poses), 4, 4))
 
 
 def skew(w: Vec3) -> Mat3:

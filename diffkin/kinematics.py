@@ -73,7 +73,7 @@ def fk(model: Model, q: jax.Array, frames: str | Sequence[str] | None = None, *,
     frames_, shape, dtype = _pass(model, q, indices[0], base, every=not single)
     if single:
         return rg.to_matrix(frames_.ee, shape, dtype)
-    return jnp.stack([rg.to_matrix(frames_.links[f], shape, dtype) for f in indices], axis=-3)
+    return rg.to_matrices([frames_.links[f] for f in indices], shape, dtype)
 
 
 def link_poses(model: Model, q: jax.Array, *, base=None) -> jax.Array:
@@ -91,7 +91,7 @@ def link_poses(model: Model, q: jax.Array, *, base=None) -> jax.Array:
         A robot: ``(..., len(robot.frame_names), 4, 4)`` in ``robot.frame_names`` order, in the world.
     """
     frames, shape, dtype = _pass(model, q, base=base, every=True)
-    return jnp.stack([rg.to_matrix(T, shape, dtype) for T in frames.links], axis=-3)
+    return rg.to_matrices(frames.links, shape, dtype)
 
 
 def _world_from_space(screws, p_ee):
