@@ -20,6 +20,7 @@ steps of :data:`CHUNK` problems.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -27,9 +28,9 @@ import jax
 import jax.numpy as jnp
 
 from diffkin import _rigid as rg
-from diffkin import kinematics
 from diffkin._checks import rigid_poses
 from diffkin._trig import atan2, sincos
+from diffkin.models import forward
 from diffkin.srs._arm import SRSArm, broadcast_batch, check_arm, float_input, gc_input, pose_input
 
 POSE_TOL = {False: 1e-4, True: 1e-9}
@@ -335,24 +336,25 @@ def _solve(arm: SRSArm, target, psi, gc) -> tuple[jax.Array, jax.Array]:
     q = geometry.angles(psi)
     shape = jnp.broadcast_shapes(*(x.shape for x in q))
     q = [jnp.broadcast_to(x, shape) for x in q]
-    valid = geometry.reachable & within_limits(arm, q)
+    valid = geometry.reachable & within_limits(arm, q) & _checked(arm, target, psi, gc, q)
     q = jnp.stack(q, axis=-1)
-    valid = jnp.broadcast_to(valid & _checked(arm, target, psi, gc, q), shape)
-    return jnp.where(jnp.isfinite(q), q, 0.0), valid
+    return jnp.where(jnp.isfinite(q), q, 0.0), jnp.broadcast_to(valid, shape)
 
 
-def _checked(arm: SRSArm, target, psi, gc, q) -> jax.Array:
-    """Whether the inputs are what the closed form assumes and ``q`` reaches ``target``.
+def _checked(arm: SRSArm, target, psi, gc, q: list) -> jax.Array:
+    """Whether the inputs are what the closed form assumes and ``q`` (7 arrays) reaches ``target``.
 
     ``gc`` entries exactly ``+-1``, ``target`` rigid (:func:`diffkin._checks.rigid_poses`), ``psi``
-    finite, ``q`` finite, and the forward kinematics of ``q`` within :data:`POSE_TOL` (position,
-    metres, and rotation entries) of ``target``.
+    finite, and the forward kinematics of ``q`` within :data:`POSE_TOL` (position, metres, and
+    rotation entries) of ``target`` (false for non-finite ``q``). Computed entry by entry from one
+    forward pass: no pose matrices are formed.
     """
     ok = jnp.all(jnp.abs(gc) == 1.0, axis=-1) & rigid_poses(target) & jnp.isfinite(psi)
-    ok = ok & jnp.all(jnp.isfinite(q), axis=-1)
-    T = kinematics.fk(arm.chain(), jnp.where(jnp.isfinite(q), q, 0.0))
-    err = jnp.max(jnp.abs(T[..., :3, :] - target[..., :3, :]), axis=(-2, -1))
-    return ok & (err <= POSE_TOL[jnp.finfo(q.dtype).bits >= 64])
+    ee = forward.frames(arm.chain(), q).ee
+    errors = [jnp.abs(ee.R[i][j] - target[..., i, j]) for i in range(3) for j in range(3)]
+    errors += [jnp.abs(ee.p[i] - target[..., i, 3]) for i in range(3)]
+    err = functools.reduce(jnp.maximum, errors)
+    return ok & (err <= POSE_TOL[jnp.finfo(target.dtype).bits >= 64])
 
 
 def arm_angle(arm: SRSArm, q: jax.Array) -> tuple[jax.Array, jax.Array]:
