@@ -227,8 +227,13 @@ def _exp_coefficients(n2, theta):
     n = jnp.sqrt(jnp.where(small, 1.0, n2))
     x = n * theta
     s, c = sincos(x)
-    t2, t3 = theta * theta, theta * theta * theta
-    A = jnp.where(small, theta - n2 * t3 / 6.0, s / n)
+    # The series below multiply an axis that is exactly zero for a prismatic joint: evaluated there at a
+    # clipped theta, so that theta^5 (which overflows from |theta| ~ 1.8e61 m in float64, 5e7 m in
+    # float32) cannot make inf * 0 = NaN. Elsewhere (and for every |theta| below the clip) unchanged.
+    clip = float(np.finfo(jnp.result_type(theta)).max) ** 0.2 / 10.0
+    theta_s = jnp.where(n2 == 0.0, jnp.clip(theta, -clip, clip), theta)
+    t2, t3 = theta_s * theta_s, theta_s * theta_s * theta_s
+    A = jnp.where(small, theta_s - n2 * t3 / 6.0, s / n)
     B = jnp.where(small, t2 / 2.0 - n2 * t2 * t2 / 24.0, (1.0 - c) / jnp.where(small, 1.0, n2))
     C = jnp.where(small, t3 / 6.0 - n2 * t3 * t2 / 120.0, (x - s) / (n * jnp.where(small, 1.0, n2)))
     return A, B, C
