@@ -95,7 +95,11 @@ def _parse(root: ET.Element) -> tuple[list[JointSpec], list[str]]:
 
 def robot_from_urdf(root: ET.Element, *, floating: bool = False) -> Robot:
     """The :class:`Robot` of a parsed URDF (see :func:`diffkin.load_robot`)."""
-    joints, links = _parse(root)
+    return _robot(root, *_parse(root), floating=floating)
+
+
+def _robot(root: ET.Element, joints: list[JointSpec], links: list[str], *, floating: bool = False) -> Robot:
+    """The :class:`Robot` of the joints and links read from ``root`` (a floating root joint made the base)."""
     free = [j for j in joints if j.kind == "floating"]
     if free:
         children = {j.child for j in joints}
@@ -130,8 +134,8 @@ def load_urdf(source, end_link: str | None = None, *, base_link: str | None = No
             and no ``end_link``, unsupported joint types, or a mimic coupling a chain cannot hold.
     """
     root = _read(source)
-    robot = robot_from_urdf(root)
     joints, links = _parse(root)
+    robot = _robot(root, joints, links)
     for arg, link in (("base_link", base_link), ("end_link", end_link)):
         if link is not None and link not in links:
             raise ValueError(f"{arg}: unknown link {link!r}; available links: {sorted(links)}")
