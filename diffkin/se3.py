@@ -76,3 +76,43 @@ def so3_log(R: jax.Array) -> jax.Array:
     sign = jnp.where(jnp.sum(axis * w_sin, -1) < 0, -1.0, 1.0)
     near_pi = cos_ < -0.99
     return jnp.where(near_pi[..., None], (sign * theta)[..., None] * axis, regular)
+
+
+def rotation_from_quaternion(quat: jax.Array) -> jax.Array:
+    """``(..., 4) -> (..., 3, 3)``: rotation of quaternions ``(w, x, y, z)``, normalised here (not zero)."""
+    quat = jnp.asarray(quat)
+    w, x, y, z = jnp.moveaxis(quat / jnp.linalg.norm(quat, axis=-1, keepdims=True), -1, 0)
+    rows = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ]
+    return jnp.stack([jnp.stack(row, -1) for row in rows], -2)
+
+
+def quaternion_from_rotation(R: jax.Array) -> jax.Array:
+    """``(..., 3, 3) -> (..., 4)``: unit quaternions ``(w, x, y, z)`` with ``w >= 0`` of rotations.
+
+    Shepperd's method: of ``4 w^2 - 1 = tr R`` and ``4 x^2 - 1 = 2 R_00 - tr R`` (and y, z), the
+    largest is taken as the pivot, so no division is by a small number.
+    """
+    R = jnp.asarray(R)
+    tr = jnp.trace(R, axis1=-2, axis2=-1)
+    d0, d1, d2 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
+    a = [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]]  # 4 w (x, y, z)
+    b = [R[..., 0, 1] + R[..., 1, 0], R[..., 0, 2] + R[..., 2, 0], R[..., 1, 2] + R[..., 2, 1]]  # 4 xy, 4 xz, 4 yz
+    pivots = jnp.stack([tr, 2 * d0 - tr, 2 * d1 - tr, 2 * d2 - tr], -1)  # 4 w^2 - 1, 4 x^2 - 1, ...
+    s = 2.0 * jnp.sqrt(1.0 + jnp.maximum(pivots, -1.0))  # 4 |w|, 4 |x|, ... (the pivot's is >= 2)
+    s = jnp.where(s > 0, s, 1.0)
+    candidates = [
+        [s[..., 0] / 4, a[0] / s[..., 0], a[1] / s[..., 0], a[2] / s[..., 0]],
+        [a[0] / s[..., 1], s[..., 1] / 4, b[0] / s[..., 1], b[1] / s[..., 1]],
+        [a[1] / s[..., 2], b[0] / s[..., 2], s[..., 2] / 4, b[2] / s[..., 2]],
+        [a[2] / s[..., 3], b[1] / s[..., 3], b[2] / s[..., 3], s[..., 3] / 4],
+    ]
+    pivot = jnp.argmax(pivots, axis=-1)
+    quat = jnp.stack(candidates[3], -1)
+    for i in (2, 1, 0):
+        quat = jnp.where((pivot == i)[..., None], jnp.stack(candidates[i], -1), quat)
+    quat = quat / jnp.linalg.norm(quat, axis=-1, keepdims=True)
+    return jnp.where(quat[..., :1] < 0, -quat, quat)

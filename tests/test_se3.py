@@ -97,3 +97,22 @@ def test_derivatives_are_finite_at_the_identity_and_a_half_turn():
         for fn in (se3.so3_log, se3.rotation_angle):
             J = jax.jacfwd(lambda M, fn=fn: fn(M))(jnp.asarray(R))
             assert np.all(np.isfinite(J))
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("kind", ["random", "near_identity", "near_pi"])
+def test_quaternion_round_trip(kind, shape):
+    """``quaternion_from_rotation`` inverts ``rotation_from_quaternion`` (``w >= 0``), under ``jit`` too."""
+    R, w, angle = _rotations(kind, shape, seed=6)
+    axis = w / angle[..., None]
+    quat = np.concatenate([np.cos(angle / 2)[..., None], np.sin(angle / 2)[..., None] * axis], -1)
+    np.testing.assert_allclose(se3.rotation_from_quaternion(3.0 * quat), R, atol=1e-12)  # normalised
+    np.testing.assert_allclose(jax.jit(se3.quaternion_from_rotation)(R), quat, atol=1e-12)
+
+
+def test_quaternions_of_half_turns_and_signs():
+    for quat in ([0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0], [1.0, 0.0, 0.0, 0.0]):
+        R = se3.rotation_from_quaternion(np.asarray(quat))
+        np.testing.assert_allclose(se3.quaternion_from_rotation(R), quat, atol=1e-15)
+    quat = np.array([-0.5, 0.5, -0.5, 0.5])  # w < 0: the same rotation as -quat
+    np.testing.assert_allclose(se3.quaternion_from_rotation(se3.rotation_from_quaternion(quat)), -quat, atol=1e-15)
