@@ -23,8 +23,6 @@ import numpy as np  # noqa: E402
 import diffkin as dk  # noqa: E402
 import diffkin.srs as srs  # noqa: E402
 
-ALL_GC = np.array([[a, b, c] for a in (1, -1) for b in (1, -1) for c in (1, -1)], dtype=np.float64)
-
 
 def main() -> None:
     jax.config.update("jax_enable_x64", True)
@@ -39,8 +37,8 @@ def main() -> None:
     chain = arm.chain()
     target = np.asarray(dk.fk(chain, np.array(args.q)))
     psi = np.linspace(-np.pi, np.pi, 2001)
-    q, valid = (np.asarray(x) for x in srs.ik(arm, target, psi, ALL_GC[:, None]))  # (8, P, 7), (8, P)
-    intervals, mask = (np.asarray(x) for x in srs.feasible_arm_angles(arm, target, ALL_GC))
+    q, valid = (np.asarray(x) for x in srs.ik(arm, target, psi, srs.ALL_GC[:, None]))  # (8, P, 7), (8, P)
+    intervals, mask = (np.asarray(x) for x in srs.feasible_arm_angles(arm, target, srs.ALL_GC))
     shown = [g for g in range(8) if mask[g].any()]
     lower, upper = np.rad2deg(np.asarray(arm.lower)), np.rad2deg(np.asarray(arm.upper))
 
@@ -59,7 +57,7 @@ def main() -> None:
             if row == 0:
                 ax.set_title(f"joint {j + 1}")
             if j == 0:
-                ax.set_ylabel(f"gc = {tuple(int(x) for x in ALL_GC[g])}\nangle (deg)")
+                ax.set_ylabel(f"gc = {tuple(int(x) for x in srs.ALL_GC[g])}\nangle (deg)")
             if row == len(shown) - 1:
                 ax.set_xlabel("arm angle psi (deg)")
     fig.suptitle("iiwa14 self-motion at q = " + np.array2string(np.array(args.q), precision=2)
@@ -71,7 +69,7 @@ def main() -> None:
 
     # Elbow circle: DH frame 3 origin along psi for gc = the target's own configuration.
     _, gc0 = srs.arm_angle(arm, np.array(args.q))
-    g0 = int(np.flatnonzero(np.all(ALL_GC == np.asarray(gc0), axis=1))[0])
+    g0 = int(np.flatnonzero(np.all(srs.ALL_GC == np.asarray(gc0), axis=1))[0])
     links = np.asarray(dk.link_poses(chain, q[g0]))[:, :, :3, 3]  # (P, 8, 3)
     elbow = links[:, 3]
     fig = plt.figure(figsize=(8, 8))

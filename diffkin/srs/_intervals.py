@@ -40,7 +40,8 @@ from diffkin.srs._closed_form import (
 _ROOTS = 24  # 6 joints x 2 limits x 2 roots
 _PIECES = _ROOTS + 1
 MAX_INTERVALS = (_PIECES + 1) // 2  # K: pieces alternate at worst between feasible and not
-_ALL_GC = np.array([[g2, g4, g6] for g2 in (1, -1) for g4 in (1, -1) for g6 in (1, -1)], dtype=np.float64)
+ALL_GC = np.array([[g2, g4, g6] for g2 in (1, -1) for g4 in (1, -1) for g6 in (1, -1)], dtype=np.float64)
+"""``(8, 3)``: every global configuration ``(gc2, gc4, gc6)``, each sign ``+1`` or ``-1``."""
 
 
 def _roots(f: Trig) -> jax.Array:
@@ -166,7 +167,7 @@ def sample_self_motion(arm: SRSArm, target: jax.Array, n: int, *, key: jax.Array
         raise ValueError(f"target: expected one (4, 4) pose, got shape {target.shape}")
     if gc is not None and jnp.shape(gc) != (3,):
         raise ValueError(f"gc: expected shape (3,) (one global configuration), got {jnp.shape(gc)}")
-    gcs = _ALL_GC if gc is None else jnp.asarray(gc)[None]
+    gcs = ALL_GC if gc is None else jnp.asarray(gc)[None]
     intervals, mask = feasible_arm_angles(arm, target, gcs)  # (G, K, 2), (G, K)
     dtype = intervals.dtype
     lo = intervals[..., 0].reshape(-1)
