@@ -7,6 +7,7 @@ import pinocchio as pin
 import pytest
 import pytorch_kinematics as pk
 import torch
+from _reference import dh_fk, poe_fk
 from conftest import BUILTIN, URDF_ROBOTS, random_q
 
 import diffkin as dk
@@ -263,3 +264,12 @@ def test_fk_at_zero_angle_is_exact_and_gradient_finite():
     np.testing.assert_allclose(dk.fk(chain, q0), chain.home, atol=1e-15)
     g = jax.grad(lambda c: jnp.sum(dk.fk(c, q0)))(chain)
     assert all(np.all(np.isfinite(leaf)) for leaf in jax.tree_util.tree_leaves(g))
+
+
+def test_numpy_reference_matches_modified_and_prismatic_chains():
+    """The tests' NumPy DH product (``_reference.dh_fk``) on chains the robots do not cover."""
+    for chain in (dk.robots.panda(), dk.DHChain.from_table([[0.1, 0.3, 0.2, 0.1], [0.2, -0.5, 0.1, 0.0]], "RP",
+                                                           modified=True)):
+        q = np.random.default_rng(0).uniform(-1, 1, (5, chain.dof))
+        np.testing.assert_allclose(dh_fk(chain, q), np.asarray(dk.fk(chain, q)), atol=1e-12)
+        np.testing.assert_allclose(poe_fk(dk.to_poe(chain), q), np.asarray(dk.fk(chain, q)), atol=1e-12)

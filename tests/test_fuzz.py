@@ -19,6 +19,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _reference import fk as fk_reference
+from _reference import rotation_angle
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -104,44 +106,6 @@ def configs(chain, bound):
     return st.tuples(*entries).map(np.array)
 
 
-# ----- an independent NumPy FK ------------------------------------------------------------------------
-
-def _np_fk(chain, q):
-    """End-effector pose in float64 NumPy: the DH product (either convention) or the product of exponentials."""
-    q = np.asarray(q, np.float64)
-    if isinstance(chain, dk.DHChain):
-        a, alpha, d, off = (np.asarray(x, np.float64) for x in (chain.a, chain.alpha, chain.d, chain.theta_offset))
-        T = np.asarray(chain.base, np.float64)
-        for i, kind in enumerate(chain.joint_types):
-            theta = q[i] + off[i] if kind == "R" else off[i]
-            di = d[i] + q[i] if kind == "P" else d[i]
-            ct, st_, ca, sa = np.cos(theta), np.sin(theta), np.cos(alpha[i]), np.sin(alpha[i])
-            Rz = np.array([[ct, -st_, 0, 0], [st_, ct, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
-            Rx = np.array([[1, 0, 0, 0], [0, ca, -sa, 0], [0, sa, ca, 0], [0, 0, 0, 1.0]])
-            Tz, Tx = np.eye(4), np.eye(4)
-            Tz[2, 3], Tx[0, 3] = di, a[i]
-            T = T @ (Rx @ Tx @ Rz @ Tz if chain.modified else Rz @ Tz @ Tx @ Rx)
-        return T @ np.asarray(chain.tool, np.float64)
-    T = np.eye(4)
-    for i, S in enumerate(np.asarray(chain.screws, np.float64)):
-        v, w = S[:3], S[3:]
-        E = np.eye(4)
-        if chain.joint_types[i] == "R":
-            K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
-            s, c = np.sin(q[i]), np.cos(q[i])
-            E[:3, :3] = np.eye(3) + s * K + (1 - c) * K @ K
-            E[:3, 3] = (np.eye(3) * q[i] + (1 - c) * K + (q[i] - s) * K @ K) @ v
-        else:
-            E[:3, 3] = v * q[i]
-        T = T @ E
-    return T @ np.asarray(chain.home, np.float64)
-
-
-def _rotation_error(A, B):
-    """Angle of ``A^T B`` for rotation matrices (float64)."""
-    return float(np.arccos(np.clip((np.trace(A.T @ B) - 1) / 2, -1, 1)))
-
-
 # ----- properties -------------------------------------------------------------------------------------
 
 @FUZZ
@@ -156,7 +120,7 @@ def test_fk_is_rigid_finite_and_matches_numpy(data):
     np.testing.assert_array_equal(T[3], [0, 0, 0, 1])
     # Against NumPy where the angles are moderate (NumPy's own sin/cos of 1e6 agree to ~1e-10 there too).
     q_small = np.clip(q, -10, 10)
-    np.testing.assert_allclose(np.asarray(fk(chain, q_small)), _np_fk(chain, q_small), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(fk(chain, q_small)), fk_reference(chain, q_small), rtol=0, atol=1e-9)
 
 
 @FUZZ
@@ -189,12 +153,12 @@ def test_jacobian_matches_central_differences(data):
 
 
 def _check_against_differences(chain, q, frame, J):
-    h, T = 1e-6, _np_fk(chain, q)
+    h, T = 1e-6, fk_reference(chain, q)
     columns = []
     for i in range(chain.dof):
         e = np.zeros(chain.dof)
         e[i] = h
-        Tp, Tm = _np_fk(chain, q + e), _np_fk(chain, q - e)
+        Tp, Tm = fk_reference(chain, q + e), fk_reference(chain, q - e)
         dT = (Tp - Tm) / (2 * h)
         R, p, dR, dp = T[:3, :3], T[:3, 3], dT[:3, :3], dT[:3, 3]
         W = dR @ R.T  # world angular velocity [w]
@@ -221,7 +185,7 @@ def test_ik_success_means_the_pose_is_reached(data):
     """One compiled solve (a 3-joint DH chain as an argument, 4 targets): reachable, garbage and
     non-finite targets; a success reaches its pose (NumPy FK), every output is finite."""
     chain = data.draw(dh_chains(IK_STRUCTURE))
-    targets = [_np_fk(chain, data.draw(configs(chain, 3.0))) for _ in range(2)]
+    targets = [fk_reference(chain, data.draw(configs(chain, 3.0))) for _ in range(2)]
     far = np.eye(4)
     far[:3, 3] = data.draw(st.sampled_from([1e3, 1e30, 1e300, 0.0]))
     nan = np.full((4, 4), data.draw(st.sampled_from([np.nan, np.inf, -np.inf])))
@@ -231,10 +195,10 @@ def test_ik_success_means_the_pose_is_reached(data):
     success = np.asarray(res.success)
     assert not success[3]
     for i in np.flatnonzero(success):
-        reached = _np_fk(chain, np.asarray(res.q[i]))
+        reached = fk_reference(chain, np.asarray(res.q[i]))
         target = np.stack(targets + [far])[i]
         assert np.linalg.norm(reached[:3, 3] - target[:3, 3]) <= 1e-5 + 1e-9
-        assert _rotation_error(reached[:3, :3], target[:3, :3]) <= 1e-4 + 1e-7
+        assert rotation_angle(reached[:3, :3].T @ target[:3, :3]) <= 1e-4 + 1e-7
 
 
 # ----- garbage in: ValueError or TypeError, nothing else -------------------------------------------------

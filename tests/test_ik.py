@@ -11,6 +11,7 @@ import optax
 import pytest
 import pytorch_kinematics as pk
 import torch
+from _reference import dh_fk, pose_errors
 from conftest import URDF_ROBOTS, random_q
 
 import diffkin as dk
@@ -19,42 +20,11 @@ import diffkin.ik as ik
 ROBOTS = ("iiwa7", "iiwa14", "panda", "ur5")
 
 
-def _dh_fk(chain, q):
-    """Independent float64 NumPy DH product ``base A_1 ... A_n tool`` (revolute joints)."""
-    a, alpha, d, off = (np.asarray(x, np.float64) for x in (chain.a, chain.alpha, chain.d, chain.theta_offset))
-    T = np.broadcast_to(np.asarray(chain.base, np.float64), q.shape[:-1] + (4, 4)).copy()
-    for i in range(chain.dof):
-        ct, st = np.cos(q[..., i] + off[i]), np.sin(q[..., i] + off[i])
-        ca, sa = np.cos(alpha[i]), np.sin(alpha[i])
-        A = np.zeros(q.shape[:-1] + (4, 4))
-        if chain.modified:  # Rx(alpha) Tx(a) Rz(theta) Tz(d)
-            A[..., 0, :] = np.stack([ct, -st, 0 * ct, a[i] + 0 * ct], -1)
-            A[..., 1, :] = np.stack([st * ca, ct * ca, -sa + 0 * ct, -sa * d[i] + 0 * ct], -1)
-            A[..., 2, :] = np.stack([st * sa, ct * sa, ca + 0 * ct, ca * d[i] + 0 * ct], -1)
-        else:  # Rz(theta) Tz(d) Tx(a) Rx(alpha)
-            A[..., 0, :] = np.stack([ct, -st * ca, st * sa, a[i] * ct], -1)
-            A[..., 1, :] = np.stack([st, ct * ca, -ct * sa, a[i] * st], -1)
-            A[..., 2, :] = np.stack([0 * ct, sa + 0 * ct, ca + 0 * ct, d[i] + 0 * ct], -1)
-        A[..., 3, 3] = 1.0
-        T = T @ A
-    return T @ np.asarray(chain.tool, np.float64)
-
-
 def _pk_fk(name):
     path, end = URDF_ROBOTS[name]
     with open(path, "rb") as f:
         chain = pk.build_serial_chain_from_urdf(f.read(), end).to(dtype=torch.float64)
     return lambda q: chain.forward_kinematics(torch.as_tensor(q, dtype=torch.float64)).get_matrix().numpy()
-
-
-def _errors(T, target):
-    """Independent float64 position and rotation-angle errors."""
-    pos = np.linalg.norm(T[..., :3, 3] - target[..., :3, 3], axis=-1)
-    M = target[..., :3, :3] @ np.swapaxes(T[..., :3, :3], -1, -2)
-    cos = np.clip((np.trace(M, axis1=-2, axis2=-1) - 1) / 2, -1, 1)
-    sin = 0.5 * np.linalg.norm(np.stack([M[..., 2, 1] - M[..., 1, 2], M[..., 0, 2] - M[..., 2, 0],
-                                         M[..., 1, 0] - M[..., 0, 1]], -1), axis=-1)
-    return pos, np.arctan2(sin, cos)
 
 
 _solve32 = {}
@@ -71,7 +41,7 @@ def _solver(chain, key_name, **kw):
 def _case(kind, name, urdf_chains):
     if kind == "builtin":
         chain = getattr(dk.robots, name)()
-        return chain, lambda q: _dh_fk(chain, q)
+        return chain, lambda q: dh_fk(chain, q)
     return urdf_chains[name], _pk_fk(name)
 
 
@@ -88,7 +58,7 @@ def test_round_trip_success_rate_float32(kind, name, urdf_chains):
     success = np.asarray(res.success)
     assert res.q.dtype == jnp.float32 and res.q.shape == (1000, chain.dof) and success.shape == (1000,)
     assert np.all(q >= np.asarray(chain.lower)) and np.all(q <= np.asarray(chain.upper))
-    pos, rot = _errors(fk64(q), target)
+    pos, rot = pose_errors(fk64(q), target)
     # float32 FK rounding (~1e-7 m) separates diffkin's error from the float64 one; allow that margin only.
     assert np.all(pos[success] <= 1e-5 + 1e-6) and np.all(rot[success] <= 1e-4 + 5e-6)
     # the solver's float32 error vs float64 FK: each float32 pose is off by up to ~5e-7 m at 1 m reach
@@ -113,7 +83,7 @@ def test_warm_start_returns_nearby_solution(name):
     arm returns a solution of the same self-motion about as near q0 as the known one (not another branch)."""
     chain = getattr(dk.robots, name)()
     q_true = random_q(chain, 50, seed=3) * 0.8
-    target = _dh_fk(chain, q_true)
+    target = dh_fk(chain, q_true)
     q0 = q_true + np.random.default_rng(4).normal(0, 0.02, q_true.shape)
     res = ik.solve(chain, jnp.asarray(target), q0=jnp.asarray(q0), key=jax.random.key(1), num_seeds=8,
                    pos_tol=1e-9, rot_tol=1e-9)
@@ -132,7 +102,7 @@ def test_unreachable_and_nan_targets_fail_honestly():
     T_far = np.eye(4)
     T_far[:3, 3] = [3.0, 0.0, 0.0]
     T_nan = np.full((4, 4), np.nan)
-    ok = _dh_fk(chain, random_q(chain, 1, seed=5))[0]
+    ok = dh_fk(chain, random_q(chain, 1, seed=5))[0]
     targets = jnp.asarray(np.stack([T_far, T_nan, ok]), jnp.float32)
     res = jax.jit(lambda t: ik.solve(chain, t, key=jax.random.key(0), num_seeds=4, max_iters=30))(targets)
     assert list(np.asarray(res.success)) == [False, False, True]
@@ -166,7 +136,7 @@ def test_planar_2r_matches_closed_form():
 
 def test_batch_shapes_vmap_and_independence():
     chain = dk.robots.iiwa7()
-    target = jnp.asarray(_dh_fk(chain, random_q(chain, 6, seed=8)), jnp.float32)
+    target = jnp.asarray(dh_fk(chain, random_q(chain, 6, seed=8)), jnp.float32)
     solve = jax.jit(lambda t: ik.solve(chain, t, key=jax.random.key(3), num_seeds=16))
     res = solve(target.reshape(2, 3, 4, 4))
     assert res.q.shape == (2, 3, 7) and res.success.shape == (2, 3) and res.iters.shape == (2, 3)
@@ -184,7 +154,7 @@ def test_batch_shapes_vmap_and_independence():
 def _ur5_solution():
     chain = dk.robots.ur5()
     q_star = np.array([0.3, -1.2, 1.4, -0.7, 1.1, 0.4])  # elbow bent, wrist away from singularity
-    return chain, q_star, jnp.asarray(_dh_fk(chain, q_star))
+    return chain, q_star, jnp.asarray(dh_fk(chain, q_star))
 
 
 def test_implicit_gradient_matches_finite_differences_ur5():
@@ -221,7 +191,7 @@ def test_implicit_gradient_matches_finite_differences_ur5():
 def test_implicit_gradient_redundant_arm_moves_the_end_effector_as_the_target():
     chain = dk.robots.iiwa14()
     q_star = np.array([0.2, 0.5, -0.3, -1.2, 0.4, 0.8, 0.1])
-    T = jnp.asarray(_dh_fk(chain, q_star))
+    T = jnp.asarray(dh_fk(chain, q_star))
     dT = jnp.asarray(np.random.default_rng(10).normal(size=(4, 4)) * np.r_[1, 1, 1, 0][:, None])
     dT = dT.at[:3, :3].set((dT[:3, :3] - dT[:3, :3].T) @ T[:3, :3])  # a tangent of SE(3) at T
     _, dq = jax.jvp(lambda t: ik.solve(chain, t, q0=jnp.asarray(q_star), num_seeds=1, pos_tol=1e-12,
@@ -240,7 +210,7 @@ def test_optax_method_reaches_loose_tolerance(urdf_chains):
     res = jax.jit(lambda t: ik.solve(chain, t, method="optax", num_seeds=4, pos_tol=5e-3, rot_tol=5e-2))(
         jnp.asarray(target, jnp.float32))
     success = np.asarray(res.success)
-    pos, rot = _errors(fk64(np.asarray(res.q, np.float64)), target)
+    pos, rot = pose_errors(fk64(np.asarray(res.q, np.float64)), target)
     assert np.all(pos[success] <= 5e-3 + 1e-6) and np.all(rot[success] <= 5e-2 + 1e-6)
     np.testing.assert_allclose(np.asarray(res.pos_err), pos, atol=1e-6)
     assert success.mean() >= 0.7  # measured 0.74; LM reaches 1e-5 m on all of these (see test above)
@@ -276,7 +246,7 @@ def test_bad_arguments_raise_before_tracing():
 def test_non_rigid_targets_are_rejected_or_fail():
     """Issue 18: a target whose rotation is not a rotation must not report success."""
     chain = dk.robots.ur5()
-    T = _dh_fk(chain, random_q(chain, 3, seed=8))
+    T = dh_fk(chain, random_q(chain, 3, seed=8))
     scaled, nearly, last_row = T.copy(), T.copy(), T.copy()
     scaled[1, :3, :3] *= 2.0
     nearly[2, :3, :3] *= 1.001

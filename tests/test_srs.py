@@ -4,12 +4,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _reference import ALL_GC, dh_fk, pose
 
 import diffkin as dk
 import diffkin.srs as srs
 
 ARMS = {"iiwa7": srs.iiwa7(), "iiwa14": srs.iiwa14()}
-ALL_GC = np.array([[a, b, c] for a in (1, -1) for b in (1, -1) for c in (1, -1)], dtype=np.float64)
 TABLE = {"iiwa7": (0.34, 0.40, 0.40, 0.126), "iiwa14": (0.36, 0.42, 0.40, 0.126)}
 LIMITS = np.deg2rad([170.0, 120.0, 170.0, 120.0, 170.0, 120.0, 175.0])
 
@@ -70,12 +70,6 @@ def pose_error(T, target):
 
 def in_limits(arm, q):
     return np.all((q >= np.asarray(arm.lower)) & (q <= np.asarray(arm.upper)), axis=-1)
-
-
-def pose(R, p):
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, p
-    return T
 
 
 # ----- model ---------------------------------------------------------------------------------------
@@ -500,19 +494,6 @@ def test_bad_input_is_rejected_on_the_host(call, error, words):
         call(ARMS["iiwa14"])
 
 
-def _np_dh_fk(q, lengths):
-    """Independent NumPy FK of the SRS arm (standard DH, float64)."""
-    d_bs, d_se, d_ew, d_wf = lengths
-    alpha = [-np.pi / 2, np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, np.pi / 2, 0.0]
-    d = [d_bs, 0.0, d_se, 0.0, d_ew, 0.0, d_wf]
-    T = np.eye(4)
-    for i in range(7):
-        ct, st, ca, sa = np.cos(q[i]), np.sin(q[i]), np.cos(alpha[i]), np.sin(alpha[i])
-        T = T @ np.array([[ct, -st * ca, st * sa, 0.0], [st, ct * ca, -ct * sa, 0.0],
-                          [0.0, sa, ca, d[i]], [0.0, 0.0, 0.0, 1.0]])
-    return T
-
-
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_valid_means_valid(dtype):
     """Issue 18: traced gc not +-1, non-rigid or non-finite targets, huge or non-finite psi."""
@@ -538,12 +519,11 @@ def test_valid_means_valid(dtype):
     q, valid = _ik(arm, targets, psis, gcs)  # jitted: gc, target and psi are traced
     q, valid = np.asarray(q), np.asarray(valid)
     assert np.all(np.isfinite(q))
-    lengths = TABLE["iiwa14"]
     for i, (_, _, _, expected) in enumerate(cases):
         if expected is not None:
             assert valid[i] == expected, (i, cases[i][1:])
         if valid[i]:  # valid means the arm reaches the pose (independent float64 FK)
-            reached = _np_dh_fk(q[i].astype(np.float64), lengths)
+            reached = dh_fk(dk.robots.iiwa14(), q[i].astype(np.float64))
             np.testing.assert_allclose(reached, T, atol=1e-4 if dtype == np.float32 else 1e-9)
     # Eager (concrete) calls check gc on the host.
     with pytest.raises(ValueError, match=r"^gc: expected entries \+1 or -1, got 0.5"):

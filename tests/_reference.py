@@ -1,0 +1,95 @@
+"""Independent float64 NumPy references shared by the tests: forward kinematics written from the
+textbook formulas (not from diffkin's kernels), pose errors, and the iiwa's global configurations."""
+
+from __future__ import annotations
+
+import numpy as np
+
+import diffkin as dk
+
+ALL_GC = np.array([[g2, g4, g6] for g2 in (1, -1) for g4 in (1, -1) for g6 in (1, -1)], dtype=np.float64)
+"""``(8, 3)``: the eight global configurations ``(gc2, gc4, gc6)`` of an SRS arm."""
+
+
+def _rot(axis: str, angle: np.ndarray) -> np.ndarray:
+    """``(..., 4, 4)`` rotations by ``angle`` about the x or z axis."""
+    c, s = np.cos(angle), np.sin(angle)
+    M = np.zeros(np.shape(angle) + (4, 4))
+    M[..., 3, 3] = 1.0
+    i, j, k = (0, 1, 2) if axis == "z" else (1, 2, 0)
+    M[..., i, i], M[..., i, j], M[..., j, i], M[..., j, j], M[..., k, k] = c, -s, s, c, 1.0
+    return M
+
+
+def _trans(axis: str, dist: np.ndarray) -> np.ndarray:
+    """``(..., 4, 4)`` translations by ``dist`` along the x or z axis."""
+    M = np.broadcast_to(np.eye(4), np.shape(dist) + (4, 4)).copy()
+    M[..., "xyz".index(axis), 3] = dist
+    return M
+
+
+def dh_fk(chain, q) -> np.ndarray:
+    """FK of a ``DHChain`` as the product of its DH matrices: ``(..., dof) -> (..., 4, 4)`` poses ``T_base_ee``.
+
+    Standard DH multiplies ``Rz(theta) Tz(d) Tx(a) Rx(alpha)`` per joint, modified DH
+    ``Rx(alpha) Tx(a) Rz(theta) Tz(d)``, between ``chain.base`` and ``chain.tool``.
+    """
+    q = np.asarray(q, dtype=np.float64)
+    batch = q.shape[:-1]
+    a, alpha, d, off = (np.asarray(v, dtype=np.float64) for v in (chain.a, chain.alpha, chain.d, chain.theta_offset))
+    T = np.broadcast_to(np.asarray(chain.base, dtype=np.float64), batch + (4, 4)).copy()
+    for i, kind in enumerate(chain.joint_types):
+        theta = q[..., i] + off[i] if kind == "R" else np.full(batch, off[i])
+        di = d[i] + q[..., i] if kind == "P" else np.full(batch, d[i])
+        alpha_i, a_i = np.full(batch, alpha[i]), np.full(batch, a[i])
+        if chain.modified:
+            A = _rot("x", alpha_i) @ _trans("x", a_i) @ _rot("z", theta) @ _trans("z", di)
+        else:
+            A = _rot("z", theta) @ _trans("z", di) @ _trans("x", a_i) @ _rot("x", alpha_i)
+        T = T @ A
+    return T @ np.asarray(chain.tool, dtype=np.float64)
+
+
+def poe_fk(chain, q) -> np.ndarray:
+    """FK of a ``PoEChain``, ``exp([S1] q1) ... exp([Sn] qn) M`` by Rodrigues' formula: ``(..., dof) -> (..., 4, 4)``
+    poses ``T_base_ee``."""
+    q = np.asarray(q, dtype=np.float64)
+    T = np.broadcast_to(np.eye(4), q.shape[:-1] + (4, 4)).copy()
+    for i, S in enumerate(np.asarray(chain.screws, np.float64)):
+        v, w, t = S[:3], S[3:], q[..., i, None, None]
+        E = np.broadcast_to(np.eye(4), q.shape[:-1] + (4, 4)).copy()
+        if chain.joint_types[i] == "R":
+            K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+            E[..., :3, :3] = np.eye(3) + np.sin(t) * K + (1 - np.cos(t)) * K @ K
+            E[..., :3, 3] = ((np.eye(3) * t + (1 - np.cos(t)) * K + (t - np.sin(t)) * K @ K) @ v)
+        else:
+            E[..., :3, 3] = v * q[..., i, None]
+        T = T @ E
+    return T @ np.asarray(chain.home, np.float64)
+
+
+def fk(chain, q) -> np.ndarray:
+    """:func:`dh_fk` or :func:`poe_fk`, whichever fits the chain."""
+    return dh_fk(chain, q) if isinstance(chain, dk.DHChain) else poe_fk(chain, q)
+
+
+def rotation_angle(R) -> np.ndarray:
+    """``(..., 3, 3) -> (...,)``: angle of rotations, ``atan2(|vee(R)|, (tr R - 1) / 2)`` (accurate near 0 and pi)."""
+    R = np.asarray(R, dtype=np.float64)
+    cos = np.clip((np.trace(R, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0)
+    skew = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], -1)
+    return np.arctan2(np.linalg.norm(skew, axis=-1) / 2, cos)
+
+
+def pose_errors(T, T_ref) -> tuple[np.ndarray, np.ndarray]:
+    """Position errors (m) and rotation-angle errors (rad) between ``(..., 4, 4)`` poses, each ``(...,)``."""
+    T, T_ref = np.asarray(T, dtype=np.float64), np.asarray(T_ref, dtype=np.float64)
+    pos = np.linalg.norm(T[..., :3, 3] - T_ref[..., :3, 3], axis=-1)
+    return pos, rotation_angle(np.swapaxes(T_ref[..., :3, :3], -1, -2) @ T[..., :3, :3])
+
+
+def pose(R, p) -> np.ndarray:
+    """``(4, 4)`` pose of a rotation ``(3, 3)`` and a position ``(3,)``."""
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, p
+    return T
