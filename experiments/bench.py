@@ -1,7 +1,6 @@
 """The benchmark suite: diffkin and pytorch-kinematics side by side, one markdown table.
 
     python experiments/bench.py [--quick] [--only fk,jacobian,ik,srs,workspace] [--write | --out PATH]
-    diffkin bench ...                     (the same, from a source checkout)
 
 Times forward kinematics, world Jacobians, batched IK, the iiwa closed form, self-motion sampling
 and reachability maps of the KUKA iiwa14: diffkin's built-in DH model, and pytorch-kinematics on
@@ -13,6 +12,7 @@ CUDA). ``--write`` saves the table as ``experiments/results/<machine>.md``.
 
 from __future__ import annotations
 
+import argparse
 import datetime
 import functools
 import inspect
@@ -260,7 +260,7 @@ def default_path() -> Path:
 
 
 def main(args) -> int:
-    """``diffkin bench``: print the report of ``args.only`` (default all parts; ``args.quick`` sizes) and write it
+    """Print the report of ``args.only`` (default all parts; ``args.quick`` sizes) and write it
     to ``args.out`` (or, with ``args.write``, to :func:`default_path`)."""
     text = report(args.only or tuple(PARTS), args.quick)
     print(text)
@@ -272,7 +272,28 @@ def main(args) -> int:
     return 0
 
 
-if __name__ == "__main__":
-    from diffkin.cli import main as cli_main
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options of :func:`main`; unknown parts and a missing output folder are usage errors (exit status 2)."""
+    parser = argparse.ArgumentParser(description="FK, Jacobians, IK, the iiwa closed form, self-motion sampling and "
+                                     "reachability maps of the iiwa14, timed for diffkin and, where installed and "
+                                     "where it has the feature, pytorch-kinematics; prints one markdown table.")
+    parser.add_argument("--quick", action="store_true", help="small batches and fewer rows")
+    parser.add_argument("--only", metavar="PARTS",
+                        help=f"comma-separated parts to run: {','.join(PARTS)} (default all)")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--write", action="store_true", help="also write the table to experiments/results/<machine>.md")
+    where.add_argument("--out", metavar="PATH", help="also write the table to PATH")
+    args = parser.parse_args(argv)
+    if args.only is not None:
+        args.only = tuple(part.strip() for part in args.only.split(",") if part.strip())
+        unknown = [part for part in args.only if part not in PARTS]
+        if unknown or not args.only:
+            found = f"unknown part {unknown[0]!r}" if unknown else "no part"
+            parser.error(f"--only: {found}: expected a comma-separated list of {', '.join(PARTS)}")
+    if args.out and not Path(args.out).parent.is_dir():
+        parser.error(f"--out: no such directory {str(Path(args.out).parent)!r}")
+    return args
 
-    sys.exit(cli_main(["bench", *sys.argv[1:]]))
+
+if __name__ == "__main__":
+    sys.exit(main(parse_args()))

@@ -12,11 +12,13 @@ import sys
 
 import numpy as np
 import pytest
+from _reference import dh_fk, pose, pose_errors
 
 import diffkin as dk
 from diffkin import cli
 
 DATA = os.path.join(os.path.dirname(__file__), "data")
+TARGET = pose(np.diag([1.0, -1.0, -1.0]), [0.5, 0.1, 0.6])  # --pose 0.5 0.1 0.6 0 1 0 0: a half-turn about x
 
 
 def run(capsys, *argv):
@@ -40,11 +42,11 @@ def assert_user_error(capsys, *argv, match=""):
 def test_help_subprocess():
     res = subprocess.run([sys.executable, "-m", "diffkin", "--help"], capture_output=True, text=True, timeout=60)
     assert res.returncode == 0, res.stderr
-    for command in ("demo", "info", "fk", "ik", "workspace", "bench"):
+    for command in ("demo", "info", "fk", "ik", "workspace", "view"):
         assert command in res.stdout
 
 
-@pytest.mark.parametrize("command", ["demo", "info", "fk", "ik", "workspace", "bench"])
+@pytest.mark.parametrize("command", ["demo", "info", "fk", "ik", "workspace", "view"])
 def test_subcommand_help(capsys, command):
     code, out, _ = run(capsys, command, "--help")
     assert code == 0 and "usage: diffkin " + command in out
@@ -61,23 +63,6 @@ def test_demo_quick(capsys, tmp_path):
         path = tmp_path / "demo" / name
         assert path.is_file() and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert str((tmp_path / "demo").resolve()) in out.strip().splitlines()[-1]
-
-
-def test_dh_fk_numpy_matches_modified_and_prismatic():
-    for chain in (dk.robots.panda(), dk.DHChain.from_table([[0.1, 0.3, 0.2, 0.1], [0.2, -0.5, 0.1, 0.0]], "RP",
-                                                           modified=True)):
-        q = np.random.default_rng(0).uniform(-1, 1, (5, chain.dof))
-        np.testing.assert_allclose(cli.dh_fk_numpy(chain, q), np.asarray(dk.fk(chain, q)), atol=1e-12)
-
-
-def test_quaternion_round_trip():
-    rng = np.random.default_rng(1)
-    for quat in [*rng.normal(size=(20, 4)), [0, 1, 0, 0], [0, 0, 0, 1], [0, 0, 1, 0]]:
-        quat = np.asarray(quat) / np.linalg.norm(quat)
-        quat = -quat if quat[0] < 0 else quat
-        T = cli.pose_from_quaternion([1, 2, 3], quat)
-        np.testing.assert_allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-12)
-        np.testing.assert_allclose(cli.quaternion(T[:3, :3]), quat, atol=1e-12)
 
 
 def test_info(capsys):
@@ -103,28 +88,26 @@ def test_fk_text_json_npy(capsys, tmp_path):
     code, out, _ = run(capsys, "fk", "iiwa14", "--q-file", tmp_path / "q.npy", "--format", "npy",
                        "--output", tmp_path / "T.npy")
     assert code == 0
-    np.testing.assert_allclose(np.load(tmp_path / "T.npy"), cli.dh_fk_numpy(chain, qs), atol=1e-12)
+    np.testing.assert_allclose(np.load(tmp_path / "T.npy"), dh_fk(chain, qs), atol=1e-12)
 
 
 def test_ik_pose(capsys):
     chain = dk.robots.iiwa14()
-    T = cli.pose_from_quaternion([0.5, 0.1, 0.6], [0, 1, 0, 0])
     code, out, _ = run(capsys, "ik", "iiwa14", "--pose", 0.5, 0.1, 0.6, 0, 1, 0, 0)
     assert code == 0 and "success  True" in out
     q = np.array([float(v) for v in out.split("q", 1)[1].split("[")[1].split("]")[0].split()])
-    pos, rot = cli._pose_errors(cli.dh_fk_numpy(chain, q), T)
+    pos, rot = pose_errors(dh_fk(chain, q), TARGET)
     assert pos < 2e-5 and rot < 2e-4
     code, out, _ = run(capsys, "ik", "iiwa14", "--pose", 5, 0, 0, 1, 0, 0, 0)  # out of reach
     assert code == 1 and "success  False" in out
 
 
 def test_ik_all(capsys):
-    T = cli.pose_from_quaternion([0.5, 0.1, 0.6], [0, 1, 0, 0])
     code, out, _ = run(capsys, "ik", "iiwa14", "--pose", 0.5, 0.1, 0.6, 0, 1, 0, 0, "--all", "--samples", 200)
     assert code == 0 and "200 of 200 valid" in out
     rows = [line for line in out.splitlines() if " yes " in line]
     q = np.array([[float(v) for v in r.split("[")[1].split("]")[0].split()] for r in rows])
-    assert cli._pose_errors(cli.dh_fk_numpy(dk.robots.iiwa14(), q), T)[0] < 1e-5  # printed to 6 digits
+    assert pose_errors(dh_fk(dk.robots.iiwa14(), q), TARGET)[0].max() < 1e-5  # printed to 6 digits
     code, out, _ = run(capsys, "ik", "iiwa14", "--pose", 0.5, 0.1, 0.6, 0, 1, 0, 0, "--all", "--psi", 0.3,
                        "--gc", 1, -1, 1)
     assert code == 0 and "1 of 1 valid" in out and "+1 -1 +1" in out
@@ -145,34 +128,6 @@ def test_cli_does_not_import_jax():
     code = "import sys, diffkin.cli; assert 'jax' not in sys.modules, 'jax imported'; print(diffkin.fk.__name__)"
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert res.returncode == 0 and res.stdout.strip() == "fk", res.stderr
-
-
-@pytest.mark.slow
-def test_bench_quick(capsys, tmp_path):
-    code, out, err = run(capsys, "bench", "--quick", "--only", "fk", "--out", tmp_path / "bench.md")
-    assert code == 0, err
-    assert "| work | batch | dtype | diffkin | pytorch-kinematics | pk / diffkin | notes |" in out
-    rows = [line for line in out.splitlines() if line.startswith("| FK |")]
-    assert [r.split(" | ")[1:3] for r in rows] == [[b, d] for b in ("1", "1,000") for d in ("float32", "float64")]
-    assert all(re.search(r"\| (\*\*[\d.]+x\*\*|\d+x \(implausible: busy machine\? rerun\)) \|", r) for r in rows), rows
-    assert (tmp_path / "bench.md").read_text().strip() in out
-
-
-@pytest.mark.slow
-def test_bench_without_pytorch_kinematics(capsys, monkeypatch):
-    monkeypatch.syspath_prepend(str(cli.experiments_dir()))
-    import _bench
-
-    monkeypatch.setattr(_bench, "pk", None)
-    code, out, err = run(capsys, "bench", "--quick", "--only", "fk")
-    assert code == 0, err
-    rows = [line for line in out.splitlines() if line.startswith("| FK |")]
-    assert len(rows) == 4 and all("| n/a | n/a |" in r for r in rows), rows
-
-
-def test_bench_needs_source_checkout(capsys, monkeypatch, tmp_path):
-    monkeypatch.setattr(cli, "experiments_dir", lambda: tmp_path)
-    assert_user_error(capsys, "bench", match="source checkout")
 
 
 @pytest.mark.parametrize("argv, match", [
@@ -199,9 +154,6 @@ def test_bench_needs_source_checkout(capsys, monkeypatch, tmp_path):
     (["workspace", "iiwa14", "--samples", "2.5", "--out", "m.npz"], "invalid integer: '2.5'"),
     (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--pos-tol", "-1"], "non-negative"),
     (["ik", "iiwa14", "--pose", "0.5", "0", "0.5", "1", "0", "0", "0", "--all", "--rot-tol", "0.1"], "--all"),
-    (["bench", "--only", "fk,nope"], "unknown part 'nope'"),
-    (["bench", "--write", "--out", "x.md"], "not allowed with"),
-    (["bench", "--out", "/nonexistent/dir/b.md"], "no such directory"),
     (["frobnicate"], "invalid choice"),
     ([], "required"),
 ])
@@ -295,17 +247,6 @@ def test_missing_optional_dependency_is_one_line(capsys, monkeypatch, tmp_path, 
     assert module in line and not (tmp_path / "m.npz").exists()
 
 
-def test_bench_without_a_dependency_is_one_line(capsys, monkeypatch):
-    monkeypatch.setitem(sys.modules, "_bench", None)  # as if experiments/_bench.py could not import
-    assert_user_error(capsys, "bench", "--quick", match="bench needs _bench")
-
-
-def test_implausible_bench_ratios_are_marked():
-    bench = cli._load_bench()
-    assert bench._ratio(42.0) == "**42x**"
-    assert bench._ratio(850.0) == "850x (implausible: busy machine? rerun)"
-
-
 def test_cache_dir_choice(monkeypatch, tmp_path):
     monkeypatch.delenv("DIFFKIN_CACHE_DIR", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
@@ -353,8 +294,6 @@ def test_without_optional_dependencies_subprocess(tmp_path):
         assert res.returncode == 2 and res.stderr.count("\n") == 1 and f"diffkin[{extra}]" in res.stderr, res.stderr
     res = bare("workspace", "iiwa14", "--samples", 1000, "--voxel", 0.2, "--out", "m.npz")
     assert res.returncode == 0 and (tmp_path / "m.npz").is_file(), res.stderr
-    res = bare("bench", "--quick", "--only", "fk")
-    assert res.returncode == 0 and "| FK |" in res.stdout, res.stderr[-2000:]
 
 
 @pytest.mark.slow

@@ -1,0 +1,90 @@
+"""The jitted functions the commands share, compiled once per robot and shape: batched IK, the iiwa closed form."""
+
+from __future__ import annotations
+
+import functools
+import sys
+
+import numpy as np
+
+from diffkin.cli._robots import chain_for, jax_x64
+
+IK_CHUNK = 64  # targets per jitted IK call: one compilation serves every batch size
+
+
+@functools.lru_cache(maxsize=16)
+def _ik_fn(key: tuple, num_seeds: int):
+    """A jitted ``dk.ik.solve`` of one robot on ``IK_CHUNK`` targets (compiled once per target kind).
+
+    Its arguments are ``(targets, key, q0 or None, pos_tol, rot_tol)``; the tolerances are traced.
+    """
+    jax = jax_x64()
+    import diffkin as dk
+
+    chain = chain_for(key)
+    return jax.jit(lambda T, k, q0, pos_tol, rot_tol: dk.ik.solve(chain, T, key=k, q0=q0, num_seeds=num_seeds,
+                                                                   pos_tol=pos_tol, rot_tol=rot_tol))
+
+
+def progress_bar(total: int, show: bool | None, **kwargs):
+    """A tqdm progress bar on stderr, or ``None``: without tqdm, ``show=False``, or (``None``) off a terminal."""
+    if show is False or (show is None and not sys.stderr.isatty()):
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    return tqdm(total=total, file=sys.stderr, **kwargs)
+
+
+def solve_ik(key: tuple, targets: np.ndarray, *, num_seeds: int = 32, q0=None, seed: int = 1,
+             pos_tol: float = 1e-5, rot_tol: float = 1e-4, progress: bool | None = False):
+    """Batched IK of ``(n, 4, 4)`` or ``(n, 3)`` targets in fixed-size jitted chunks.
+
+    Args:
+        key: the robot (:func:`diffkin.cli._robots.robot_key`).
+        targets: ``(n, 4, 4)`` poses ``T_base_ee`` or ``(n, 3)`` positions (m) in the chain's base frame.
+        progress: a tqdm bar over the targets; ``None``: only on a terminal.
+
+    Returns:
+        ``dict`` of numpy arrays ``q (n, dof)``, ``success``, ``pos_err``, ``rot_err``, ``iters`` ``(n,)``.
+    """
+    jax = jax_x64()
+    targets = np.asarray(targets, dtype=np.float64)
+    n = targets.shape[0]
+    fn = _ik_fn(key, num_seeds)
+    q0 = None if q0 is None else np.asarray(q0, dtype=np.float64)
+    tolerances = np.float64(pos_tol), np.float64(rot_tol)
+    bar = progress_bar(n, progress, desc="IK", unit="target") if n > IK_CHUNK else None
+    parts = []
+    for c, start in enumerate(range(0, n, IK_CHUNK)):
+        chunk = targets[start:start + IK_CHUNK]
+        pad = IK_CHUNK - chunk.shape[0]
+        chunk = np.concatenate([chunk, np.repeat(chunk[-1:], pad, axis=0)]) if pad else chunk
+        k = jax.random.fold_in(jax.random.key(seed), c)
+        res = fn(chunk, k, q0, *tolerances)
+        parts.append({f: np.asarray(getattr(res, f))[:IK_CHUNK - pad] for f in ("q", "success", "pos_err",
+                                                                              "rot_err", "iters")})
+        if bar is not None:
+            bar.update(IK_CHUNK - pad)
+    if bar is not None:
+        bar.close()
+    return {f: np.concatenate([p[f] for p in parts]) for f in parts[0]}
+
+
+@functools.lru_cache(maxsize=4)
+def srs_fns(name: str):
+    """The SRS arm of ``name`` and jitted ``sample_self_motion`` (by sample count), ``ik``, ``arm_angle``."""
+    jax = jax_x64()
+    import diffkin as dk
+
+    arm = getattr(dk.srs, name)()
+
+    @functools.lru_cache(maxsize=8)
+    def sampler(n: int, with_gc: bool):
+        if with_gc:
+            return jax.jit(lambda T, gc: dk.srs.sample_self_motion(arm, T, n, gc=gc))
+        return jax.jit(lambda T: dk.srs.sample_self_motion(arm, T, n))
+
+    return (arm, sampler, jax.jit(lambda T, psi, gc: dk.srs.ik(arm, T, psi, gc)),
+            jax.jit(lambda q: dk.srs.arm_angle(arm, q)))

@@ -1,0 +1,93 @@
+"""The robots the commands work on: built-in names and URDF/MJCF files, loaded once per process."""
+
+from __future__ import annotations
+
+import functools
+import os
+from pathlib import Path
+
+from diffkin.cli._errors import CLIError
+
+ROBOTS = ("iiwa7", "iiwa14", "panda", "ur5", "puma560")
+SRS_ROBOTS = ("iiwa7", "iiwa14")
+
+
+def jax_x64():
+    """Import jax with float64 enabled (every command computes in float64)."""
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    return jax
+
+
+def robot_key(spec: str, end_link: str | None, base_link: str | None) -> tuple:
+    """A hashable key of a robot argument (files by absolute path and modification time)."""
+    if spec in ROBOTS:
+        if end_link is not None or base_link is not None:
+            raise CLIError(f"--end-link/--base-link apply to URDF and MJCF files, not to the built-in robot {spec!r}")
+        return (spec,)
+    path = Path(spec)
+    if not path.is_file():
+        raise CLIError(f"unknown robot {spec!r}: expected one of {', '.join(ROBOTS)} or a URDF or MJCF file path")
+    if not os.access(path, os.R_OK):
+        raise CLIError(f"cannot read {spec!r}")
+    return (str(path.resolve()), path.stat().st_mtime_ns, end_link, base_link)
+
+
+@functools.lru_cache(maxsize=16)
+def _tree_for(path: str, _mtime: int):
+    """The whole robot (``dk.Robot``) of a URDF or MJCF file."""
+    import diffkin as dk
+
+    return dk.load_robot(path)
+
+
+@functools.lru_cache(maxsize=16)
+def chain_for(key: tuple):
+    """The chain of a :func:`robot_key`: a built-in robot, or one path of a file's tree."""
+    import diffkin as dk
+
+    if len(key) == 1:
+        return getattr(dk.robots, key[0])()
+    path, mtime, end_link, base_link = key
+    robot = _tree_for(path, mtime)
+    for flag, name in (("--end-link", end_link), ("--base-link", base_link)):
+        if name is not None and name not in robot.frame_names:
+            raise CLIError(f"{flag}: unknown link {name!r}; the robot's links and frames are {list(robot.frame_names)}")
+    return robot.chain(end_link or single_end(robot), base_link)
+
+
+def single_end(robot) -> str:
+    """The end frame of a robot whose tree has one leaf body: its last frame (the deepest fixed link)."""
+    parents = set(robot.parents)
+    leaves = [b for b in range(len(robot.parents) + 1) if b not in parents and b > 0] or [0]
+    if len(leaves) > 1:
+        ends = [robot.frame_names[max(f for f, b in enumerate(robot.frame_bodies) if b == leaf)] for leaf in leaves]
+        raise CLIError(f"the robot is a tree with {len(leaves)} branches: choose --end-link, e.g. one of {ends}")
+    return robot.frame_names[max(f for f, b in enumerate(robot.frame_bodies) if b == leaves[0])]
+
+
+def tree(spec: str):
+    """The ``dk.Robot`` of a URDF or MJCF path (``None`` for a built-in robot name)."""
+    key = robot_key(spec, None, None)
+    return None if len(key) == 1 else _tree_for(key[0], key[1])
+
+
+def load_robot(spec: str, end_link: str | None = None, base_link: str | None = None):
+    """The chain of a built-in robot name, or of one path of a URDF or MJCF file's tree.
+
+    Args:
+        spec: ``iiwa7``, ``iiwa14``, ``panda``, ``ur5``, ``puma560`` or a URDF/MJCF file path.
+        end_link: end frame of the chain (default: the last frame of the single leaf).
+        base_link: base frame of the chain (default: the root).
+
+    Returns:
+        A ``DHChain`` (built-in robots) or ``PoEChain`` (``robot.chain(end_link, base_link)``).
+
+    Raises:
+        CLIError: an unknown name, a missing or unreadable file, link options with a built-in robot,
+            a tree with several leaves and no ``end_link``.
+        ValueError: a malformed file (from :func:`diffkin.load_robot`) or an unknown frame.
+    """
+    jax_x64()
+    return chain_for(robot_key(spec, end_link, base_link))
