@@ -1,5 +1,11 @@
-"""Checks shared by the functions: host-side input conversion (raising), and traceable validity checks
-(no raising: they give a boolean per problem)."""
+"""Checks shared by the functions: host-side argument checks (raising a TypeError or ValueError that
+names the argument), and traceable validity checks (no raising: they give a boolean per problem).
+
+Host side: :func:`instance` (the type of a model or an arm), :func:`positive_int` (counts),
+:func:`real_array` (numbers: ``q``, ``psi``, targets), :func:`pose_array` (``(..., 4, 4)`` poses),
+:func:`sign_array` (``+-1`` entries, checked when known), :func:`broadcast_batch` (batch shapes).
+The model constructors' field checks are in :mod:`diffkin.models._validate`.
+"""
 
 from __future__ import annotations
 
@@ -7,6 +13,9 @@ import functools
 
 import jax
 import jax.numpy as jnp
+import numpy as np
+
+from diffkin._xla import is_concrete
 
 
 def rigid_tol(dtype) -> float:
@@ -32,17 +41,70 @@ def rigid_poses(T: jax.Array) -> jax.Array:
     return worst <= tol  # false for NaN
 
 
-def real_array(value, name: str, what: str) -> jax.Array:
+def instance(value, types: type | tuple[type, ...], name: str, expected: str) -> None:
+    """Raise ``TypeError("{name}: expected {expected}, got <type>")`` unless ``value`` is one of ``types``."""
+    if not isinstance(value, types):
+        raise TypeError(f"{name}: expected {expected}, got {type(value).__name__}")
+
+
+def positive_int(value, name: str, what: str = "a positive int") -> int:
+    """``value`` as an ``int >= 1`` (Python or NumPy ints; not bools).
+
+    Raises:
+        TypeError: not an int.
+        ValueError: ``value < 1``.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name}: expected {what}, got {type(value).__name__}")
+    if value < 1:
+        raise ValueError(f"{name}: expected {what}, got {value}")
+    return int(value)
+
+
+def real_array(value, name: str, what: str = "numbers") -> jax.Array:
     """``value`` as a real floating array (integers cast to the default float); raises on the host.
 
     Raises:
         ValueError: numbers beyond the float range.
-        TypeError: bool or complex values.
+        TypeError: not numbers, or bool or complex values.
     """
     try:
         x = jnp.asarray(value)
     except OverflowError as err:
         raise ValueError(f"{name}: expected {what} within the float range, got {value!r:.80}") from err
+    except TypeError as err:
+        raise TypeError(f"{name}: expected an array of {what}, got {type(value).__name__}") from err
     if x.dtype == bool or jnp.issubdtype(x.dtype, jnp.complexfloating):
         raise TypeError(f"{name}: expected real {what}, got dtype {x.dtype}")
     return x if jnp.issubdtype(x.dtype, jnp.floating) else x.astype(jnp.result_type(float))
+
+
+def pose_array(value, name: str = "target") -> jax.Array:
+    """``value`` as a real floating array of ``(..., 4, 4)`` homogeneous poses (see :func:`real_array`)."""
+    T = real_array(value, name, "poses")
+    if T.ndim < 2 or T.shape[-2:] != (4, 4):
+        raise ValueError(f"{name}: expected shape (..., 4, 4) homogeneous poses, got {T.shape}")
+    return T
+
+
+def sign_array(value, name: str, size: int, what: str) -> jax.Array:
+    """``(..., size)`` array of ``+1``/``-1`` entries (``what`` names them); the values are checked when concrete."""
+    x = jnp.asarray(value)
+    if x.ndim == 0 or x.shape[-1] != size:
+        raise ValueError(f"{name}: expected shape (..., {size}) with entries {what}, got {x.shape}")
+    if is_concrete(x):
+        values = np.asarray(x)
+        bad = np.argwhere(np.abs(values) != 1)
+        if bad.size:
+            index = tuple(int(i) for i in bad[0])
+            raise ValueError(f"{name}: expected entries +1 or -1, got {values[index]} at index {index}")
+    return x
+
+
+def broadcast_batch(**shapes: tuple[int, ...]) -> tuple[int, ...]:
+    """Broadcast the named batch shapes, or a ValueError listing them."""
+    try:
+        return tuple(np.broadcast_shapes(*shapes.values()))
+    except ValueError as err:
+        listed = ", ".join(f"{k} {v}" for k, v in shapes.items())
+        raise ValueError(f"expected batch shapes that broadcast together, got {listed}") from err

@@ -19,11 +19,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffkin._trig import sincos
+from diffkin import _trig
+from diffkin._trig import atan2
+from diffkin._xla import is_concrete, materialize  # noqa: F401 (materialize: diffkin.ik imports it from here)
 
 Entry = jax.Array | float
-Vec3 = tuple[Entry, Entry, Entry]
-Mat3 = tuple[Vec3, Vec3, Vec3]
+# Three entries, and three rows of three. Variable-length tuple types: the entries are built by
+# comprehensions (``tuple(... for i in range(3))``), which a type checker types as ``tuple[X, ...]``.
+Vec3 = tuple[Entry, ...]
+Mat3 = tuple[Vec3, ...]
 
 _SNAP = 1e-12  # constants this close to 0 or +-1 are taken as exactly that
 
@@ -33,11 +37,6 @@ class Rigid(NamedTuple):
 
     R: Mat3
     p: Vec3
-
-
-def is_concrete(x) -> bool:
-    """Whether ``x`` holds known values at trace time (not a tracer)."""
-    return not isinstance(x, jax.core.Tracer)
 
 
 def constant(x) -> Entry:
@@ -92,7 +91,7 @@ def scale(s: Entry, v: Vec3) -> Vec3:
 
 
 def vadd(*vs: Vec3) -> Vec3:
-    return tuple(add(*(v[i] for v in vs)) for i in range(3))  # type: ignore[return-value]
+    return tuple(add(*(v[i] for v in vs)) for i in range(3))
 
 
 def column(R: Mat3, j: int) -> Vec3:
@@ -106,7 +105,7 @@ def rotate(R: Mat3, v: Vec3) -> Vec3:
 
 def matmul(A: Mat3, B: Mat3) -> Mat3:
     cols = [column(B, j) for j in range(3)]
-    return tuple(tuple(dot(A[i], cols[j]) for j in range(3)) for i in range(3))  # type: ignore[return-value]
+    return tuple(tuple(dot(A[i], cols[j]) for j in range(3)) for i in range(3))
 
 
 def compose(A: Rigid, B: Rigid) -> Rigid:
@@ -116,7 +115,7 @@ def compose(A: Rigid, B: Rigid) -> Rigid:
 
 def inverse(A: Rigid) -> Rigid:
     Rt = tuple(column(A.R, j) for j in range(3))
-    return Rigid(Rt, scale(-1.0, rotate(Rt, A.p)))  # type: ignore[arg-type]
+    return Rigid(Rt, scale(-1.0, rotate(Rt, A.p)))
 
 
 IDENTITY = Rigid(((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), (0.0, 0.0, 0.0))
@@ -127,13 +126,13 @@ def from_matrix(T) -> Rigid:
     if is_concrete(T) and np.ndim(T) == 2:
         T = np.asarray(T, dtype=np.float64)  # index on the host: indexing a jax Array under jit stages it out
         return Rigid(
-            tuple(tuple(constant(T[i, j]) for j in range(3)) for i in range(3)),  # type: ignore[arg-type]
-            tuple(constant(T[i, 3]) for i in range(3)),  # type: ignore[arg-type]
+            tuple(tuple(constant(T[i, j]) for j in range(3)) for i in range(3)),
+            tuple(constant(T[i, 3]) for i in range(3)),
         )
     T = jnp.asarray(T)
     return Rigid(
-        tuple(tuple(T[..., i, j] for j in range(3)) for i in range(3)),  # type: ignore[arg-type]
-        tuple(T[..., i, 3] for i in range(3)),  # type: ignore[arg-type]
+        tuple(tuple(T[..., i, j] for j in range(3)) for i in range(3)),
+        tuple(T[..., i, 3] for i in range(3)),
     )
 
 
@@ -141,7 +140,7 @@ def vector(x) -> Vec3:
     """Split a ``(..., 3)`` vector into entries, folding it if it is a concrete constant."""
     if is_concrete(x) and np.ndim(x) == 1:
         x = np.asarray(x, dtype=np.float64)
-        return tuple(constant(x[i]) for i in range(3))  # type: ignore[return-value]
+        return tuple(constant(x[i]) for i in range(3))
     x = jnp.asarray(x)
     return (x[..., 0], x[..., 1], x[..., 2])
 
@@ -150,19 +149,6 @@ def stack(entries: list[Entry], shape: tuple[int, ...], dtype, axis: int = -1) -
     """Entries broadcast to ``shape`` and stacked on a new axis (the last by default)."""
     arrays = [jnp.broadcast_to(jnp.asarray(e, dtype=dtype), shape) for e in entries]
     return jnp.stack(arrays, axis=axis)
-
-
-def materialize(entries: list[Entry]) -> jax.Array:
-    """The entries computed once: ``(len(entries),) + batch`` stacked behind an optimization barrier.
-
-    XLA's CPU fusion duplicates an elementwise producer into every consumer kernel; in a deep
-    computation with much reuse (a forward pass, a Cholesky factorisation) that recomputes the
-    same values many times over. Materialising the entries that later stages share avoids it
-    (an unrolled 6x6 damped least-squares solve over a batch runs ~9x faster).
-    """
-    shape = batch_shape(*entries)
-    dtype = jnp.result_type(*(e for e in entries if not isinstance(e, float)))
-    return jax.lax.optimization_barrier(stack(entries, shape, dtype, axis=0))
 
 
 def _matrix_entries(A: Rigid) -> list[Entry]:
@@ -187,7 +173,7 @@ def to_matrices(poses: list[Rigid], shape: tuple[int, ...], dtype) -> jax.Array:
 
 
 def skew(w: Vec3) -> Mat3:
-    return ((0.0, -w[2], w[1]), (w[2], 0.0, -w[0]), (-w[1], w[0], 0.0))  # type: ignore[return-value]
+    return ((0.0, -w[2], w[1]), (w[2], 0.0, -w[0]), (-w[1], w[0], 0.0))
 
 
 def screw_exp(v: Vec3, w: Vec3, theta: jax.Array) -> Rigid:
@@ -203,11 +189,11 @@ def screw_exp(v: Vec3, w: Vec3, theta: jax.Array) -> Rigid:
     W2 = matmul(W, W)
     Wv, W2v = rotate(W, v), rotate(W2, v)
     if all(isinstance(x, float) for x in w):
-        n2 = sum(x * x for x in w)  # type: ignore[operator]
+        n2 = sum(x * x for x in w)
         if n2 == 0.0:
             return Rigid(IDENTITY.R, scale(theta, v))
         if abs(n2 - 1.0) < _SNAP:
-            c, s = cos_sin(theta)
+            s, c = sincos(theta)
             A, B, C = s, add(1.0, -c), add(theta, -s)
         else:
             A, B, C = _exp_coefficients(jnp.asarray(n2), theta)
@@ -218,7 +204,53 @@ def screw_exp(v: Vec3, w: Vec3, theta: jax.Array) -> Rigid:
         for i in range(3)
     )
     p = vadd(scale(theta, v), scale(B, Wv), scale(C, W2v))
-    return Rigid(R, p)  # type: ignore[arg-type]
+    return Rigid(R, p)
+
+
+def _norm(v: Vec3) -> jax.Array:
+    """``|v|`` with a zero (not NaN) derivative at ``v = 0``."""
+    sq = dot(v, v)
+    nonzero = sq > 0
+    return jnp.where(nonzero, jnp.sqrt(jnp.where(nonzero, sq, 1.0)), 0.0)
+
+
+def _angle_terms(M: Mat3) -> tuple[Vec3, jax.Array, jax.Array]:
+    """``vee(M) = sin(theta) axis``, ``|vee(M)| = sin(theta)`` and ``cos(theta) = (tr M - 1) / 2`` of a rotation."""
+    v = tuple(mul(0.5, add(M[i][j], -M[j][i])) for i, j in ((2, 1), (0, 2), (1, 0)))
+    return v, _norm(v), mul(0.5, add(M[0][0], M[1][1], M[2][2], -1.0))
+
+
+def rotation_angle(M: Mat3) -> jax.Array:
+    """Angle ``theta`` in ``[0, pi]`` of the rotation ``M`` (entries): ``atan2(|vee(M)|, (tr M - 1) / 2)``.
+
+    Accurate near 0 and pi (``arccos`` of the trace is not: it loses half the digits near 0);
+    a finite derivative everywhere (zero at the identity, where ``theta`` has no two-sided one).
+    """
+    _, sin_, cos_ = _angle_terms(M)
+    return atan2(sin_, cos_)
+
+
+def so3_log(M: Mat3) -> tuple[Vec3, jax.Array]:
+    """Rotation vector ``w`` with ``M = exp([w])``, ``|w| <= pi``, and its angle ``theta = |w|``, elementwise.
+
+    ``w = theta / sin(theta) vee(M)`` (a series below 1e-4 rad). Near a half-turn (``cos theta <
+    -0.99``) the axis is the column of ``(M + M^T)/2 - cos(theta) I = (1 - cos theta) a a^T`` of
+    largest diagonal entry, normalised and oriented by ``vee(M)``. Written with selects, not gathers,
+    so that XLA fuses it over the batch; finite derivatives for every rotation.
+    """
+    v, sin_, cos_ = _angle_terms(M)
+    theta = atan2(sin_, cos_)
+    small = theta < 1e-4
+    factor = jnp.where(small, 1.0 + theta * theta / 6.0, theta / jnp.where(small, 1.0, sin_))
+    S = [[add(mul(0.5, add(M[i][j], M[j][i])), -cos_ if i == j else 0.0) for j in range(3)] for i in range(3)]
+    first = (S[0][0] >= S[1][1]) & (S[0][0] >= S[2][2])
+    second = S[1][1] >= S[2][2]
+    col = [jnp.where(first, S[i][0], jnp.where(second, S[i][1], S[i][2])) for i in range(3)]
+    norm = jnp.sqrt(jnp.maximum(col[0] * col[0] + col[1] * col[1] + col[2] * col[2], jnp.finfo(theta.dtype).tiny))
+    signed = jnp.where(col[0] * v[0] + col[1] * v[1] + col[2] * v[2] < 0, -theta, theta) / norm
+    near_pi = cos_ < -0.99
+    w = tuple(jnp.where(near_pi, signed * col[i], factor * v[i]) for i in range(3))
+    return w, theta
 
 
 def _exp_coefficients(n2, theta):
@@ -226,7 +258,7 @@ def _exp_coefficients(n2, theta):
     small = n2 < 1e-8
     n = jnp.sqrt(jnp.where(small, 1.0, n2))
     x = n * theta
-    s, c = sincos(x)
+    s, c = _trig.sincos(x)
     # The series below multiply an axis that is exactly zero for a prismatic joint: evaluated there at a
     # clipped theta, so that theta^5 (which overflows from |theta| ~ 1.8e61 m in float64, 5e7 m in
     # float32) cannot make inf * 0 = NaN. Elsewhere (and for every |theta| below the clip) unchanged.
@@ -263,16 +295,15 @@ class Frames(NamedTuple):
     screws: list[tuple[Vec3, Vec3]]
 
 
-def cos_sin(x: Entry) -> tuple[Entry, Entry]:
-    """``(cos x, sin x)``, as snapped Python floats for a constant angle."""
+def sincos(x: Entry) -> tuple[Entry, Entry]:
+    """``(sin x, cos x)`` of an entry (as :func:`diffkin._trig.sincos`), as snapped Python floats for a constant."""
     if isinstance(x, float):
-        return constant(np.cos(x)), constant(np.sin(x))
-    s, c = sincos(x)
-    return c, s
+        return constant(np.sin(x)), constant(np.cos(x))
+    return _trig.sincos(x)
 
 
-def entries(x) -> list[Entry]:
-    """The entries of a ``(n,)`` model parameter: snapped floats if concrete, else traced slices."""
+def per_joint(x) -> list[Entry]:
+    """The values of a ``(n,)`` model parameter, one per joint: snapped floats if concrete, else traced slices."""
     if is_concrete(x):
         return [constant(v) for v in np.asarray(x, dtype=np.float64)]
     return [x[..., i] for i in range(x.shape[-1])]

@@ -9,6 +9,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from diffkin import _rigid as rg
+
 
 def skew(w: jax.Array) -> jax.Array:
     """``(..., 3) -> (..., 3, 3)``: the matrix ``[w]`` with ``[w] x = w x x``."""
@@ -38,18 +40,18 @@ def adjoint(T: jax.Array) -> jax.Array:
     return jnp.concatenate([top, bottom], -2)
 
 
-def _safe_norm(x: jax.Array) -> jax.Array:
-    """Euclidean norm over the last axis with a zero (not NaN) derivative at zero."""
-    sq = jnp.sum(x * x, -1)
-    nonzero = sq > 0
-    return jnp.where(nonzero, jnp.sqrt(jnp.where(nonzero, sq, 1.0)), 0.0)
+def _entries(R: jax.Array) -> rg.Mat3:
+    """The nine entries ``(..., )`` of ``(..., 3, 3)`` matrices."""
+    R = jnp.asarray(R)
+    return tuple(tuple(R[..., i, j] for j in range(3)) for i in range(3))
 
 
 def rotation_angle(R: jax.Array) -> jax.Array:
-    """``(..., 3, 3) -> (...,)``: angle in ``[0, pi]`` of rotations, accurate near 0 and pi."""
-    sin_ = _safe_norm(vee(R))
-    cos_ = 0.5 * (jnp.trace(R, axis1=-2, axis2=-1) - 1.0)
-    return jnp.arctan2(sin_, cos_)
+    """``(..., 3, 3) -> (...,)``: angle in ``[0, pi]`` of rotations, accurate near 0 and pi.
+
+    The matrix form of :func:`diffkin._rigid.rotation_angle`.
+    """
+    return rg.rotation_angle(_entries(R))
 
 
 def so3_log(R: jax.Array) -> jax.Array:
@@ -57,25 +59,10 @@ def so3_log(R: jax.Array) -> jax.Array:
 
     Finite for every rotation: near the identity the series of ``theta / sin(theta)`` is used;
     near a half-turn the axis comes from the symmetric part ``(R + R^T)/2 = I + (1 - cos) a a^T``.
+    The matrix form of :func:`diffkin._rigid.so3_log`.
     """
-    w_sin = vee(R)  # sin(theta) * axis
-    sin_ = _safe_norm(w_sin)
-    cos_ = 0.5 * (jnp.trace(R, axis1=-2, axis2=-1) - 1.0)
-    theta = jnp.arctan2(sin_, cos_)
-    # Regular and small angles: w = theta / sin(theta) * vee(R).
-    small = theta < 1e-4
-    safe_sin = jnp.where(small, 1.0, sin_)
-    factor = jnp.where(small, 1.0 + theta * theta / 6.0, theta / safe_sin)
-    regular = factor[..., None] * w_sin
-    # Near pi: the axis from the largest diagonal column of (R + R^T)/2 - cos I.
-    S = 0.5 * (R + jnp.swapaxes(R, -1, -2)) - cos_[..., None, None] * jnp.eye(3, dtype=R.dtype)
-    k = jnp.argmax(jnp.diagonal(S, axis1=-2, axis2=-1), axis=-1)
-    col = jnp.take_along_axis(S, k[..., None, None], axis=-1)[..., 0]
-    axis = col / jnp.maximum(_safe_norm(col), 1e-30)[..., None]
-    # Orient the axis with the (small but informative) skew part.
-    sign = jnp.where(jnp.sum(axis * w_sin, -1) < 0, -1.0, 1.0)
-    near_pi = cos_ < -0.99
-    return jnp.where(near_pi[..., None], (sign * theta)[..., None] * axis, regular)
+    w, _ = rg.so3_log(_entries(R))
+    return jnp.stack(w, -1)
 
 
 def rotation_from_quaternion(quat: jax.Array) -> jax.Array:

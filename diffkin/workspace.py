@@ -42,7 +42,10 @@ from jax.sharding import PartitionSpec as P
 
 from diffkin import _rigid as rg
 from diffkin import kinematics
+from diffkin._checks import instance, positive_int
 from diffkin._trig import atan2, sincos
+from diffkin._xla import opaque_index
+from diffkin.models import forward
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain, to_poe
 from diffkin.models.robot import Robot
@@ -133,28 +136,18 @@ class ReachabilityMap:
         )
 
 
-def _positive_int(value, name: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name}: expected a positive int, got {type(value).__name__}")
-    if value < 1:
-        raise ValueError(f"{name}: expected a positive int, got {value}")
-    return int(value)
-
-
 def _as_chain(chain):
     """A chain as given, or the chain of a ``(robot, frame_name)`` pair (:meth:`Robot.chain` from the root)."""
     if isinstance(chain, tuple) and len(chain) == 2 and isinstance(chain[0], Robot):
         robot, frame = chain
         return robot.chain(frame)
-    if not isinstance(chain, (DHChain, PoEChain)):
-        raise TypeError(f"chain: expected a DHChain, PoEChain or (Robot, frame_name), got {type(chain).__name__}")
+    instance(chain, (DHChain, PoEChain), "chain", "a DHChain, PoEChain or (Robot, frame_name)")
     return chain
 
 
 def _joint_ranges(chain) -> tuple[np.ndarray, np.ndarray]:
     """``(lo, hi)`` sampling ranges: the limits, one turn ``[-pi, pi)`` for unlimited revolute joints."""
-    if not isinstance(chain, (DHChain, PoEChain, Robot)):
-        raise TypeError(f"chain: expected a DHChain, PoEChain or Robot, got {type(chain).__name__}")
+    forward.check(chain)
     lo, hi = np.asarray(chain.lower, np.float64), np.asarray(chain.upper, np.float64)
     for i, kind in enumerate(chain.actuated_types if isinstance(chain, Robot) else chain.joint_types):
         if kind == "P" and not (np.isfinite(lo[i]) and np.isfinite(hi[i])):
@@ -186,7 +179,7 @@ def sample_configs(chain, n: int, key, *, dtype=None) -> jax.Array:
         ``(n, dof)`` joint values, radians (revolute) or metres (prismatic).
     """
     lo, hi = _joint_ranges(chain)
-    n = _positive_int(n, "n")
+    n = positive_int(n, "n")
     return _uniform(key, lo, hi, n, jnp.dtype(dtype or jnp.result_type(float))).T
 
 
@@ -336,10 +329,7 @@ def _compiled(chain_key: _ChainKey, shape: tuple[int, int, int], n_bins: int, ch
         flat, inside = _flat_index(p, origin, inv_voxel, shape)
         slot = jnp.where(inside & (jnp.arange(chunk) < n_valid), flat * n_bins + _orientation_bin(R, n_bins // 6),
                          n_slots)  # out of range: dropped by the scatters
-        # An identity (slot <= n_slots) by a runtime value, which XLA neither folds nor duplicates
-        # into its consumers: the forward kinematics is evaluated once for the three scatters
-        # instead of once per coordinate and per index array.
-        slot = jax.lax.rem(slot, n_slots + 1)
+        slot = opaque_index(slot, n_slots + 1)  # one forward pass for the three scatters, not one per scatter
         m = _manipulability(frames, chain.dof).astype(dtype)
         counts = counts.reshape(-1).at[slot // n_bins].add(1, mode="drop").reshape(counts.shape)
         best = best.reshape(-1).at[slot // n_bins].max(m, mode="drop").reshape(best.shape)
@@ -428,9 +418,9 @@ def reachability(
         ValueError, TypeError: bad arguments (named in the message).
     """
     chain = _as_chain(chain)
-    n_samples = _positive_int(n_samples, "n_samples")
-    chunk = _positive_int(chunk, "chunk")
-    orientation_bins = _positive_int(orientation_bins, "orientation_bins")
+    n_samples = positive_int(n_samples, "n_samples")
+    chunk = positive_int(chunk, "chunk")
+    orientation_bins = positive_int(orientation_bins, "orientation_bins")
     if orientation_bins % 6:
         raise ValueError(f"orientation_bins: expected a multiple of 6 (6 cube faces x roll sectors), "
                          f"got {orientation_bins}")

@@ -125,15 +125,15 @@ class DHChain:
 
     def _frames(self, q: list[jax.Array]) -> rg.Frames:
         """Forward pass over the joint values ``q`` (one array per joint, any batch shape)."""
-        a, alpha, d, offset = (rg.entries(x) for x in (self.a, self.alpha, self.d, self.theta_offset))
+        a, alpha, d, offset = (rg.per_joint(x) for x in (self.a, self.alpha, self.d, self.theta_offset))
         T = rg.from_matrix(self.base)
         links, screws = [T], []
         for i, kind in enumerate(self.joint_types):
             revolute = kind == "R"
             theta = rg.add(q[i], offset[i]) if revolute else offset[i]
             d_i = d[i] if revolute else rg.add(d[i], q[i])
-            ct, st = rg.cos_sin(theta)
-            ca, sa = rg.cos_sin(alpha[i])
+            st, ct = rg.sincos(theta)
+            sa, ca = rg.sincos(alpha[i])
             if self.modified:
                 A = rg.Rigid(
                     ((ct, -st, 0.0),

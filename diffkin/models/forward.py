@@ -25,7 +25,8 @@ import jax
 import jax.numpy as jnp
 
 from diffkin import _rigid as rg
-from diffkin._checks import real_array
+from diffkin._checks import instance, real_array
+from diffkin._xla import is_concrete
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain
 from diffkin.models.robot import Robot
@@ -36,8 +37,7 @@ CHAINS = (DHChain, PoEChain)
 
 def check(model, name: str = "chain") -> None:
     """Raise a TypeError unless ``model`` is a model of diffkin."""
-    if not isinstance(model, (DHChain, PoEChain, Robot)):
-        raise TypeError(f"{name}: expected a DHChain, PoEChain or Robot, got {type(model).__name__}")
+    instance(model, (DHChain, PoEChain, Robot), name, "a DHChain, PoEChain or Robot")
 
 
 def joint_values(model: Model, q) -> jax.Array:
@@ -47,7 +47,7 @@ def joint_values(model: Model, q) -> jax.Array:
     if q.ndim == 0 or q.shape[-1] != model.dof:
         kind = "robot" if isinstance(model, Robot) else "chain"
         raise ValueError(f"q: expected shape (..., {model.dof}) for a {model.dof}-joint {kind}, got {q.shape}")
-    if q.dtype == jnp.float64 and any(rg.is_concrete(x) and x.dtype == jnp.float32 for x in jax.tree.leaves(model)):
+    if q.dtype == jnp.float64 and any(is_concrete(x) and x.dtype == jnp.float32 for x in jax.tree.leaves(model)):
         warnings.warn("the model's numbers are float32 (it was built before jax_enable_x64 was switched on): "
                       "float64 results are only accurate to ~1e-7; build the model after enabling x64",
                       stacklevel=3)

@@ -7,7 +7,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin import _rigid as rg
+from diffkin._checks import instance
 from diffkin._pytree import pytree_dataclass, static
+from diffkin._xla import is_concrete
 from diffkin.models import _validate as check
 from diffkin.models.dh import DHChain
 
@@ -132,7 +134,7 @@ class PoEChain:
 
     def _frames(self, q: list[jax.Array]) -> rg.Frames:
         """Forward pass over the joint values ``q`` (one array per joint, any batch shape)."""
-        if rg.is_concrete(self.screws):
+        if is_concrete(self.screws):
             S = np.asarray(self.screws, dtype=np.float64)
             L = np.asarray(self.link_homes, dtype=np.float64)
         else:
@@ -182,8 +184,7 @@ def to_poe(chain: DHChain) -> PoEChain:
     with JAX operations on the chain's arrays (so gradients flow through the conversion).
     The DH ``base`` is folded into the screws and poses: the PoE base frame is the world frame.
     """
-    if not isinstance(chain, DHChain):
-        raise TypeError(f"chain: expected a DHChain, got {type(chain).__name__}")
+    instance(chain, DHChain, "chain", "a DHChain")
     dtype = jnp.result_type(chain.a)
     frames = chain._frames([jnp.zeros((), dtype) for _ in range(chain.dof)])
     screws = jnp.stack([rg.stack([*v, *w], (), dtype) for v, w in frames.screws])

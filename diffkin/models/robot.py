@@ -27,6 +27,7 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
+from diffkin._xla import is_concrete
 from diffkin.models import _validate as check
 from diffkin.models.poe import PoEChain, _screw_types
 
@@ -154,7 +155,7 @@ class Robot:
             base: ``T_world_root``.
         """
         P, S, m, o = (_host(x) for x in (self.joint_poses, self.screws, self.multipliers, self.offsets))
-        m, o = rg.entries(m), rg.entries(o)
+        m, o = rg.per_joint(m), rg.per_joint(o)
         bodies, screws = [base], []
         for j, parent in enumerate(self.parents):
             T = rg.compose(bodies[parent], rg.from_matrix(P[j]))
@@ -179,7 +180,7 @@ class Robot:
         bodies, screws = self._bodies(q, base)
         zero = (0.0, 0.0, 0.0)
         columns: list = [(zero, zero)] * self.dof
-        m = rg.entries(_host(self.multipliers))
+        m = rg.per_joint(_host(self.multipliers))
         for j in self.ancestors(self.frame_bodies[frame]):
             v, w = screws[j]
             i = self.sources[j]
@@ -212,7 +213,7 @@ class Robot:
         if not path:
             raise ValueError(f"chain: no moving joint between {self.frame_names[f_base]!r} and {end!r}")
         sources = [self.sources[j] for j in path]
-        m_host = np.asarray(self.multipliers, np.float64) if rg.is_concrete(self.multipliers) else None
+        m_host = np.asarray(self.multipliers, np.float64) if is_concrete(self.multipliers) else None
         for j in path:
             if sources.count(self.sources[j]) > 1:
                 driven = [self.tree_joints[k] for k in path if self.sources[k] == self.sources[j]]
@@ -244,7 +245,7 @@ class Robot:
 
 def _host(x):
     """A concrete model array as float64 numpy (so entries fold at trace time); a traced one as is."""
-    return np.asarray(x, dtype=np.float64) if rg.is_concrete(x) else x
+    return np.asarray(x, dtype=np.float64) if is_concrete(x) else x
 
 
 # --------------------------------------------------------------------------------------------- building

@@ -1,4 +1,4 @@
-"""The spherical-revolute-spherical arm model and the host-side checks of the ``srs`` functions."""
+"""The spherical-revolute-spherical arm model."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin import robots
+from diffkin._checks import instance
 from diffkin._pytree import pytree_dataclass
-from diffkin._rigid import is_concrete
 from diffkin.models import _validate as check
 from diffkin.models.dh import DHChain
 
@@ -16,6 +16,7 @@ from diffkin.models.dh import DHChain
 ALPHA = np.array([-np.pi / 2, np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, np.pi / 2, 0.0])
 _LENGTHS = ("d_bs", "d_se", "d_ew", "d_wf")
 _D_INDEX = (0, 2, 4, 6)  # rows of the DH table holding d_bs, d_se, d_ew, d_wf
+AN_ARM = "a diffkin.srs.SRSArm (e.g. diffkin.srs.iiwa14())"  # what the functions' ``arm`` must be
 
 
 @pytree_dataclass
@@ -71,8 +72,7 @@ class SRSArm:
                 ``theta_offset = 0``, the SRS twists and zero ``d_2, d_4, d_6``, and an identity
                 base and tool; the message names the first offending field.
         """
-        if not isinstance(chain, DHChain):
-            raise TypeError(f"chain: expected a DHChain, got {type(chain).__name__}")
+        instance(chain, DHChain, "chain", "a DHChain")
         if chain.joint_types != "R" * 7 or chain.modified:
             raise ValueError(
                 f"chain: expected 7 revolute joints in standard DH, got joint_types={chain.joint_types!r}, "
@@ -119,54 +119,3 @@ def iiwa7() -> SRSArm:
 def iiwa14() -> SRSArm:
     """KUKA LBR iiwa 14 R820: the arm of :func:`diffkin.robots.iiwa14` (same lengths, limits and frames)."""
     return SRSArm.from_chain(robots.iiwa14())
-
-
-# ----- host-side checks of the public functions' arguments -----------------------------------------
-
-
-def check_arm(arm) -> None:
-    if not isinstance(arm, SRSArm):
-        raise TypeError(f"arm: expected a diffkin.srs.SRSArm (e.g. diffkin.srs.iiwa14()), got {type(arm).__name__}")
-
-
-def float_input(x, name: str) -> jax.Array:
-    """``x`` as a JAX array of a floating dtype (integers become the default float)."""
-    try:
-        x = jnp.asarray(x)
-    except TypeError as err:
-        raise TypeError(f"{name}: expected an array of numbers, got {type(x).__name__}") from err
-    if jnp.issubdtype(x.dtype, jnp.complexfloating) or x.dtype == jnp.bool_:
-        raise TypeError(f"{name}: expected real numbers, got dtype {x.dtype}")
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
-    return x
-
-
-def pose_input(target, name: str = "target") -> jax.Array:
-    target = float_input(target, name)
-    if target.ndim < 2 or target.shape[-2:] != (4, 4):
-        raise ValueError(f"{name}: expected shape (..., 4, 4) homogeneous poses, got {target.shape}")
-    return target
-
-
-def gc_input(gc) -> jax.Array:
-    """``(..., 3)`` global configuration; entries must be +1 or -1 (checked when known on the host)."""
-    gc = jnp.asarray(gc)
-    if gc.ndim == 0 or gc.shape[-1] != 3:
-        raise ValueError(f"gc: expected shape (..., 3) with entries (gc2, gc4, gc6), got {gc.shape}")
-    if is_concrete(gc):
-        values = np.asarray(gc)
-        bad = np.argwhere(np.abs(values) != 1)
-        if bad.size:
-            index = tuple(int(i) for i in bad[0])
-            raise ValueError(f"gc: expected entries +1 or -1, got {values[index]} at index {index}")
-    return gc
-
-
-def broadcast_batch(**shapes: tuple[int, ...]) -> tuple[int, ...]:
-    """Broadcast the named batch shapes, or a ValueError listing them."""
-    try:
-        return tuple(np.broadcast_shapes(*shapes.values()))
-    except ValueError as err:
-        listed = ", ".join(f"{k} {v}" for k, v in shapes.items())
-        raise ValueError(f"expected batch shapes that broadcast together, got {listed}") from err

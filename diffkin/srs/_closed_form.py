@@ -28,22 +28,18 @@ import jax
 import jax.numpy as jnp
 
 from diffkin import _rigid as rg
-from diffkin._checks import rigid_poses
+from diffkin._checks import broadcast_batch, instance, pose_array, real_array, rigid_poses, sign_array
 from diffkin._trig import atan2, sincos
+from diffkin._xla import in_steps, materialize
 from diffkin.models import forward
-from diffkin.srs._arm import SRSArm, broadcast_batch, check_arm, float_input, gc_input, pose_input
+from diffkin.srs._arm import AN_ARM, SRSArm
 
 POSE_TOL = {False: 1e-4, True: 1e-9}
 """Largest entry of ``fk(q) - target`` (rotation entries, and position in metres) of a valid solution:
 float32 (key ``False``), float64 (``True``); far above the closed form's rounding, far below a wrong solution."""
 
 CHUNK = 4096
-"""Problems per step of :func:`ik` on large batches: the intermediates of one step stay in cache."""
-
-
-def _once(entries) -> list[jax.Array]:
-    """The entries computed once (:func:`diffkin._rigid.materialize`), as a list of arrays."""
-    return list(rg.materialize(entries))
+"""Problems per step of :func:`ik` on large batches (:func:`diffkin._xla.in_steps`)."""
 
 
 def safe_sqrt(x):
@@ -70,7 +66,7 @@ class Trig(NamedTuple):
         return Trig(f(self.a), f(self.b), f(self.c))
 
 
-class Entries(NamedTuple):
+class AngleEntries(NamedTuple):
     """The entries (1-indexed) of ``R03`` and ``R47`` that the joint angles depend on.
 
     Each is an array, or a :class:`Trig` for the entries as functions of ``psi``.
@@ -100,7 +96,7 @@ def _times(g, x):
     return x.scaled(g) if isinstance(x, Trig) else g * x
 
 
-def tangent_pairs(e: Entries, g2, g6) -> list[tuple]:
+def tangent_pairs(e: AngleEntries, g2, g6) -> list[tuple]:
     """``(num, den)`` of the tangent-type joints 1, 3, 5, 7: ``theta = atan2(num, den)`` (Shimizu's form)."""
     return [
         (_times(g2, e.r22), _times(g2, e.r12)),
@@ -129,7 +125,7 @@ def _spherical(g, num, den, cos_b, m11, m21, m31) -> list[jax.Array]:
     return [atan2(num, den), atan2(sin_b, cos_b), c]
 
 
-def joint_angles(e: Entries, g2, g6, theta4) -> list[jax.Array]:
+def joint_angles(e: AngleEntries, g2, g6, theta4) -> list[jax.Array]:
     """The seven joint angles (radians) from the matrix entries (arrays) and ``gc2, gc6, theta4``.
 
     Shoulder ``R03 = R01 R12 R23`` and wrist ``R47 = R45 R56 R67`` have the same structure
@@ -144,12 +140,12 @@ def joint_angles(e: Entries, g2, g6, theta4) -> list[jax.Array]:
 
 def _rows(flat) -> rg.Mat3:
     """The matrix with the given nine entries, row by row."""
-    return (tuple(flat[0:3]), tuple(flat[3:6]), tuple(flat[6:9]))  # type: ignore[return-value]
+    return (tuple(flat[0:3]), tuple(flat[3:6]), tuple(flat[6:9]))
 
 
 def _columns(cols) -> rg.Mat3:
     """The matrix with the given three columns."""
-    return tuple(tuple(cols[j][i] for j in range(3)) for i in range(3))  # type: ignore[return-value]
+    return tuple(tuple(cols[j][i] for j in range(3)) for i in range(3))
 
 
 def shoulder_frame(d_se, d_ew, x_sw: rg.Vec3, c4, s4) -> tuple[rg.Vec3, rg.Mat3]:
@@ -213,7 +209,7 @@ class PoseGeometry(NamedTuple):
     g6: jax.Array
     reachable: jax.Array
 
-    def entries(self, R03: rg.Mat3) -> Entries:
+    def angle_entries(self, R03: rg.Mat3) -> AngleEntries:
         """The joint-angle entries of ``R03`` and of ``R47 = R34^T R03^T R07``.
 
         Linear in ``R03``: applied to ``As, Bs, Cs`` it gives the coefficients of the wrist
@@ -223,26 +219,26 @@ class PoseGeometry(NamedTuple):
         x7, y7, z7 = (rg.column(self.R07, j) for j in range(3))
         col0 = rg.vadd(rg.scale(self.c4, a0), rg.scale(self.s4, a1))  # columns 0 and 2 of R04 = R03 R34
         col2 = rg.vadd(rg.scale(-self.s4, a0), rg.scale(self.c4, a1))
-        return Entries(R03[0][0], R03[1][0], R03[2][0], R03[0][1], R03[1][1], R03[2][1], R03[2][2],
+        return AngleEntries(R03[0][0], R03[1][0], R03[2][0], R03[0][1], R03[1][1], R03[2][1], R03[2][2],
                        rg.dot(col0, x7), -rg.dot(a2, x7), rg.dot(col2, x7),
                        rg.dot(col0, z7), -rg.dot(a2, z7), rg.dot(col2, z7), rg.dot(col2, y7))
 
-    def trig_entries(self) -> Entries:
+    def trig_entries(self) -> AngleEntries:
         """The joint-angle entries as functions of ``psi``."""
-        per_matrix = [self.entries(M) for M in shoulder_matrices(self.u, self.ref)]
-        return Entries(*(Trig(*abc) for abc in zip(*per_matrix, strict=True)))
+        per_matrix = [self.angle_entries(M) for M in shoulder_matrices(self.u, self.ref)]
+        return AngleEntries(*(Trig(*abc) for abc in zip(*per_matrix, strict=True)))
 
     def angles(self, psi) -> list[jax.Array]:
         """The seven joint angles (radians) at arm angles ``psi``.
 
-        ``R03`` and the entries are materialised (:func:`_once`): each feeds several later
-        expressions, which XLA would otherwise recompute in every one.
+        ``R03`` and the entries are materialised (:func:`diffkin._xla.materialize`): each feeds several
+        later expressions, which XLA would otherwise recompute in every one.
         """
         s, c = sincos(psi)
         As, Bs, Cs = shoulder_matrices(self.u, self.ref)
-        R03 = _rows(_once([As[i][j] * s + Bs[i][j] * c + Cs[i][j] for i in range(3) for j in range(3)]))
-        e = self.entries(R03)
-        e = e._replace(**dict(zip(ANGLE_ENTRIES, _once([getattr(e, k) for k in ANGLE_ENTRIES]), strict=True)))
+        R03 = _rows(list(materialize([As[i][j] * s + Bs[i][j] * c + Cs[i][j] for i in range(3) for j in range(3)])))
+        e = self.angle_entries(R03)
+        e = e._replace(**dict(zip(ANGLE_ENTRIES, materialize([getattr(e, k) for k in ANGLE_ENTRIES]), strict=True)))
         return joint_angles(e, self.g2, self.g6, self.theta4)
 
 
@@ -256,14 +252,14 @@ def pose_geometry(arm: SRSArm, target: jax.Array, gc: jax.Array) -> PoseGeometry
             target[..., 2, 3] - d_wf * R07[2][2] - d_bs)
     # Materialised stages (see PoseGeometry.angles): the inputs, read once from their interleaved
     # layout, then the geometry.
-    flat = _once([e for row in R07 for e in row] + list(x_sw) + [g2, g4, g6])
+    flat = list(materialize([e for row in R07 for e in row] + list(x_sw) + [g2, g4, g6]))
     R07, x_sw, (g2, g4, g6) = _rows(flat[:9]), tuple(flat[9:12]), flat[12:]
     c4_raw = (rg.dot(x_sw, x_sw) - d_se * d_se - d_ew * d_ew) / (2.0 * d_se * d_ew)
     reachable = jnp.abs(c4_raw) <= 1.0 + 64.0 * jnp.finfo(dtype).eps
     c4 = jnp.clip(c4_raw, -1.0, 1.0)
     s4 = g4 * safe_sqrt(1.0 - c4 * c4)
     u, ref = shoulder_frame(d_se, d_ew, x_sw, c4, s4)
-    flat = _once(list(u) + [e for row in ref for e in row][:8] + [c4, s4, atan2(s4, c4)])  # ref[2][2] = 0
+    flat = list(materialize(list(u) + [e for row in ref for e in row][:8] + [c4, s4, atan2(s4, c4)]))  # ref[2][2] = 0
     u, ref, (c4, s4, theta4) = tuple(flat[:3]), _rows(flat[3:11] + [0.0]), flat[11:]
     return PoseGeometry(u, ref, R07, c4, s4, theta4, g2, g6, reachable)
 
@@ -278,10 +274,10 @@ def within_limits(arm: SRSArm, q: list[jax.Array]) -> jax.Array:
 
 def prepare(arm: SRSArm, target, gc, **extra):
     """Checked ``(target, gc, *extra arrays)`` cast to one float dtype; raises on the host."""
-    check_arm(arm)
-    target = pose_input(target)
-    gc = gc_input(gc)
-    arrays = {name: float_input(x, name) for name, x in extra.items()}
+    instance(arm, SRSArm, "arm", AN_ARM)
+    target = pose_array(target)
+    gc = sign_array(gc, "gc", 3, "(gc2, gc4, gc6)")
+    arrays = {name: real_array(x, name) for name, x in extra.items()}
     dtype = jnp.result_type(target, *arrays.values())
     broadcast_batch(target=target.shape[:-2], gc=gc.shape[:-1], **{k: v.shape for k, v in arrays.items()})
     return target.astype(dtype), gc.astype(dtype), *(v.astype(dtype) for v in arrays.values())
@@ -315,18 +311,9 @@ def ik(arm: SRSArm, target: jax.Array, psi: jax.Array, gc: jax.Array) -> tuple[j
     if n <= CHUNK:
         q, valid = _solve(arm, target, psi, gc)
         return jnp.broadcast_to(q, shape + (7,)), jnp.broadcast_to(valid, shape)
-    # A large batch goes in steps of CHUNK problems, the last step overlapping the one before it.
-    # Each step's intermediates then stay in cache, and XLA's temporary buffer stays small
-    # (float64 otherwise pays for fresh pages on every call).
     inputs = (jnp.broadcast_to(target, shape + (4, 4)).reshape(n, 4, 4), jnp.broadcast_to(psi, shape).reshape(n),
               jnp.broadcast_to(gc, shape + (3,)).reshape(n, 3))
-
-    def step(i, out):
-        start = jnp.minimum(i * CHUNK, n - CHUNK)
-        results = _solve(arm, *(jax.lax.dynamic_slice_in_dim(x, start, CHUNK) for x in inputs))
-        return tuple(jax.lax.dynamic_update_slice_in_dim(o, r, start, 0) for o, r in zip(out, results, strict=True))
-
-    q, valid = jax.lax.fori_loop(0, -(-n // CHUNK), step, (jnp.zeros((n, 7), target.dtype), jnp.zeros((n,), bool)))
+    q, valid = in_steps(functools.partial(_solve, arm), inputs, CHUNK)
     return q.reshape(shape + (7,)), valid.reshape(shape)
 
 
@@ -379,8 +366,8 @@ def arm_angle(arm: SRSArm, q: jax.Array) -> tuple[jax.Array, jax.Array]:
         TypeError: ``arm`` is not an :class:`SRSArm`.
         ValueError: ``q`` is not ``(..., 7)``.
     """
-    check_arm(arm)
-    q = float_input(q, "q")
+    instance(arm, SRSArm, "arm", AN_ARM)
+    q = real_array(q, "q", "joint angles")
     if q.ndim == 0 or q.shape[-1] != 7:
         raise ValueError(f"q: expected shape (..., 7) for an SRS arm, got {q.shape}")
     dtype = q.dtype

@@ -23,10 +23,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffkin._checks import instance, pose_array, positive_int
 from diffkin._trig import atan2, sincos
-from diffkin.srs._arm import SRSArm, check_arm, pose_input
+from diffkin.srs._arm import AN_ARM, SRSArm
 from diffkin.srs._closed_form import (
-    Entries,
+    AngleEntries,
     Trig,
     ik,
     joint_angles,
@@ -59,7 +60,7 @@ def _roots(f: Trig) -> jax.Array:
     return jnp.where(jnp.concatenate([exists, exists], -1), roots, -jnp.pi)
 
 
-def _limit_roots(arm: SRSArm, e: Entries, g2, g6, dtype) -> jax.Array:
+def _limit_roots(arm: SRSArm, e: AngleEntries, g2, g6, dtype) -> jax.Array:
     """``(..., 24)`` roots of ``theta_j(psi) = lower_j`` and ``= upper_j`` for joints 1, 2, 3, 5, 6, 7.
 
     Args:
@@ -109,7 +110,7 @@ def feasible_arm_angles(arm: SRSArm, target: jax.Array, gc: jax.Array) -> tuple[
     mid = 0.5 * (left + right)
     s, c = sincos(mid)
     per_piece = lambda x: x[..., None]  # noqa: E731 (one value per pose -> broadcast over the pieces)
-    values = Entries(*(t.map(per_piece).at(s, c) for t in e))
+    values = AngleEntries(*(t.map(per_piece).at(s, c) for t in e))
     angles = joint_angles(values, per_piece(g2), per_piece(g6), per_piece(geometry.theta4))
     feasible = per_piece(geometry.reachable) & within_limits(arm, angles)
     # Pieces of rounding width take the verdict of the last wide piece before them.
@@ -157,12 +158,9 @@ def sample_self_motion(arm: SRSArm, target: jax.Array, n: int, *, key: jax.Array
         TypeError: ``n`` not an int, ``arm`` not an :class:`SRSArm`.
         ValueError: ``n <= 0``, ``target`` not ``(4, 4)``, ``gc`` not ``(3,)`` of ``+-1``.
     """
-    check_arm(arm)
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
-        raise TypeError(f"n: expected a positive Python int (number of samples), got {type(n).__name__}")
-    if n <= 0:
-        raise ValueError(f"n: expected a positive number of samples, got {n}")
-    target = pose_input(target)
+    instance(arm, SRSArm, "arm", AN_ARM)
+    n = positive_int(n, "n", "a positive int (number of samples)")
+    target = pose_array(target)
     if target.shape != (4, 4):
         raise ValueError(f"target: expected one (4, 4) pose, got shape {target.shape}")
     if gc is not None and jnp.shape(gc) != (3,):

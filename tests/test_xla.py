@@ -1,0 +1,95 @@
+"""A model closed over by ``jit`` (its numbers folded as constants, :func:`diffkin._xla.is_concrete`)
+and the same model passed as a ``jit`` argument (traced: the general path) give the same numbers, in
+every public function. One compiled function per path and model kind, small batches."""
+
+import os
+
+import jax
+import numpy as np
+import pytest
+from conftest import DATA, random_q
+
+import diffkin as dk
+
+FINGER = os.path.join(DATA, "example-robot-data", "robots", "finger_edu_description", "robots", "finger_edu.urdf")
+# Small models of every kind (the paths, not the sizes, differ): compilations of the traced path are long.
+TABLE = [[0.1, 0.3, 0.2, 0.1], [0.2, -0.5, 0.1, 0.0], [0.0, 1.5707963267948966, 0.3, 0.0]]
+MODELS = {
+    "standard DH": lambda: dk.DHChain.from_table(TABLE, "RPR", lower=[-2, 0, -2], upper=[2, 0.5, 2]),
+    "modified DH": lambda: dk.DHChain.from_table(TABLE, "RRP", modified=True, lower=[-2, -2, 0], upper=[2, 2, 0.5]),
+    "PoE": lambda: dk.to_poe(dk.DHChain.from_table(TABLE, "RPR", lower=[-2, 0, -2], upper=[2, 0.5, 2])),
+    "Robot": lambda: dk.load_robot(FINGER),
+}
+
+
+def _kinematics(model, q):
+    """fk, link_poses, the world Jacobian by both methods and manipulability of a chain."""
+    jacobians = tuple(dk.jacobian(model, q, method=m) for m in ("autodiff", "analytic"))
+    return dk.fk(model, q), dk.link_poses(model, q), jacobians, dk.manipulability(model, q)
+
+
+def _robot_kinematics(robot, q, frame="finger_tip_link"):
+    """The same for a frame of a whole robot."""
+    jacobians = tuple(dk.jacobian(robot, q, frame, method=m) for m in ("autodiff", "analytic"))
+    return (dk.fk(robot, q, frame), dk.link_poses(robot, q), jacobians, dk.manipulability(robot, q, frame))
+
+
+_passed = {fn: jax.jit(fn) for fn in (_kinematics, _robot_kinematics)}
+
+
+def _assert_same(closed, passed, atol):
+    for a, b in zip(jax.tree.leaves(closed), jax.tree.leaves(passed), strict=True):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=atol)
+
+
+@pytest.mark.parametrize("kind", ["standard DH", "modified DH", "PoE", "Robot"])
+def test_kinematics(kind):
+    model = MODELS[kind]()
+    fn = _robot_kinematics if kind == "Robot" else _kinematics
+    q = random_q(model, 3, seed=1)
+    _assert_same(jax.jit(lambda q: fn(model, q))(q), _passed[fn](model, q), atol=1e-12)
+
+
+def test_ik_solve():
+    chain = dk.robots.planar([0.5, 0.4, 0.3])
+    targets = np.asarray(dk.fk(chain, random_q(chain, 4, seed=2)))[:, :3, 3]
+
+    def solve(chain, targets):
+        res = dk.ik.solve(chain, targets, key=jax.random.key(0), num_seeds=4, max_iters=20)
+        return res.q, res.success, res.pos_err, res.rot_err, res.iters
+
+    closed = jax.jit(lambda targets: solve(chain, targets))(targets)
+    passed = jax.jit(solve)(chain, targets)
+    assert np.all(closed[1]) and np.array_equal(closed[1], passed[1]) and np.array_equal(closed[4], passed[4])
+    _assert_same(closed[:4], passed[:4], atol=1e-9)
+
+
+def test_srs():
+    arm = dk.srs.iiwa14()
+    q = random_q(arm.chain(), 3, seed=3)
+    T = np.asarray(dk.fk(arm.chain(), q))
+
+    def functions(arm, T, q):
+        psi, gc = dk.srs.arm_angle(arm, q)
+        # sample_self_motion places its samples on the feasible_arm_angles intervals of every gc
+        return psi, gc, dk.srs.ik(arm, T, psi, gc), dk.srs.sample_self_motion(arm, T[0], 8, key=jax.random.key(0))
+
+    closed = jax.jit(lambda T, q: functions(arm, T, q))(T, q)
+    _assert_same(closed, jax.jit(functions)(arm, T, q), atol=1e-12)
+
+
+def test_reachability_against_the_traced_path():
+    """The map's samples (chunk 0 is ``sample_configs(chain, chunk, fold_in(key, 0))``) through a traced chain."""
+    chain = dk.robots.iiwa14()
+    n, key = 512, jax.random.key(4)
+    wmap = dk.workspace.reachability(chain, n, key=key, voxel_size=0.2, chunk=n, devices=jax.devices()[:1],
+                                     progress=False)
+    q = dk.workspace.sample_configs(chain, n, jax.random.fold_in(key, 0))
+    T, m = jax.jit(lambda chain, q: (dk.fk(chain, q), dk.manipulability(chain, q)))(chain, q)
+    cells = np.floor((np.asarray(T)[:, :3, 3] - wmap.origin) / wmap.voxel_size).astype(int)
+    counts = np.zeros_like(wmap.counts)
+    np.add.at(counts, tuple(cells.T), 1)
+    np.testing.assert_array_equal(wmap.counts, counts)
+    best = np.zeros(wmap.counts.shape)
+    np.maximum.at(best, tuple(cells.T), np.asarray(m))
+    np.testing.assert_allclose(wmap.manipulability, best, rtol=1e-10, atol=1e-12)
