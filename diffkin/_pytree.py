@@ -15,7 +15,7 @@ check: it costs nothing there and cannot break on leaves that are not the user's
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, TypeVar
+from typing import Any, TypeVar, dataclass_transform
 
 import jax
 
@@ -32,16 +32,18 @@ def _post_init(self) -> None:
     self._check(concrete=not any(isinstance(x, jax.core.Tracer) for x in leaves))
 
 
+@dataclass_transform(frozen_default=True, field_specifiers=(dataclasses.field, static))
 def pytree_dataclass(cls: type[T]) -> type[T]:
     """Make ``cls`` a frozen dataclass and register it as a pytree.
 
     The class gains ``replace(**fields)``, returning a modified copy, validated as a new instance
     (see the module docstring; traced values get the shape checks only).
     """
-    if hasattr(cls, "_check") and "__post_init__" not in cls.__dict__:
-        cls.__post_init__ = _post_init
-    cls = dataclasses.dataclass(frozen=True, eq=False)(cls)
-    fields = dataclasses.fields(cls)
+    klass: Any = cls  # the class being made a dataclass: attributes a type checker cannot know of
+    if hasattr(klass, "_check") and "__post_init__" not in klass.__dict__:
+        klass.__post_init__ = _post_init
+    klass = dataclasses.dataclass(frozen=True, eq=False)(klass)
+    fields = dataclasses.fields(klass)
     meta = tuple(f.name for f in fields if f.metadata.get("static", False))
     data = tuple(f.name for f in fields if not f.metadata.get("static", False))
 
@@ -52,13 +54,13 @@ def pytree_dataclass(cls: type[T]) -> type[T]:
         return [getattr(obj, n) for n in data], tuple(getattr(obj, n) for n in meta)
 
     def unflatten(aux, children):
-        obj = object.__new__(cls)  # no __init__, so no check: see the module docstring
+        obj = object.__new__(klass)  # no __init__, so no check: see the module docstring
         for name, value in zip(meta, aux, strict=True):
             object.__setattr__(obj, name, value)
         for name, value in zip(data, children, strict=True):
             object.__setattr__(obj, name, value)
         return obj
 
-    jax.tree_util.register_pytree_with_keys(cls, flatten_with_keys, unflatten, flatten)
-    cls.replace = lambda self, **changes: dataclasses.replace(self, **changes)
-    return cls
+    jax.tree_util.register_pytree_with_keys(klass, flatten_with_keys, unflatten, flatten)
+    klass.replace = lambda self, **changes: dataclasses.replace(self, **changes)
+    return klass

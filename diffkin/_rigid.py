@@ -176,7 +176,7 @@ def skew(w: Vec3) -> Mat3:
     return ((0.0, -w[2], w[1]), (w[2], 0.0, -w[0]), (-w[1], w[0], 0.0))
 
 
-def screw_exp(v: Vec3, w: Vec3, theta: jax.Array) -> Rigid:
+def screw_exp(v: Vec3, w: Vec3, theta: Entry) -> Rigid:
     """``exp([S] theta)`` for the screw ``S = [v; w]``.
 
     ``R = I + A [w] + B [w]^2`` and ``p = theta v + B [w] v + C [w]^2 v`` with
@@ -189,7 +189,7 @@ def screw_exp(v: Vec3, w: Vec3, theta: jax.Array) -> Rigid:
     W2 = matmul(W, W)
     Wv, W2v = rotate(W, v), rotate(W2, v)
     if all(isinstance(x, float) for x in w):
-        n2 = sum(x * x for x in w)
+        n2 = sum(float(x) * float(x) for x in w)
         if n2 == 0.0:
             return Rigid(IDENTITY.R, scale(theta, v))
         if abs(n2 - 1.0) < _SNAP:
@@ -217,7 +217,7 @@ def _norm(v: Vec3) -> jax.Array:
 def _angle_terms(M: Mat3) -> tuple[Vec3, jax.Array, jax.Array]:
     """``vee(M) = sin(theta) axis``, ``|vee(M)| = sin(theta)`` and ``cos(theta) = (tr M - 1) / 2`` of a rotation."""
     v = tuple(mul(0.5, add(M[i][j], -M[j][i])) for i, j in ((2, 1), (0, 2), (1, 0)))
-    return v, _norm(v), mul(0.5, add(M[0][0], M[1][1], M[2][2], -1.0))
+    return v, _norm(v), jnp.asarray(mul(0.5, add(M[0][0], M[1][1], M[2][2], -1.0)))
 
 
 def rotation_angle(M: Mat3) -> jax.Array:

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 from diffkin import _rigid as rg
 from diffkin.models import forward
@@ -46,7 +47,7 @@ def _frame_indices(robot: Robot, frames) -> tuple[list[int], bool]:
     return [robot.frame_index(f) for f in frames], False
 
 
-def fk(model: Model, q: jax.Array, frames: str | Sequence[str] | None = None, *, base=None) -> jax.Array:
+def fk(model: Model, q: ArrayLike, frames: str | Sequence[str] | None = None, *, base=None) -> jax.Array:
     """Pose of a chain's end effector, or of named frames of a robot.
 
     Args:
@@ -76,7 +77,7 @@ def fk(model: Model, q: jax.Array, frames: str | Sequence[str] | None = None, *,
     return rg.to_matrices([frames_.links[f] for f in indices], shape, dtype)
 
 
-def link_poses(model: Model, q: jax.Array, *, base=None) -> jax.Array:
+def link_poses(model: Model, q: ArrayLike, *, base=None) -> jax.Array:
     """Poses of every link (chain) or every named frame (robot).
 
     Args:
@@ -130,7 +131,7 @@ def _autodiff(model: Model, q, frame: str, f: int | None, base, include_base: bo
         ee = forward.frames(model, qs_, f, B_).ee
         return tuple(jnp.asarray(e, q.dtype) for e in rg.leaves(ee))
 
-    moves = []  # (pose as a function of one scalar, the scalar's value)
+    moves: list[tuple[Callable[..., tuple], jax.Array]] = []  # (pose as a function of one scalar, its value)
     if include_base:  # the root moved by exp(t e_k) in its own frame
         zero, unit = (0.0, 0.0, 0.0), ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
         steps = [(e, zero) for e in unit] + [(zero, e) for e in unit]
@@ -142,7 +143,7 @@ def _autodiff(model: Model, q, frame: str, f: int | None, base, include_base: bo
         T, dT = jax.jvp(fn, (x,), (jnp.ones_like(x),))
         R, p, dR, dp = _split(T), T[9:], _split(dT), dT[9:]
         if frame == "body":  # [R^T dp; vee(R^T dR)]
-            Rt, dRt = [rg.column(R, j) for j in range(3)], [rg.column(dR, j) for j in range(3)]
+            Rt, dRt = tuple(rg.column(R, j) for j in range(3)), tuple(rg.column(dR, j) for j in range(3))
             columns.append((rg.rotate(Rt, dp), _vee_of_product(Rt, dRt)))
         else:
             w = _vee_of_product(dR, R)  # vee(dR R^T)
@@ -160,21 +161,21 @@ def _stack_columns(columns, shape, dtype) -> jax.Array:
 
 def _split(entries) -> rg.Mat3:
     """The rotation of a pose's :func:`rg.leaves`."""
-    return tuple(tuple(entries[3 * i: 3 * i + 3]) for i in range(3))  # type: ignore[return-value]
+    return tuple(tuple(entries[3 * i: 3 * i + 3]) for i in range(3))
 
 
 def _vee_of_product(A: rg.Mat3, B: rg.Mat3) -> rg.Vec3:
     """``vee`` of the skew part of ``A B^T`` (only its off-diagonal entries are formed)."""
     W = lambda a, b: rg.dot(A[a], B[b])  # noqa: E731
-    return tuple(0.5 * (W(a, b) - W(b, a)) for a, b in ((2, 1), (0, 2), (1, 0)))  # type: ignore[return-value]
+    return tuple(0.5 * (W(a, b) - W(b, a)) for a, b in ((2, 1), (0, 2), (1, 0)))
 
 
 def _where(model: Model, where: tuple, frame: str | None, frame_name: str | None) -> tuple[int | None, str]:
     """The frame index (robots) and the reference frame of a :func:`jacobian` call."""
-    where = list(where)
+    names = list(where)
     if isinstance(model, Robot):
-        if frame_name is None and where:
-            frame_name = where.pop(0)
+        if frame_name is None and names:
+            frame_name = names.pop(0)
         if frame_name is None:
             raise TypeError(f"frame_name: name the frame of the robot, one of {list(model.frame_names)}")
         f = model.frame_index(frame_name)
@@ -182,17 +183,17 @@ def _where(model: Model, where: tuple, frame: str | None, frame_name: str | None
         if frame_name is not None:
             raise TypeError("frame_name: a chain has one end effector; name frames only for a Robot")
         f = None
-    if where and frame is not None:
-        raise TypeError(f"frame: given twice ({where[0]!r} and {frame!r})")
-    if len(where) > 1:
-        raise TypeError(f"jacobian: too many positional arguments: {tuple(where)!r}")
-    frame = where[0] if where else ("world" if frame is None else frame)
+    if names and frame is not None:
+        raise TypeError(f"frame: given twice ({names[0]!r} and {frame!r})")
+    if len(names) > 1:
+        raise TypeError(f"jacobian: too many positional arguments: {tuple(names)!r}")
+    frame = names[0] if names else ("world" if frame is None else frame)
     if frame not in _FRAMES:
         raise ValueError(f"frame: expected one of {_FRAMES}, got {frame!r}")
     return f, frame
 
 
-def jacobian(model: Model, q: jax.Array, *where: str, frame: str | None = None, frame_name: str | None = None,
+def jacobian(model: Model, q: ArrayLike, *where: str, frame: str | None = None, frame_name: str | None = None,
              method: str | None = None, base=None, include_base: bool = False) -> jax.Array:
     """Geometric Jacobian of a chain's end effector or of a robot's frame, rows ``[v; w]``.
 
@@ -232,7 +233,7 @@ def jacobian(model: Model, q: jax.Array, *where: str, frame: str | None = None, 
     return (_analytic if method == "analytic" else _autodiff)(model, q, frame, f, base, bool(include_base))
 
 
-def manipulability(model: Model, q: jax.Array, frame_name: str | None = None, *, base=None) -> jax.Array:
+def manipulability(model: Model, q: ArrayLike, frame_name: str | None = None, *, base=None) -> jax.Array:
     """Yoshikawa's manipulability of the world Jacobian (of a chain, or of a robot's frame).
 
     ``sqrt(det(J J^T))`` for 6 or more joints, ``sqrt(det(J^T J))`` for fewer (both the

@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 from diffkin import _rigid as rg
 
 
-def skew(w: jax.Array) -> jax.Array:
+def skew(w: ArrayLike) -> jax.Array:
     """``(..., 3) -> (..., 3, 3)``: the matrix ``[w]`` with ``[w] x = w x x``."""
     w = jnp.asarray(w)
     z = jnp.zeros_like(w[..., 0])
@@ -40,13 +41,13 @@ def adjoint(T: jax.Array) -> jax.Array:
     return jnp.concatenate([top, bottom], -2)
 
 
-def _entries(R: jax.Array) -> rg.Mat3:
+def _entries(R: ArrayLike) -> rg.Mat3:
     """The nine entries ``(..., )`` of ``(..., 3, 3)`` matrices."""
     R = jnp.asarray(R)
     return tuple(tuple(R[..., i, j] for j in range(3)) for i in range(3))
 
 
-def rotation_angle(R: jax.Array) -> jax.Array:
+def rotation_angle(R: ArrayLike) -> jax.Array:
     """``(..., 3, 3) -> (...,)``: angle in ``[0, pi]`` of rotations, accurate near 0 and pi.
 
     The matrix form of :func:`diffkin._rigid.rotation_angle`.
@@ -54,7 +55,7 @@ def rotation_angle(R: jax.Array) -> jax.Array:
     return rg.rotation_angle(_entries(R))
 
 
-def so3_log(R: jax.Array) -> jax.Array:
+def so3_log(R: ArrayLike) -> jax.Array:
     """``(..., 3, 3) -> (..., 3)``: rotation vector ``w`` with ``R = exp([w])``, ``|w| <= pi``.
 
     Finite for every rotation: near the identity the series of ``theta / sin(theta)`` is used;
@@ -65,7 +66,7 @@ def so3_log(R: jax.Array) -> jax.Array:
     return jnp.stack(w, -1)
 
 
-def rotation_from_quaternion(quat: jax.Array) -> jax.Array:
+def rotation_from_quaternion(quat: ArrayLike) -> jax.Array:
     """``(..., 4) -> (..., 3, 3)``: rotation of quaternions ``(w, x, y, z)``, normalised here (not zero)."""
     quat = jnp.asarray(quat)
     w, x, y, z = jnp.moveaxis(quat / jnp.linalg.norm(quat, axis=-1, keepdims=True), -1, 0)
@@ -77,7 +78,7 @@ def rotation_from_quaternion(quat: jax.Array) -> jax.Array:
     return jnp.stack([jnp.stack(row, -1) for row in rows], -2)
 
 
-def quaternion_from_rotation(R: jax.Array) -> jax.Array:
+def quaternion_from_rotation(R: ArrayLike) -> jax.Array:
     """``(..., 3, 3) -> (..., 4)``: unit quaternions ``(w, x, y, z)`` with ``w >= 0`` of rotations.
 
     Shepperd's method: of ``4 w^2 - 1 = tr R`` and ``4 x^2 - 1 = 2 R_00 - tr R`` (and y, z), the

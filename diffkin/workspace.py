@@ -97,7 +97,8 @@ class ReachabilityMap:
 
     def save(self, path) -> None:
         """Write the map to ``path`` as a ``.npz`` archive (numpy appends ``.npz`` if missing)."""
-        np.savez_compressed(path, **{f.name: np.asarray(getattr(self, f.name)) for f in dataclasses.fields(self)})
+        fields = {f.name: np.asarray(getattr(self, f.name)) for f in dataclasses.fields(self)}
+        np.savez_compressed(path, **fields)  # type: ignore[arg-type]  # numpy's stub reads **fields as allow_pickle
 
     @classmethod
     def load(cls, path) -> ReachabilityMap:
@@ -206,13 +207,14 @@ def _reach(chain) -> float:
     return reach + float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
 
 
-def _grid(chain, voxel_size, bounds) -> tuple[np.ndarray, float, tuple[int, int, int]]:
+def _grid(chain, voxel_size, bounds) -> tuple[np.ndarray, float, tuple[int, ...]]:
     """``(origin (3,), voxel_size, shape)`` of the voxel grid, validated."""
     if isinstance(voxel_size, bool) or not isinstance(voxel_size, (int, float, np.integer, np.floating)):
         raise TypeError(f"voxel_size: expected a positive number of metres, got {type(voxel_size).__name__}")
     voxel_size = float(voxel_size)
     if not (math.isfinite(voxel_size) and voxel_size > 0):
         raise ValueError(f"voxel_size: expected a positive number of metres, got {voxel_size}")
+    shape: tuple[int, ...]
     if bounds is None:
         m = math.ceil(_reach(chain) / voxel_size)
         origin, shape = np.full(3, -(m + 0.5) * voxel_size), (2 * m + 1,) * 3
@@ -260,7 +262,7 @@ def _manipulability(frames: rg.Frames, dof: int) -> jax.Array:
     columns = kinematics._world_from_space(frames.screws, frames.ee.p)
     J = [[columns[i][r // 3][r % 3] for i in range(dof)] for r in range(6)]  # J[row][column]
     rows = J if dof >= 6 else [[J[r][i] for r in range(6)] for i in range(dof)]  # short side first
-    minors = {(): 1.0}  # column subset -> minor over the first len(subset) rows
+    minors: dict[tuple[int, ...], rg.Entry] = {(): 1.0}  # column subset -> minor over the first len(subset) rows
     for k, row in enumerate(rows):
         minors = {
             subset: rg.add(*(rg.mul((-1.0) ** (k + j), rg.mul(row[c], minors[subset[:j] + subset[j + 1:]]))
@@ -271,7 +273,7 @@ def _manipulability(frames: rg.Frames, dof: int) -> jax.Array:
     return jnp.sqrt(det)
 
 
-def _flat_index(p: rg.Vec3, origin, inv_voxel, shape) -> tuple[jax.Array, jax.Array]:
+def _flat_index(p: rg.Vec3, origin, inv_voxel, shape) -> tuple[jax.Array | int, jax.Array | bool]:
     """Flat voxel index of positions given by entries, and whether they are inside the grid.
 
     The cell is ``floor((p - origin) * inv_voxel)``: a subtraction and a product, which round the
@@ -279,7 +281,8 @@ def _flat_index(p: rg.Vec3, origin, inv_voxel, shape) -> tuple[jax.Array, jax.Ar
     estimate in some compilations and exactly in others: with ``/ voxel_size`` a sample on a
     voxel face changed voxels with the number of devices.)
     """
-    flat, inside = 0, True
+    flat: jax.Array | int = 0
+    inside: jax.Array | bool = True
     for i, n in enumerate(shape):
         cell = jnp.floor((p[i] - origin[i]) * inv_voxel)
         inside = inside & (cell >= 0) & (cell < n)
@@ -456,10 +459,11 @@ def reachability(
     args = (jnp.asarray(n_full, jnp.int32), jnp.asarray(n_last, jnp.int32),
             jnp.asarray(origin, dtype), jnp.asarray(1.0 / voxel_size, dtype), jnp.asarray(n_slots, jnp.int32))
     sharded = NamedSharding(mesh, P(_AXIS))
-    state, counts, bar, done = zeros(), np.zeros(shape, np.int64), _progress(n_samples, progress), None
+    state, counts, bar = zeros(), np.zeros(shape, np.int64), _progress(n_samples, progress)
+    done: jax.Array | None = None  # the valid samples of the step in flight
     for s in range(n_steps):
-        chunks = np.arange(s * len(devices), (s + 1) * len(devices), dtype=np.int32)
-        chunks = jax.make_array_from_callback(chunks.shape, sharded, lambda i, chunks=chunks: chunks[i])
+        indices = np.arange(s * len(devices), (s + 1) * len(devices), dtype=np.int32)
+        chunks = jax.make_array_from_callback(indices.shape, sharded, indices.__getitem__)
         *state, n_step = step(*state, key, chunks, *args)
         if bar is not None:
             if done is not None:
@@ -470,8 +474,9 @@ def reachability(
             counts += _host(counts_s).reshape(shape)
             if s + 1 < n_steps:
                 state = [zeros()[0], *state[1:]]
-    if bar is not None:
+    if bar is not None and done is not None:
         bar.update(int(done))
+    if bar is not None:
         bar.close()
     return ReachabilityMap(
         counts=counts, manipulability=_host(best).reshape(shape), dexterity=_host(dexterity).reshape(shape),

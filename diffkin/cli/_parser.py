@@ -144,7 +144,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser.add_argument("--version", action="version", version=f"diffkin {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_IntermixedParser)
-    common = _Parser(add_help=False)
+    common = _IntermixedParser(add_help=False)  # the options every command shares (a parent parser)
     cache = common.add_argument_group("compilation cache")
     cache.add_argument("--cache-dir", metavar="DIR", help="JAX's persistent compilation cache (default "
                        "$DIFFKIN_CACHE_DIR, else $XDG_CACHE_HOME/diffkin/jax or ~/.cache/diffkin/jax; "

@@ -41,7 +41,7 @@ def plot_self_motion(name: str, q: np.ndarray, path: Path) -> None:
         ax.plot(psi, frac[:, j], lw=1.5, label=f"joint {j + 1} (limits ±{upper[j]:.2f} rad)")
     for limit in (-1, 1):
         ax.axhline(limit, color="k", ls="--", lw=1)
-    ax.axvline(psi0, color="k", ls=":", lw=1, label=f"arm angle of q ({float(psi0):+.2f} rad)")
+    ax.axvline(float(psi0), color="k", ls=":", lw=1, label=f"arm angle of q ({float(psi0):+.2f} rad)")
     signs = " ".join(f"{int(g):+d}" for g in gc)
     ax.set(xlim=(-np.pi, np.pi), ylim=(-1.6, 1.6), xlabel="arm angle psi (rad)",
            ylabel="joint angle / its limit (rad / rad; -1 lower, +1 upper limit)")

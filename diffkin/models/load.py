@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 from diffkin.models import _xml
 from diffkin.models.mjcf import robot_from_mjcf
 from diffkin.models.robot import Robot
@@ -48,4 +50,4 @@ def load_robot(source, *, floating: bool = False) -> Robot:
         robot = robot_from_mjcf(root, path)
     else:
         raise ValueError(f"source: expected a <robot> (URDF) or <mujoco> (MJCF) root element, got <{root.tag}>")
-    return robot.replace(floating=True) if floating else robot
+    return dataclasses.replace(robot, floating=True) if floating else robot

@@ -33,6 +33,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -86,7 +87,7 @@ def _zaxis(z: np.ndarray, where: str) -> np.ndarray:
     return _axis_angle(axis, np.arctan2(s, z[2]))
 
 
-def _euler(angles: np.ndarray, seq: str) -> np.ndarray:
+def _euler(angles: Sequence[float], seq: str) -> np.ndarray:
     """Euler angles (radians) in MuJoCo's ``eulerseq``: lowercase about the moving axes (post-multiplied),
     uppercase about the fixed axes (pre-multiplied)."""
     R = np.eye(3)
@@ -134,7 +135,7 @@ class _Reader:
                 raise ValueError(f"{_describe(el)}: eulerseq must be 3 letters of xyzXYZ, got {seq!r}")
             self.eulerseq = seq
         if auto is not None:
-            self.autolimits = self._bool(el, "autolimits", auto)
+            self.autolimits = self._bool(el, "autolimits", auto) is True
 
     def _defaults(self, el: ET.Element, name: str, parent: str | None) -> None:
         """Record a ``<default>`` class: per element tag, its attributes (nested classes inherit)."""
@@ -145,7 +146,7 @@ class _Reader:
             if child.tag == "default":
                 if not child.get("class"):
                     raise ValueError(f"MJCF nested <default> in class {name!r}: missing 'class' attribute")
-                self._defaults(child, child.get("class"), name)
+                self._defaults(child, child.get("class", ""), name)
             else:
                 tags.setdefault(child.tag, {}).update(child.attrib)
 
@@ -175,8 +176,8 @@ class _Reader:
         return default
 
     @staticmethod
-    def _bool(el: ET.Element, attribute: str, text: str, allowed=("true", "false")) -> bool | str:
-        if text not in allowed:
+    def _bool(el: ET.Element, attribute: str, text: str | None, allowed=("true", "false")) -> bool | str:
+        if text is None or text not in allowed:
             raise ValueError(f"{_describe(el)}: {attribute} must be one of {list(allowed)}, got {text!r}")
         return {"true": True, "false": False}.get(text, text)
 
@@ -186,7 +187,7 @@ class _Reader:
     def _rotation(self, el: ET.Element, cls: str | None = None) -> np.ndarray:
         """The element's orientation (from its class chain if it gives none), as a 3x3 rotation."""
         sources = [el.attrib, *(self._chain(cls, el.tag) if cls is not None else ())]
-        attrs = next((a for a in sources if any(k in a for k in _ORIENTATIONS)), {})
+        attrs: dict[str, str] = next((a for a in sources if any(k in a for k in _ORIENTATIONS)), {})
         given = [k for k in _ORIENTATIONS if k in attrs]
         where = _describe(el)
         if len(given) > 1:
@@ -285,7 +286,7 @@ class _Reader:
         cls = self._class(el, cls, "childclass")
         part.links.append(name)
         contents = self._contents(el, np.eye(4), cls, [])
-        moving = []
+        moving: list[JointSpec] = []
         for child, T, c in contents:
             if child.tag in ("joint", "freejoint"):
                 spec, free = self._joint(child, T, c, name)
@@ -293,7 +294,7 @@ class _Reader:
                     raise ValueError(f"{_describe(child)}: a free joint must be the only joint of a top-level body")
                 if free:
                     part.free = child
-                else:
+                elif spec is not None:  # (a hinge or slide joint: always)
                     moving.append(spec)
         if part.free is not None and parent == "world" and moving:
             raise ValueError(f"{_describe(part.free)}: a free joint must be the only joint of a top-level body")
@@ -394,7 +395,7 @@ def _expand_includes(el: ET.Element, folder: str, stack: tuple[str, ...] = ()) -
             continue
         if not child.get("file"):
             raise ValueError("MJCF <include>: missing 'file' attribute")
-        path = os.path.normpath(os.path.join(folder, child.get("file")))
+        path = os.path.normpath(os.path.join(folder, child.get("file", "")))
         if not os.path.isfile(path):
             raise ValueError(f"{_describe(child)}: file not found: {path!r}")
         if path in stack:
@@ -418,13 +419,13 @@ def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
     reader = _Reader(root)
     for el in root.findall("worldbody"):
         reader.worldbody(el)
-    free = [(name, part) for name, part in reader.parts.items() if part.free is not None]
+    free = [(name, part, part.free) for name, part in reader.parts.items() if part.free is not None]
     if len(free) > 1:
-        raise ValueError(f"{_describe(free[1][1].free)}: several bodies have free joints ({[n for n, _ in free]}); "
+        raise ValueError(f"{_describe(free[1][2])}: several bodies have free joints ({[n for n, _, _ in free]}); "
                          "a robot has one floating root")
     parts = list(reader.parts.values())
     if free:
-        name, part = free[0]
+        name, part, _ = free[0]
         for other, p in reader.parts.items():
             moving = [j.name for j in p.joints if j.kind != "F"]
             if p is not part and moving:

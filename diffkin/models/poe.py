@@ -55,6 +55,7 @@ class PoEChain:
         hi = check.leaf(self.upper, "upper", (dof,), concrete, finite=False)
         if not concrete:
             return
+        assert S is not None and L is not None  # concrete: check.leaf returned the values
         tol = check.tolerance(self.screws)
         for i, given in enumerate(_screw_types(S, tol)):
             if given != self.joint_types[i]:
@@ -134,6 +135,8 @@ class PoEChain:
 
     def _frames(self, q: list[jax.Array]) -> rg.Frames:
         """Forward pass over the joint values ``q`` (one array per joint, any batch shape)."""
+        S: np.ndarray | jax.Array
+        L: np.ndarray | jax.Array
         if is_concrete(self.screws):
             S = np.asarray(self.screws, dtype=np.float64)
             L = np.asarray(self.link_homes, dtype=np.float64)
@@ -161,7 +164,7 @@ def _screw_types(S: np.ndarray, tol: float) -> list[str]:
         nw, nv = np.linalg.norm(w), np.linalg.norm(v)
         if abs(nw - 1.0) < tol:
             pitch = float(np.dot(v, w))
-            if abs(pitch) > tol * max(1.0, nv):
+            if abs(pitch) > tol * max(1.0, float(nv)):
                 raise ValueError(
                     f"screws[{i}]: expected a revolute screw without pitch (v . w = 0), got v . w = {pitch:.6g}"
                 )

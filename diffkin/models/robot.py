@@ -106,6 +106,7 @@ class Robot:
         hi = check.leaf(self.upper, "upper", (dof,), concrete, finite=False)
         if not concrete:
             return
+        assert S is not None and P is not None and F is not None  # concrete: check.leaf returned the values
         for j, kind in enumerate(_screw_types(S, check.tolerance(self.screws))):
             if kind != self.joint_types[j]:
                 raise ValueError(f"joint_types[{j}]: {self.joint_types[j]!r} contradicts screws[{j}] ({kind!r})")
@@ -360,16 +361,16 @@ def build(
     for j in moving:
         # positions: pos_j = mult * pos_src + off along the mimic chain, so pos_j = m q_src + o;
         # the joint's angle is theta_j = pos_j + j.offset.
-        m, o, cur, seen = 1.0, 0.0, j, [j.name]
+        m, o, cur, followed = 1.0, 0.0, j, [j.name]
         while cur.mimic is not None:
             src, mult, off = cur.mimic
             if src in fixed:
                 raise ValueError(f"{where}: joint {cur.name!r} mimics {src!r}, a fixed joint")
             if src not in index:
                 raise ValueError(f"{where}: joint {cur.name!r} mimics {src!r}, which is not a joint of the robot")
-            if src in seen:
-                raise ValueError(f"{where}: mimic joints form a cycle: {' -> '.join([*seen, src])}")
-            seen.append(src)
+            if src in followed:
+                raise ValueError(f"{where}: mimic joints form a cycle: {' -> '.join([*followed, src])}")
+            followed.append(src)
             m, o = m * mult, o + m * off
             cur = moving[index[src]]
         sources.append(q_index[cur.name])

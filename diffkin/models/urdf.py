@@ -68,7 +68,7 @@ def _parse_joint(el: ET.Element) -> JointSpec:
             raise ValueError(f"{where} <mimic>: missing 'joint' attribute")
         mimic = (source, float(_xml.numbers(mimic_el, "multiplier", 1, "1", f"{where} <mimic>")[0]),
                  float(_xml.numbers(mimic_el, "offset", 1, "0", f"{where} <mimic>")[0]))
-    return JointSpec(name, kind_letter, parent.get("link"), child.get("link"), T, screw, lower, upper, mimic)
+    return JointSpec(name, kind_letter, parent.get("link", ""), child.get("link", ""), T, screw, lower, upper, mimic)
 
 
 def _read(source) -> ET.Element:
@@ -81,9 +81,10 @@ def _read(source) -> ET.Element:
 def _parse(root: ET.Element) -> tuple[list[JointSpec], list[str]]:
     links = []
     for el in root.findall("link"):
-        if not el.get("name"):
+        name = el.get("name")
+        if not name:
             raise ValueError("URDF <link>: missing 'name' attribute")
-        links.append(el.get("name"))
+        links.append(name)
     joints = [_parse_joint(el) for el in root.findall("joint")]
     known = set(links)
     for j in joints:

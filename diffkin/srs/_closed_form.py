@@ -22,10 +22,11 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 from diffkin import _rigid as rg
 from diffkin._checks import broadcast_batch, instance, pose_array, real_array, rigid_poses, sign_array
@@ -69,23 +70,24 @@ class Trig(NamedTuple):
 class AngleEntries(NamedTuple):
     """The entries (1-indexed) of ``R03`` and ``R47`` that the joint angles depend on.
 
-    Each is an array, or a :class:`Trig` for the entries as functions of ``psi``.
+    Each is an entry (an array over the batch), or a :class:`Trig` for the entries as functions of
+    ``psi`` (hence typed ``Any``).
     """
 
-    r11: jax.Array
-    r21: jax.Array
-    r31: jax.Array
-    r12: jax.Array
-    r22: jax.Array
-    r32: jax.Array
-    r33: jax.Array
-    w11: jax.Array
-    w21: jax.Array
-    w31: jax.Array
-    w13: jax.Array
-    w23: jax.Array
-    w33: jax.Array
-    w32: jax.Array
+    r11: Any
+    r21: Any
+    r31: Any
+    r12: Any
+    r22: Any
+    r32: Any
+    r33: Any
+    w11: Any
+    w21: Any
+    w31: Any
+    w13: Any
+    w23: Any
+    w33: Any
+    w32: Any
 
 
 ANGLE_ENTRIES = ("r11", "r21", "r31", "r12", "r22", "r32", "w11", "w21", "w31", "w13", "w23", "w33")
@@ -247,7 +249,7 @@ def pose_geometry(arm: SRSArm, target: jax.Array, gc: jax.Array) -> PoseGeometry
     dtype = target.dtype
     d_bs, d_se, d_ew, d_wf = (jnp.asarray(v, dtype) for v in (arm.d_bs, arm.d_se, arm.d_ew, arm.d_wf))
     g2, g4, g6 = gc[..., 0], gc[..., 1], gc[..., 2]
-    R07 = tuple(tuple(target[..., i, j] for j in range(3)) for i in range(3))
+    R07: rg.Mat3 = tuple(tuple(target[..., i, j] for j in range(3)) for i in range(3))
     x_sw = (target[..., 0, 3] - d_wf * R07[0][2], target[..., 1, 3] - d_wf * R07[1][2],
             target[..., 2, 3] - d_wf * R07[2][2] - d_bs)
     # Materialised stages (see PoseGeometry.angles): the inputs, read once from their interleaved
@@ -266,13 +268,11 @@ def pose_geometry(arm: SRSArm, target: jax.Array, gc: jax.Array) -> PoseGeometry
 
 def within_limits(arm: SRSArm, q: list[jax.Array]) -> jax.Array:
     """Whether every joint angle of ``q`` (seven arrays) lies in ``[lower, upper]``."""
-    ok = True
-    for i, qi in enumerate(q):
-        ok = ok & (qi >= arm.lower[i].astype(qi.dtype)) & (qi <= arm.upper[i].astype(qi.dtype))
-    return ok
+    within = [(qi >= arm.lower[i].astype(qi.dtype)) & (qi <= arm.upper[i].astype(qi.dtype)) for i, qi in enumerate(q)]
+    return functools.reduce(jnp.logical_and, within)
 
 
-def prepare(arm: SRSArm, target, gc, **extra):
+def prepare(arm: SRSArm, target, gc, **extra) -> tuple[jax.Array, ...]:
     """Checked ``(target, gc, *extra arrays)`` cast to one float dtype; raises on the host."""
     instance(arm, SRSArm, "arm", AN_ARM)
     target = pose_array(target)
@@ -283,7 +283,7 @@ def prepare(arm: SRSArm, target, gc, **extra):
     return target.astype(dtype), gc.astype(dtype), *(v.astype(dtype) for v in arrays.values())
 
 
-def ik(arm: SRSArm, target: jax.Array, psi: jax.Array, gc: jax.Array) -> tuple[jax.Array, jax.Array]:
+def ik(arm: SRSArm, target: ArrayLike, psi: ArrayLike, gc: ArrayLike) -> tuple[jax.Array, jax.Array]:
     """Closed-form inverse kinematics at arm angle ``psi`` and global configuration ``gc``.
 
     Args:
@@ -324,8 +324,8 @@ def _solve(arm: SRSArm, target, psi, gc) -> tuple[jax.Array, jax.Array]:
     shape = jnp.broadcast_shapes(*(x.shape for x in q))
     q = [jnp.broadcast_to(x, shape) for x in q]
     valid = geometry.reachable & within_limits(arm, q) & _checked(arm, target, psi, gc, q)
-    q = jnp.stack(q, axis=-1)
-    return jnp.where(jnp.isfinite(q), q, 0.0), jnp.broadcast_to(valid, shape)
+    q_stacked = jnp.stack(q, axis=-1)
+    return jnp.where(jnp.isfinite(q_stacked), q_stacked, 0.0), jnp.broadcast_to(valid, shape)
 
 
 def _checked(arm: SRSArm, target, psi, gc, q: list) -> jax.Array:
@@ -344,7 +344,7 @@ def _checked(arm: SRSArm, target, psi, gc, q: list) -> jax.Array:
     return ok & (err <= POSE_TOL[jnp.finfo(target.dtype).bits >= 64])
 
 
-def arm_angle(arm: SRSArm, q: jax.Array) -> tuple[jax.Array, jax.Array]:
+def arm_angle(arm: SRSArm, q: ArrayLike) -> tuple[jax.Array, jax.Array]:
     """Arm angle and global configuration of joint configurations: the inverse of :func:`ik`.
 
     ``psi`` is the angle of the rotation about ``u`` that takes the reference shoulder frame

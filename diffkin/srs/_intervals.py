@@ -22,6 +22,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from diffkin._checks import instance, pose_array, positive_int
 from diffkin._trig import atan2, sincos
@@ -78,7 +79,7 @@ def _limit_roots(arm: SRSArm, e: AngleEntries, g2, g6, dtype) -> jax.Array:
     return _roots(Trig(*(jnp.concatenate(x, -1) for x in zip(flat(f_tan), flat(f_cos), strict=True))))
 
 
-def feasible_arm_angles(arm: SRSArm, target: jax.Array, gc: jax.Array) -> tuple[jax.Array, jax.Array]:
+def feasible_arm_angles(arm: SRSArm, target: ArrayLike, gc: ArrayLike) -> tuple[jax.Array, jax.Array]:
     """The exact set of arm angles whose :func:`ik` solution is in reach and within every joint limit.
 
     Args:
@@ -134,7 +135,7 @@ def feasible_arm_angles(arm: SRSArm, target: jax.Array, gc: jax.Array) -> tuple[
     return intervals, mask
 
 
-def sample_self_motion(arm: SRSArm, target: jax.Array, n: int, *, key: jax.Array | None = None,
+def sample_self_motion(arm: SRSArm, target: ArrayLike, n: int, *, key: jax.Array | None = None,
                        gc: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
     """``n`` exact IK solutions of one pose spread over its whole self-motion within the joint limits.
 

@@ -38,7 +38,7 @@ class Kinematics:
     joint_names: tuple[str, ...]
     lower: np.ndarray
     upper: np.ndarray
-    poses: Callable[[np.ndarray], jax.Array]
+    poses: Callable[[jax.Array], jax.Array]
     ends: tuple[str, ...]
 
     @property
@@ -72,7 +72,7 @@ def kinematics(model, ends: Sequence[str] | None = None) -> Kinematics:
     lower, upper = np.where(np.isfinite(lo), lo, -np.pi), np.where(np.isfinite(hi), hi, np.pi)
     if isinstance(model, dk.Robot):
         names = tuple(model.frame_names)
-        first = {}
+        first: dict[int, int] = {}  # body -> its first frame
         for f, body in enumerate(model.frame_bodies):
             first.setdefault(body, f)
         parents = []
@@ -99,7 +99,7 @@ def kinematics(model, ends: Sequence[str] | None = None) -> Kinematics:
                 model.frame_index(end)
     elif isinstance(model, (dk.DHChain, dk.PoEChain)):
         names = ("base", *(f"link{i + 1}" for i in range(model.dof)), "ee")
-        parents = tuple(range(-1, model.dof + 1))
+        parents = list(range(-1, model.dof + 1))
         poses = jax.jit(lambda q: jnp.concatenate([dk.link_poses(model, q), dk.fk(model, q)[None]]))
         if ends is None:
             ends = ("ee",)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import threading
 from collections.abc import Sequence
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -34,6 +35,11 @@ def _safe(name: str) -> str:
 
 def _wxyz(R: np.ndarray) -> np.ndarray:
     return vtf.SO3.from_matrix(np.asarray(R, dtype=np.float64)).wxyz
+
+
+def _signs(text: str) -> np.ndarray:
+    """``(3,)`` global configuration of a dropdown entry ``"+1 -1 +1"``."""
+    return np.array([float(s) for s in text.split()])
 
 
 def _pose(position, wxyz) -> np.ndarray:
@@ -127,11 +133,11 @@ class Viewer:
     def _build_robot(self, source, size: float) -> None:
         scene = self.server.scene
         names = self.kin.frame_names
-        self.visuals = {name: [] for name in names}
+        self.visuals: dict[str, list] = {name: [] for name in names}
         self.missing: list[str] = []
         visuals = _visuals.read_visuals(source) if source is not None else []
         has_meshes = False
-        self.frames = {}
+        self.frames: dict[str, viser.FrameHandle] = {}
         axes = 0.08 * size
         for name in names:
             self.frames[name] = scene.add_frame(f"/robot/{_safe(name)}", show_axes=True, axes_length=axes,
@@ -150,7 +156,7 @@ class Viewer:
             self.visuals[visual.frame].append(handle)
         self.has_meshes = has_meshes
         radius = 0.025 * size
-        self.skeleton = {}
+        self.skeleton: dict[str, Any] = {}  # joint spheres and link cylinders, by frame
         for f, parent in enumerate(self.kin.frame_parents):
             name = names[f]
             joint = scene.add_icosphere(f"/robot/{_safe(name)}/joint", radius=radius * 1.3, color=(240, 140, 40),
@@ -160,8 +166,8 @@ class Viewer:
                 self.skeleton[name] = scene.add_cylinder(f"/skeleton/{_safe(name)}", radius=radius, height=1.0,
                                                          color=(120, 130, 150), visible=not has_meshes)
         self._lengths = {name: 1.0 for name in self.skeleton}
-        for handle in self.frames.values():
-            handle.show_axes = not has_meshes
+        for frame in self.frames.values():
+            frame.show_axes = not has_meshes
 
     def _update_scene(self, poses: np.ndarray) -> None:
         names = self.kin.frame_names
@@ -213,7 +219,11 @@ class Viewer:
             for i, joint in enumerate(self.kin.joint_names):
                 lo, hi = float(self.kin.lower[i]), float(self.kin.upper[i])
                 slider = gui.add_slider(joint, min=lo, max=hi, step=1e-3, initial_value=_shown(self.q[i]))
-                slider.on_update(lambda _event, i=i: self._on_slider(i))
+
+                def moved(_event, i: int = i) -> None:
+                    self._on_slider(i)
+
+                slider.on_update(moved)
                 self.sliders.append(slider)
             reset = gui.add_button("Reset to zero")
             reset.on_click(lambda _event: self.set_q(np.zeros(self.kin.dof)))
@@ -225,7 +235,11 @@ class Viewer:
             for end in self.kin.ends:
                 self.ik_status[end] = gui.add_markdown(f"`{end}`: not solved yet")
                 gizmo = self.server.scene.add_transform_controls(f"/targets/{_safe(end)}", scale=0.18 * self.size)
-                gizmo.on_update(lambda _event, end=end: self._on_gizmo(end))
+
+                def dragged(_event, end: str = end) -> None:
+                    self._on_gizmo(end)
+
+                gizmo.on_update(dragged)
                 self.targets[end] = gizmo
         self._pending = dict.fromkeys(self.kin.ends, False)
         self._solving = threading.Lock()
@@ -240,9 +254,13 @@ class Viewer:
             with gui.add_folder("Arm angle (iiwa)") as self._arm_folder:
                 self.psi_slider = gui.add_slider("arm angle psi", min=-np.pi, max=np.pi, step=1e-3, initial_value=0.0)
                 self.srs_status = gui.add_markdown("")
-            self.gc_dropdown = None
+            self.gc_dropdown: viser.GuiDropdownHandle[str] | None = None
             self._show_gc(GC_OPTIONS[0])
-            self.psi_slider.on_update(lambda _event: self._quiet or self.set_arm_angle(self.psi_slider.value))
+
+            @self.psi_slider.on_update
+            def _(_event) -> None:
+                if not self._quiet:
+                    self.set_arm_angle(self.psi_slider.value)
 
         self.map = workspace_map
         if workspace_map is not None:
@@ -274,12 +292,16 @@ class Viewer:
         if old is not None and old.value == text:
             return
         with self._arm_folder:
-            self.gc_dropdown = self.server.gui.add_dropdown("gc (signs q2 q4 q6)", GC_OPTIONS, initial_value=text,
-                                                            order=None if old is None else old.order)
+            dropdown = self.server.gui.add_dropdown("gc (signs q2 q4 q6)", GC_OPTIONS, initial_value=text,
+                                                    order=None if old is None else old.order)
+        self.gc_dropdown = dropdown
         if old is not None:
             old.remove()
-        self.gc_dropdown.on_update(lambda _event: self._quiet or self.set_arm_angle(
-            self.psi_slider.value, np.array([float(s) for s in self.gc_dropdown.value.split()]), nearest=True))
+
+        @dropdown.on_update
+        def _(_event) -> None:
+            if not self._quiet:
+                self.set_arm_angle(self.psi_slider.value, _signs(dropdown.value), nearest=True)
 
     def _draw_map(self) -> None:
         points, colors = _overlays.map_points(self.map, self.map_quantity.value)
@@ -299,7 +321,7 @@ class Viewer:
             try:
                 if source != "slider":
                     for slider, value in zip(self.sliders, self.q, strict=True):
-                        slider.value = _shown(value)
+                        slider.value = _shown(value)  # type: ignore[misc]  # viser's stub: read-only; its API sets it
                 for end, gizmo in self.targets.items():
                     if source != ("gizmo", end):
                         f = self.kin.frame_names.index(end)
@@ -382,7 +404,7 @@ class Viewer:
         q = jnp.asarray(self.q)
         self._flange = self._srs_fk(q)
         psi, gc = (np.asarray(x) for x in self._srs_angle(q))
-        self.psi_slider.value = _shown(psi) if np.isfinite(psi) else 0.0
+        self.psi_slider.value = _shown(float(psi)) if np.isfinite(psi) else 0.0  # type: ignore[misc]  # viser: read-only stub
         self._show_gc(" ".join(f"{int(s):+d}" for s in gc))
         self._show_intervals(gc, "" if np.isfinite(psi) else "arm angle undefined here (elbow stretched)")
 
@@ -407,8 +429,8 @@ class Viewer:
         if self.arm is None:
             raise ValueError("set_arm_angle: the arm-angle controls need an iiwa (show(..., arm=dk.srs.iiwa14()))")
         with self._lock:
-            if gc is None:
-                gc = np.array([float(s) for s in self.gc_dropdown.value.split()])
+            if gc is None and self.gc_dropdown is not None:  # (always built with the arm controls)
+                gc = _signs(self.gc_dropdown.value)
             gc = np.asarray(gc, dtype=np.float64)
             q, valid = self._srs_ik(self._flange, float(psi), jnp.asarray(gc))
             feasible = self._show_intervals(gc)
@@ -418,7 +440,7 @@ class Viewer:
                 q, valid = self._srs_ik(self._flange, psi, jnp.asarray(gc))
             self._quiet = True
             try:
-                self.psi_slider.value = _shown(psi)
+                self.psi_slider.value = _shown(psi)  # type: ignore[misc]  # viser's stub: read-only; its API sets it
                 self._show_gc(" ".join(f"{int(s):+d}" for s in gc))
             finally:
                 self._quiet = False

@@ -104,11 +104,11 @@ def resolve_mesh(filename: str, base_dir: str | None) -> str | None:
 
 def urdf_visuals(root: ET.Element, base_dir: str | None) -> list[Visual]:
     """Every ``<link><visual>`` of a URDF, with named ``<material>`` colours resolved."""
-    colors = {}
-    for material in root.findall("material"):
-        color = material.find("color")
-        if material.get("name") and color is not None:
-            colors[material.get("name")] = tuple(_floats(color.get("rgba"), 4, DEFAULT_RGBA))
+    colors: dict[str, tuple] = {}
+    for named in root.findall("material"):
+        named_color, name = named.find("color"), named.get("name")
+        if name and named_color is not None:
+            colors[name] = tuple(_floats(named_color.get("rgba"), 4, DEFAULT_RGBA))
     visuals = []
     for link in root.findall("link"):
         for visual in link.findall("visual"):
@@ -122,12 +122,12 @@ def urdf_visuals(root: ET.Element, base_dir: str | None) -> list[Visual]:
                 if color is not None:
                     rgba = tuple(_floats(color.get("rgba"), 4, DEFAULT_RGBA))
                 else:
-                    rgba = colors.get(material.get("name"), DEFAULT_RGBA)
+                    rgba = colors.get(material.get("name", ""), DEFAULT_RGBA)
             geometry = visual.find("geometry")
             shape = geometry[0] if geometry is not None and len(geometry) else None
             if shape is None:
                 continue
-            frame = link.get("name")
+            frame = link.get("name", "")
             if shape.tag == "mesh":
                 filename = shape.get("filename", "")
                 visuals.append(Visual(frame, T, "mesh", tuple(_floats(shape.get("scale"), 3, (1, 1, 1))), filename,
@@ -183,8 +183,9 @@ def mjcf_visuals(root: ET.Element, base_dir: str | None) -> list[Visual]:
                 length = float(np.linalg.norm(axis))
                 p = (ends[:3] + ends[3:]) / 2
                 R = _z_to(axis)
-            if kind == "mesh" and geom.get("mesh") in meshes:
-                file, path, scale = meshes[geom.get("mesh")]
+            mesh = geom.get("mesh", "")
+            if kind == "mesh" and mesh in meshes:
+                file, path, scale = meshes[mesh]
                 visuals.append(Visual(name, _pose(R, p), "mesh", scale, file, path, rgba))
             elif kind == "box" and size is not None and size.size >= 3:
                 visuals.append(Visual(name, _pose(R, p), "box", tuple(2 * size[:3]), rgba=rgba))
