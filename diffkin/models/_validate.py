@@ -136,3 +136,17 @@ def dof_of(joint_types_value) -> int:
     if not joint_types_value:
         raise ValueError("joint_types: expected at least one joint, got ''")
     return len(joint_types(joint_types_value, len(joint_types_value)))
+
+
+def chain_statics(chain) -> int:
+    """The static fields every chain has, ``joint_types``, ``joint_names`` and ``name``; returns ``dof``."""
+    dof = dof_of(chain.joint_types)
+    static_names(chain.joint_names, dof)
+    text(chain.name, "name")
+    return dof
+
+
+def limit_leaves(chain, dof: int, concrete: bool) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The ``lower`` and ``upper`` leaves of a model with ``dof`` joints: their values when ``concrete``."""
+    return (leaf(chain.lower, "lower", (dof,), concrete, finite=False),
+            leaf(chain.upper, "upper", (dof,), concrete, finite=False))

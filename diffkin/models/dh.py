@@ -56,14 +56,11 @@ class DHChain:
 
     def _check(self, concrete: bool) -> None:
         """Static fields and leaf shapes always; values (finite, limits, rigid base/tool) when concrete."""
-        dof = check.dof_of(self.joint_types)
+        dof = check.chain_statics(self)
         check.flag(self.modified, "modified")
-        check.static_names(self.joint_names, dof)
-        check.text(self.name, "name")
         for field in ("a", "alpha", "d", "theta_offset"):
             check.leaf(getattr(self, field), field, (dof,), concrete)
-        lo = check.leaf(self.lower, "lower", (dof,), concrete, finite=False)
-        hi = check.leaf(self.upper, "upper", (dof,), concrete, finite=False)
+        lo, hi = check.limit_leaves(self, dof, concrete)
         if concrete:
             check.limits(lo, hi, dof)
         for field in ("base", "tool"):

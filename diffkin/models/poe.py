@@ -45,14 +45,11 @@ class PoEChain:
 
     def _check(self, concrete: bool) -> None:
         """Static fields and leaf shapes always; values (unit screws, limits, rigid poses) when concrete."""
-        dof = check.dof_of(self.joint_types)
-        check.static_names(self.joint_names, dof)
-        check.text(self.name, "name")
+        dof = check.chain_statics(self)
         S = check.leaf(self.screws, "screws", (dof, 6), concrete)
         check.leaf(self.home, "home", (4, 4), concrete)
         L = check.leaf(self.link_homes, "link_homes", (dof, 4, 4), concrete)
-        lo = check.leaf(self.lower, "lower", (dof,), concrete, finite=False)
-        hi = check.leaf(self.upper, "upper", (dof,), concrete, finite=False)
+        lo, hi = check.limit_leaves(self, dof, concrete)
         if not concrete:
             return
         assert S is not None and L is not None  # concrete: check.leaf returned the values

@@ -102,8 +102,7 @@ class Robot:
         check.leaf(self.multipliers, "multipliers", (nj,), concrete)
         check.leaf(self.offsets, "offsets", (nj,), concrete)
         F = check.leaf(self.frame_poses, "frame_poses", (nf, 4, 4), concrete)
-        lo = check.leaf(self.lower, "lower", (dof,), concrete, finite=False)
-        hi = check.leaf(self.upper, "upper", (dof,), concrete, finite=False)
+        lo, hi = check.limit_leaves(self, dof, concrete)
         if not concrete:
             return
         assert S is not None and P is not None and F is not None  # concrete: check.leaf returned the values
