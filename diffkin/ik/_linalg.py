@@ -77,11 +77,11 @@ def _dense_step(J: jax.Array, r: jax.Array, lam: jax.Array) -> jax.Array:
     m, n = Jp.shape[1:]
     if m <= n:
         A = Jp @ jnp.swapaxes(Jp, -1, -2) + lam[:, None, None] * jnp.eye(m, dtype=J.dtype)
-        y = jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(A, lower=True), rp)
+        y = jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(A, lower=True), rp[..., None])[..., 0]
         return jnp.einsum("pmn,pm->np", Jp, y)
     A = jnp.swapaxes(Jp, -1, -2) @ Jp + lam[:, None, None] * jnp.eye(n, dtype=J.dtype)
     b = jnp.einsum("pmn,pm->pn", Jp, rp)
-    return jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(A, lower=True), b).T
+    return jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(A, lower=True), b[..., None])[..., 0].T
 
 
 def _unrolled_step(J, r, lam) -> list:

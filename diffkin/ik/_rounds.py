@@ -143,7 +143,7 @@ def _best(s: Seeds, num_targets: int, rank) -> Seeds:
 
 
 def search(build: Callable, lift: Callable, rank: Callable, key, n: int, lower, upper, first, init, step_fn,
-           settings: Settings) -> Seeds:
+           settings: Settings, moves=None) -> Seeds:
     """Solve ``n`` targets from seeds in rounds; the best seed of each (leaves end with ``(n,)``).
 
     Args:
@@ -157,6 +157,10 @@ def search(build: Callable, lift: Callable, rank: Callable, key, n: int, lower, 
         first: ``(n, n_state)`` warm-start states (seed 0 of the first round), or ``None``.
         init, step_fn: the method: ``init(x) -> aux``, ``step_fn(problem, x, ev, aux)``.
         settings: seeds, iterations, polishing rounds and tolerances.
+        moves: ``(dof, k)`` bool, which joints move which of ``k`` targets (several targets), or
+            ``None``. Then the random seeds of later rounds keep the best state's joints that
+            move only targets it already reached (and its root pose if it reached any): a
+            two-arm problem with one arm solved searches for the other arm only.
     """
     dtype, dof = lower.dtype, lower.shape[0]
 
@@ -177,10 +181,20 @@ def search(build: Callable, lift: Callable, rank: Callable, key, n: int, lower, 
         per_target = seeds.x.reshape(seeds.x.shape[0], copies, m)
         return _best(seeds, m, rank(idx, per_target))
 
-    def seeds(idx, round_index, group: int):
-        """``group`` random seeds per target, ``(group, len(idx), n_state)``, each the best of ``_SCREEN`` draws."""
+    def seeds(idx, round_index, group: int, best=None):
+        """``group`` random seeds per target, ``(group, len(idx), n_state)``, each the best of ``_SCREEN`` draws.
+
+        With ``best`` (and ``moves``), joints that move only reached targets keep their best values.
+        """
         q = _seed_configs(key, idx, round_index, lower, upper, _SCREEN * group, dtype)
         x = lift(idx, q)
+        if best is not None and moves is not None:
+            near = best.x[:, idx].T  # (m, n_state)
+            reached = (best.ev.pos_err[:, idx] <= settings.pos_tol) & (best.ev.rot_err[:, idx] <= settings.rot_tol)
+            only_reached = ~jnp.any(moves[:, :, None] & ~reached[None], axis=1)  # (dof, m)
+            keep = jnp.concatenate([only_reached.T, jnp.broadcast_to(jnp.any(reached, axis=0)[:, None],
+                                                                     (idx.shape[0], x.shape[-1] - dof))], axis=-1)
+            x = jnp.where(keep, near, x)
         problem = build(idx, _SCREEN * group)
         cost = problem.screen_cost(problem.project(x.reshape(-1, x.shape[-1]).T)).reshape(_SCREEN, group, -1)
         best = jnp.argmin(cost, axis=0)
@@ -195,7 +209,7 @@ def search(build: Callable, lift: Callable, rank: Callable, key, n: int, lower, 
 
         def attempt(idx, round_index, live, best):
             """Round ``round_index`` (per target) for the targets ``idx``: random or polishing seeds."""
-            fresh = seeds(idx, round_index, GROUP)
+            fresh = seeds(idx, round_index, GROUP, best)
             near = best.x[:, idx].T  # (m, n_state)
             joints = near[:, :dof] + _JITTER * (fresh[1:, :, :dof] - near[:, :dof])
             nearby = jnp.concatenate([joints, jnp.broadcast_to(near[:, dof:], fresh[1:, :, dof:].shape)], axis=-1)

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffkin.ik import _args, _rounds
+from diffkin.ik import _args, _rounds, _tree
 from diffkin.ik._implicit import implicit_q
 from diffkin.ik._prepare import cast, detach, inward, method_steps, valid_targets
 from diffkin.ik._problem import Problem
@@ -21,10 +21,14 @@ from diffkin.models.poe import PoEChain
 from diffkin.models.robot import Robot
 
 _DEFAULT_ITERS = {"lm": 10, "optax": 1000}
+# Several targets (and a floating base) converge in more LM steps: 10 solved 94 % of Talos'
+# four-contact problems, 20 solved 98 %, 40 solved 100 % (50 problems, float32).
+_TREE_ITERS = {"lm": 30, "optax": 1000}
 
 
 def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str = "lm", max_iters: int | None = None,
-          pos_tol: float = 1e-5, rot_tol: float = 1e-4, respect_limits: bool = True, optimizer=None) -> IKResult:
+          pos_tol: float = 1e-5, rot_tol: float = 1e-4, respect_limits: bool = True, optimizer=None, weights=None,
+          locked=None, rest=None, secondary=None, solve_base: bool = False, base=None) -> IKResult:
     """Inverse kinematics for a batch of targets, from random seeds (and an optional warm start).
 
     Every target gets up to ``num_seeds`` seeds, each the best (least pose error) of 8
@@ -86,10 +90,21 @@ def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str 
         TypeError: a chain that is not a chain model, an optimizer that is not an optax
             ``GradientTransformation``, a bool, complex or float16 target.
     """
-    max_iters = _DEFAULT_ITERS[method] if max_iters is None and method in _args.METHODS else max_iters
+    if isinstance(chain, Robot):
+        max_iters = _TREE_ITERS.get(method, max_iters) if max_iters is None else max_iters
+        return _tree.solve(chain, target, weights=weights, locked=locked, q0=q0, rest=rest, secondary=secondary,
+                           solve_base=solve_base, base=base, key=key, num_seeds=num_seeds, method=method,
+                           max_iters=max_iters, pos_tol=pos_tol, rot_tol=rot_tol, respect_limits=respect_limits,
+                           optimizer=optimizer)
+    max_iters = _DEFAULT_ITERS.get(method, max_iters) if max_iters is None else max_iters
     if not isinstance(chain, (DHChain, PoEChain)):
-        hint = " (for a frame of a whole robot, solve robot.chain(frame_name))" if isinstance(chain, Robot) else ""
-        raise TypeError(f"chain: expected a DHChain or PoEChain{hint}, got {type(chain).__name__}")
+        raise TypeError(f"chain: expected a DHChain, PoEChain or Robot, got {type(chain).__name__}")
+    for name, value in (("weights", weights), ("locked", locked), ("rest", rest), ("secondary", secondary),
+                        ("base", base)):
+        if value is not None:
+            raise ValueError(f"{name}: only for a Robot (solve dk.load_robot(...) with a mapping of targets)")
+    if solve_base:
+        raise ValueError("solve_base: only for a floating Robot")
     _args.check_settings(num_seeds, method, max_iters, pos_tol, rot_tol, optimizer)
     target, position_only, batch = _args.check_target(target)
     if q0 is not None:
