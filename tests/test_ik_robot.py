@@ -202,7 +202,7 @@ def test_rest_objective_lowers_its_cost_and_keeps_the_targets(iiwa, iiwa_solve):
     assert _rate(ok) >= 0.99
     assert np.all(np.asarray(rested.pos_err)[ok] <= POS_TOL) and np.all(np.asarray(rested.rot_err)[ok] <= ROT_TOL)
     free = jnp.ones(7, bool)
-    cost = lambda q: np.asarray(_secondary.cost_and_gradient(  # noqa: E731
+    cost = lambda q: np.asarray(_secondary.cost_and_step(  # noqa: E731
         (("rest", 1.0),), jnp.asarray(q).T, IIWA_REST[:, None], iiwa.lower, iiwa.upper, free)[0])
     assert np.all(cost(rested.q)[ok] <= cost(plain.q)[ok] + 1e-6)
     assert np.mean(cost(rested.q)[ok]) < 0.9 * np.mean(cost(plain.q)[ok])

@@ -1,7 +1,8 @@
 """Secondary objectives of a redundant robot, lowered in the null space of its targets.
 
-Once a problem's targets are solved, :func:`refine` moves the joints along ``-(I - J^+ J) grad h``
-(``J`` the targets' weighted Jacobian, so the targets do not move to first order), then takes one
+Once a problem's targets are solved, :func:`refine` moves the joints along ``-(I - J^+ J) s``, ``s``
+the Newton step of ``h`` (``J`` the targets' weighted Jacobian, so the targets do not move to
+first order), then takes one
 Gauss-Newton step back onto the targets, and keeps the move only if every target is still within
 tolerance and ``h`` went down. The targets' accuracy is therefore what the solver reached, and
 ``h`` never rises.
@@ -24,28 +25,31 @@ from diffkin.ik._rounds import succeeded
 OBJECTIVES = ("rest", "limits")
 _REFINE_ITERS = 20
 _LAM = 1e-6  # m^2: damping of the null-space projection and of the step back onto the targets
-_ALPHA0, _ALPHA_MIN = 0.5, 1e-3
+_ALPHA0, _ALPHA_MIN = 1.0, 1e-3
 
 
-def cost_and_gradient(objectives: tuple, q: jax.Array, rest, lower, upper, free) -> tuple[jax.Array, jax.Array]:
-    """``(h, dh/dq)`` of the weighted objectives at ``q`` ``(dof, ...)``: ``(...)`` and ``(dof, ...)``.
+def cost_and_step(objectives: tuple, q: jax.Array, rest, lower, upper, free) -> tuple[jax.Array, jax.Array]:
+    """``(h, step)`` of the weighted objectives at ``q`` ``(dof, ...)``: ``(...)`` and ``(dof, ...)``.
 
+    ``step`` is the Newton step ``grad h / diag(hess h)`` (each objective is a separable quadratic,
+    so a full step reaches its minimum joint by joint, whatever the units and ranges of the joints).
     ``rest``: ``(dof, ...)`` rest configuration (for ``"rest"``); ``lower``/``upper``: ``(dof,)``
     limits; ``free``: ``(dof,)`` bool, the joints the solver moves.
     """
     expand = (slice(None),) + (None,) * (q.ndim - 1)
-    h, grad = jnp.zeros(q.shape[1:], q.dtype), jnp.zeros_like(q)
+    h, grad, curvature = jnp.zeros(q.shape[1:], q.dtype), jnp.zeros_like(q), jnp.zeros_like(q)
     for name, weight in objectives:
         if name == "rest":
-            d = q - rest
-            h, grad = h + weight * 0.5 * jnp.sum(jnp.where(free[expand], d * d, 0.0), axis=0), grad + weight * d
+            d = jnp.where(free[expand], q - rest, 0.0)
+            h, grad, curvature = h + weight * 0.5 * jnp.sum(d * d, axis=0), grad + weight * d, curvature + weight
         else:  # "limits"
-            limited = free & jnp.isfinite(lower) & jnp.isfinite(upper) & (upper > lower)
-            span = jnp.where(limited, upper - lower, 1.0)[expand]
-            u = (2 * q - jnp.where(limited, lower + upper, 0.0)[expand]) / span
-            h = h + weight * 0.5 * jnp.sum(jnp.where(limited[expand], u * u, 0.0), axis=0)
-            grad = grad + weight * jnp.where(limited[expand], 2 * u / span, 0.0)
-    return h, jnp.where(free[expand], grad, 0.0)
+            limited = (free & jnp.isfinite(lower) & jnp.isfinite(upper) & (upper > lower))[expand]
+            span = jnp.where(limited, upper[expand] - lower[expand], 1.0)
+            u = jnp.where(limited, (2 * q - jnp.where(limited, lower[expand] + upper[expand], 0.0)) / span, 0.0)
+            h = h + weight * 0.5 * jnp.sum(u * u, axis=0)
+            grad = grad + weight * 2 * u / span
+            curvature = curvature + weight * jnp.where(limited, 4 / (span * span), 0.0)
+    return h, jnp.where(free[expand] & (curvature > 0), grad / jnp.where(curvature > 0, curvature, 1.0), 0.0)
 
 
 def refine(problem, x: jax.Array, ev, success: jax.Array, h_of, pos_tol, rot_tol):
@@ -54,7 +58,7 @@ def refine(problem, x: jax.Array, ev, success: jax.Array, h_of, pos_tol, rot_tol
     Args:
         problem: the problems of ``x`` (``evaluate``, ``retract``).
         ev: the evaluation at ``x``; ``success``: ``(P,)`` which are solved (only those move).
-        h_of: ``h_of(x) -> (h (P,), grad (dof, P))``.
+        h_of: ``h_of(x) -> (h (P,), Newton step (dof, P))``.
 
     Returns:
         ``(x, ev)`` after at most 20 accepted or rejected moves per problem (the step length

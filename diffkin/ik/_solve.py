@@ -56,10 +56,17 @@ def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str 
     through the implicit function theorem (``dq = J^+ dx``, see :func:`implicit_q`), not through
     the iterations; the derivative is that of a successful, non-singular solution off the limits.
 
+    A :class:`~diffkin.Robot` takes a mapping ``{frame_name: target}`` instead: every target is
+    solved at once (success means all within tolerance), with per-axis ``weights``, ``locked``
+    joints, secondary objectives and a solved floating base (see :mod:`diffkin.ik._tree`; the
+    residual stacks one such residual per target, dense linear algebra above 6 rows and columns,
+    30 LM iterations per seed by default).
+
     Args:
-        chain: a :class:`~diffkin.DHChain` or :class:`~diffkin.PoEChain`.
+        chain: a :class:`~diffkin.DHChain` or :class:`~diffkin.PoEChain`, or a :class:`~diffkin.Robot`.
         target: ``(..., 4, 4)`` end-effector poses ``T_base_ee`` or ``(..., 3)`` positions in the
             base frame (metres; orientation free). The solver runs in this dtype (float32 default).
+            For a robot: a mapping from frame names to such targets (world frame), one batch shape.
         key: PRNG key for the seeds; default ``jax.random.key(0)``. Target ``b`` of the flattened
             batch draws round ``r``'s seeds from ``fold_in(fold_in(key, b), r)``.
         q0: optional ``(..., dof)`` warm start broadcastable to the targets' batch; it is an extra
@@ -75,6 +82,18 @@ def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str 
         respect_limits: keep every iterate (and the result) within ``[chain.lower, chain.upper]``.
         optimizer: an ``optax.GradientTransformation`` for ``method="optax"``; default
             ``optax.adam(1e-2)``.
+        weights: robots: ``{frame_name: w}``, ``w`` six non-negative weights of the ``[v; w]``
+            error in the target frame (world axes for a position target) or a pair
+            ``(w_pos, w_rot)``; a zero frees that axis (errors and success ignore it). Default 1.
+        locked: robots: ``{joint_name: value}`` (a number or one per target) or a sequence of
+            joint names whose values come from ``q0``; those joints do not move.
+        rest: robots: ``(..., dof)`` rest configuration (for the ``"rest"`` objective).
+        secondary: robots: ``"rest"``, ``"limits"``, a sequence of them or ``{name: weight}``
+            (default ``"rest"`` when ``rest`` is given): lowered in the null space of the
+            targets once they are solved, without losing any (see :mod:`diffkin.ik._secondary`).
+        solve_base: robots: for a floating robot, solve the root pose too (``IKResult.base``).
+        base: robots: ``(..., 4, 4)`` root pose ``T_world_root``: fixed, or the starting guess
+            with ``solve_base`` (default identity).
 
     Returns:
         :class:`IKResult`, each field with the batch shape of ``target``. Without a success the

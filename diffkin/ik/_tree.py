@@ -214,9 +214,9 @@ def _solve_tree(known: _args.KnownLeaves, traced: tuple, targets: tuple, key, q0
         return jnp.concatenate([q, jnp.broadcast_to(base_rows[idx], q.shape[:2] + (BASE_ROWS,))], axis=-1)
 
     def h_of(idx):
-        def h(x):  # x (n_state, ...) -> (h, grad)
+        def h(x):  # x (n_state, ...) -> (h, Newton step)
             r = None if rest_flat is None else rest_flat[idx].T.reshape((dof,) + (1,) * (x.ndim - 2) + (-1,))
-            return _secondary.cost_and_gradient(spec.secondary, x[:dof], r, lower, upper, free)
+            return _secondary.cost_and_step(spec.secondary, x[:dof], r, lower, upper, free)
         return h
 
     def rank(idx, x):  # among successes: least secondary cost, else nearest the warm start
