@@ -25,7 +25,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import diffkin as dk
-from diffkin.ik import _solve
+from diffkin.ik import _args
 
 EXAMPLES = int(os.environ.get("DIFFKIN_FUZZ_EXAMPLES", "25"))
 FUZZ = settings(max_examples=EXAMPLES, deadline=None, derandomize="DIFFKIN_FUZZ_EXAMPLES" not in os.environ,
@@ -246,10 +246,10 @@ def test_bad_inputs_raise_value_or_type_errors(data):
     _value_or_type_error_only(dk.jacobian, chain, np.zeros(3), junk)
     _value_or_type_error_only(dk.jacobian, chain, np.zeros(3), method=junk)
     # IK's host-side checks (the solve itself is traced code, fuzzed above).
-    _value_or_type_error_only(_solve._check_args, chain, junk, None, 4, "lm", 10, 1e-5, 1e-4, None)
-    _value_or_type_error_only(_solve._check_args, chain, np.eye(4), junk, 4, "lm", 10, 1e-5, 1e-4, None)
-    _value_or_type_error_only(_solve._check_args, chain, np.eye(4), None, junk, "lm", 10, 1e-5, 1e-4, None)
-    _value_or_type_error_only(_solve._check_args, chain, np.eye(4), None, 4, "lm", 10, junk, 1e-4, None)
+    _value_or_type_error_only(_args.check_target, junk)
+    _value_or_type_error_only(_args.check_batched, junk, "q0", (chain.dof,), (), "for a chain")
+    _value_or_type_error_only(_args.check_settings, junk, "lm", 10, 1e-5, 1e-4, None)
+    _value_or_type_error_only(_args.check_settings, 4, "lm", 10, junk, 1e-4, None)
 
 
 @pytest.mark.parametrize("value", [np.nan, np.inf])

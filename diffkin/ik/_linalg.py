@@ -7,6 +7,7 @@ whole solve; on CPU this is far faster than a batched LAPACK call per tiny matri
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from diffkin import _rigid as rg
@@ -43,7 +44,13 @@ def _materialized(A: list[list]) -> list[list]:
     return out
 
 
-def damped_step(J: list[list], r: list, lam) -> list:
+#: Largest normal matrix solved entry by entry. Above it (several targets of a whole robot) the
+#: unrolled factorisation's trace and compile time grow as ``size^3`` and a batched LAPACK solve
+#: of dense matrices is used instead.
+_UNROLL_MAX = 6
+
+
+def damped_step(J: jax.Array, r: jax.Array, lam: jax.Array) -> jax.Array:
     """Levenberg step ``dq = argmin |J dq - r|^2 + lam |dq|^2`` for a batch of small systems.
 
     Uses ``dq = J^T (J J^T + lam I)^-1 r`` when ``J`` has no more rows than columns and
@@ -51,13 +58,34 @@ def damped_step(J: list[list], r: list, lam) -> list:
     normal matrix (``min(m, n)`` square).
 
     Args:
-        J: ``m x n`` nested lists of entries (arrays of the batch shape, or Python floats).
-        r: ``m`` residual entries.
-        lam: damping, an array of the batch shape (positive).
+        J: ``(m, n, P)`` matrices, problem axis last.
+        r: ``(m, P)`` residuals.
+        lam: ``(P,)`` damping (positive).
 
     Returns:
-        ``n`` entries of the step.
+        ``(n, P)`` steps.
     """
+    m, n = J.shape[:2]
+    if min(m, n) > _UNROLL_MAX:
+        return _dense_step(J, r, lam)
+    return jnp.stack(_unrolled_step(J, r, lam))
+
+
+def _dense_step(J: jax.Array, r: jax.Array, lam: jax.Array) -> jax.Array:
+    """:func:`damped_step` with batched dense matrices (``(P, k, k)`` Cholesky)."""
+    Jp, rp = jnp.moveaxis(J, -1, 0), jnp.moveaxis(r, -1, 0)  # (P, m, n), (P, m)
+    m, n = Jp.shape[1:]
+    if m <= n:
+        A = Jp @ jnp.swapaxes(Jp, -1, -2) + lam[:, None, None] * jnp.eye(m, dtype=J.dtype)
+        y = jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(A, lower=True), rp[..., None])[..., 0]
+        return jnp.einsum("pmn,pm->np", Jp, y)
+    A = jnp.swapaxes(Jp, -1, -2) @ Jp + lam[:, None, None] * jnp.eye(n, dtype=J.dtype)
+    b = jnp.einsum("pmn,pm->pn", Jp, rp)
+    return jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(A, lower=True), b[..., None])[..., 0].T
+
+
+def _unrolled_step(J, r, lam) -> list:
+    """:func:`damped_step` entry by entry (``J[i][k]``, ``r[i]`` of the batch shape): ``n`` entries."""
     m, n = len(J), len(J[0])
     if m <= n:
         A = [[rg.add(*(rg.mul(J[i][k], J[j][k]) for k in range(n))) for j in range(m)] for i in range(m)]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from diffkin.ik._linalg import damped_step
-from diffkin.ik._problem import Eval, Problem, evaluate
+from diffkin.ik._problem import Eval
 
 _MU_INIT = 1e-2  # damping lam = mu |r|^2 + lam_min (error-proportional, as in Sugihara 2011)
 _MU_MIN = 1e-6
@@ -19,7 +19,7 @@ def init(q: jnp.ndarray) -> jnp.ndarray:
     return jnp.full(q.shape[1:], _MU_INIT, q.dtype)
 
 
-def step(problem: Problem, q, ev: Eval, mu):
+def step(problem, q, ev: Eval, mu):
     """One LM trial: ``(q_new, ev_new, mu_new, accepted, stalled)``, one forward pass.
 
     The step solves ``(J J^T + lam I) y = r, dq = J^T y`` (or the ``dof x dof`` form),
@@ -27,9 +27,8 @@ def step(problem: Problem, q, ev: Eval, mu):
     keeps ``q`` and raises the damping.
     """
     lam = mu * ev.cost + _LAM_MIN
-    dq = jnp.stack(damped_step(ev.J, ev.r, lam))
-    q_try = problem.project(q + dq)
-    ev_try = evaluate(problem, q_try)
+    q_try = problem.retract(q, damped_step(ev.J, ev.r, lam))
+    ev_try = problem.evaluate(q_try)
     accept = ev_try.cost < ev.cost
     mu = jnp.where(accept, jnp.maximum(mu * _MU_DOWN, _MU_MIN), mu * _MU_UP)
     return q_try, ev_try, mu, accept, mu >= _MU_MAX

@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from diffkin.ik._problem import Eval, Problem, evaluate, gradient
+from diffkin.ik._problem import Eval, gradient
 
 
 def default_optimizer() -> optax.GradientTransformation:
@@ -19,14 +19,14 @@ def init(optimizer: optax.GradientTransformation, q: jax.Array):
     return jax.vmap(optimizer.init, in_axes=-1, out_axes=-1)(q)
 
 
-def step(optimizer: optax.GradientTransformation, problem: Problem, q, ev: Eval, state):
+def step(optimizer: optax.GradientTransformation, problem, q, ev: Eval, state):
     """One optimizer update on ``|r|^2 / 2`` with the exact gradient ``-J^T r``, then projected.
 
     Returns ``(q_new, ev_new, state_new, accepted, stalled)``: every step is taken (first-order
     methods may go uphill), none stalls.
     """
     updates, state = jax.vmap(optimizer.update, in_axes=-1, out_axes=-1)(gradient(ev), state, q)
-    q_new = problem.project(optax.apply_updates(q, updates))
-    ev_new = evaluate(problem, q_new)
+    q_new = problem.retract(q, updates)
+    ev_new = problem.evaluate(q_new)
     accept = jnp.ones(ev.cost.shape, bool)
     return q_new, ev_new, state, accept, jnp.zeros(ev.cost.shape, bool)

@@ -62,9 +62,34 @@ class Problem(NamedTuple):
 
     def project(self, q: jax.Array) -> jax.Array:
         """Wrap unlimited revolute joints and (with ``respect_limits``) clip to the limits."""
-        wrap, lower, upper = self.wrap[:, None], self.lower[:, None], self.upper[:, None]
-        wrapped = jnp.where(wrap, jnp.mod(q + np.pi, 2 * np.pi) - np.pi, q)
-        return jnp.clip(wrapped, lower, upper) if self.respect_limits else wrapped
+        return project(q, self.lower, self.upper, self.wrap, self.respect_limits)
+
+    def retract(self, q: jax.Array, dq: jax.Array) -> jax.Array:
+        """``q + dq``, projected."""
+        return self.project(q + dq)
+
+    def evaluate(self, q: jax.Array) -> Eval:
+        return evaluate(self, q)
+
+    def screen_cost(self, q: jax.Array) -> jax.Array:
+        """``(P,)`` cheap cost for choosing seeds: ``|p_t - p|^2 + ROT_WEIGHT^2 (3 - trace(R_t^T R))``.
+
+        One forward pass without Jacobian; the rotation term is ``2 (1 - cos angle)``, the
+        squared angle near 0.
+        """
+        ee = self.chain._frames(list(q)).ee
+        cost = sum(rg.add(self.p[i], -ee.p[i]) ** 2 for i in range(3))
+        if self.R is not None:
+            trace = rg.add(*(rg.mul(ee.R[i][j], self.R[i][j]) for i in range(3) for j in range(3)))
+            cost = cost + ROT_WEIGHT**2 * (3.0 - trace)
+        return cost
+
+
+def project(q: jax.Array, lower, upper, wrap, respect_limits: bool) -> jax.Array:
+    """``q`` ``(dof, P)`` with unlimited revolute joints (``wrap``) wrapped to ``[-pi, pi)`` and,
+    with ``respect_limits``, every joint clipped to ``[lower, upper]`` ``(dof,)``."""
+    wrapped = jnp.where(wrap[:, None], jnp.mod(q + np.pi, 2 * np.pi) - np.pi, q)
+    return jnp.clip(wrapped, lower[:, None], upper[:, None]) if respect_limits else wrapped
 
 
 def evaluate(problem: Problem, q: jax.Array) -> Eval:

@@ -21,6 +21,12 @@ class IKResult(NamedTuple):
         rot_err: ``(...,)`` angle in radians of the residual rotation ``R_target R(q)^T``
             (0 for position-only targets).
         iters: ``(...,)`` int32 number of solver iterations the returned seed ran.
+        base: ``(..., 4, 4)`` the solved root pose ``T_world_root`` of a floating robot solved
+            with ``solve_base=True``, else ``None``.
+
+    For a :class:`~diffkin.Robot` with ``k`` targets, ``pos_err`` and ``rot_err`` are ``(..., k)``
+    (in the order of the ``targets`` mapping), each measured on the target's weighted axes only,
+    and ``success`` means every target is within tolerance.
     """
 
     q: jax.Array
@@ -28,3 +34,4 @@ class IKResult(NamedTuple):
     pos_err: jax.Array
     rot_err: jax.Array
     iters: jax.Array
+    base: jax.Array | None = None

@@ -178,6 +178,15 @@ class Robot:
         ``links`` holds every frame (in :attr:`frame_names` order) if ``every``, else is empty.
         """
         bodies, screws = self._bodies(q, base)
+        links = [self._frame(bodies, f) for f in range(len(self.frame_names))] if every else []
+        return rg.Frames(links, self._frame(bodies, frame), self._columns(screws, frame))
+
+    def _columns(self, screws: list[tuple[rg.Vec3, rg.Vec3]], frame: int) -> list[tuple[rg.Vec3, rg.Vec3]]:
+        """Per entry of ``q``, the space twist of frame ``frame`` per unit ``q_i``, from the joints' screws.
+
+        The sum over the joints on the frame's path that ``q_i`` drives of ``multiplier * screw``
+        (zero if none): the columns of the frame's space Jacobian.
+        """
         zero = (0.0, 0.0, 0.0)
         columns: list = [(zero, zero)] * self.dof
         m = rg.per_joint(_host(self.multipliers))
@@ -185,8 +194,7 @@ class Robot:
             v, w = screws[j]
             i = self.sources[j]
             columns[i] = (rg.vadd(columns[i][0], rg.scale(m[j], v)), rg.vadd(columns[i][1], rg.scale(m[j], w)))
-        links = [self._frame(bodies, f) for f in range(len(self.frame_names))] if every else []
-        return rg.Frames(links, self._frame(bodies, frame), columns)
+        return columns
 
     def chain(self, end: str, base: str | None = None) -> PoEChain:
         """The exact :class:`PoEChain` of the path from frame ``base`` (default the root) to frame ``end``.

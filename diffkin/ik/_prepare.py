@@ -1,0 +1,65 @@
+"""What a solve prepares inside ``jit``: the model and targets in the solver's dtype, safe targets,
+limits rounded inwards, and the method's iteration."""
+
+from __future__ import annotations
+
+import functools
+import importlib
+
+import jax
+import jax.numpy as jnp
+
+from diffkin._checks import rigid_poses
+from diffkin._rigid import is_concrete
+from diffkin.ik import _lm
+
+
+def detach(tree):
+    """``stop_gradient`` on traced leaves only (concrete model constants stay foldable)."""
+    return jax.tree.map(lambda x: x if is_concrete(x) else jax.lax.stop_gradient(x), tree)
+
+
+def cast(tree, dtype):
+    """Traced floating leaves to ``dtype``; concrete ones are folded as Python floats by the model."""
+    def cast_leaf(x):
+        if not is_concrete(x) and jnp.issubdtype(x.dtype, jnp.floating):
+            return x.astype(dtype)
+        return x
+    return jax.tree.map(cast_leaf, tree)
+
+
+def inward(limit, dtype, side: int) -> jax.Array:
+    """``limit`` in ``dtype``, rounded towards the inside of the range (``side`` -1: lower, +1: upper)."""
+    limit = jnp.asarray(limit)
+    rounded = limit.astype(dtype)
+    outside = side * (rounded.astype(limit.dtype) - limit) > 0
+    return jnp.where(outside, jnp.nextafter(rounded, jnp.asarray(-side * jnp.inf, dtype)), rounded)
+
+
+def method_steps(method: str, optimizer):
+    """``(init, step_fn)`` of the method (see :func:`diffkin.ik._rounds.search`)."""
+    if method == "lm":
+        return _lm.init, _lm.step
+    _optax = optax_module()
+    opt = _optax.default_optimizer() if optimizer is None else optimizer
+    return functools.partial(_optax.init, opt), functools.partial(_optax.step, opt)
+
+
+def optax_module():
+    """``diffkin.ik._optax`` (which needs optax), or an ImportError naming the extra to install."""
+    try:
+        return importlib.import_module("diffkin.ik._optax")
+    except ImportError as e:
+        raise ImportError("method='optax' needs optax: pip install 'diffkin[ik]' (or pip install optax)") from e
+
+
+def valid_targets(flat: jax.Array, position_only: bool) -> tuple[jax.Array, jax.Array]:
+    """``(valid, safe)``: which of the targets ``(n, 4, 4)``/``(n, 3)`` are finite (and rigid), and the
+    targets with the others replaced by the identity (so that nothing NaN enters the solver)."""
+    n = flat.shape[0]
+    valid = jnp.all(jnp.isfinite(flat.reshape(n, -1)), axis=-1)
+    valid = valid if position_only else valid & rigid_poses(flat)  # a non-rigid traced target fails
+    identity = jnp.eye(4, dtype=flat.dtype)
+    safe = jnp.where(valid.reshape((n,) + (1,) * (flat.ndim - 1)), flat,
+                     identity[:3, 3] if position_only else identity)
+    return valid, safe

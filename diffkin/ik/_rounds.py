@@ -1,0 +1,249 @@
+"""The search every IK problem shares: seeds in rounds, the iteration loop, the choice of seed.
+
+Layout, stated once: inside the search every array is flat over ``P = copies x targets``
+problems with that axis last. The state ``x`` is ``(n, P)``: the ``dof`` joint values, then (when
+a floating base is solved) the 12 entries of the root pose ``[p; R row by row]``. Seeds are drawn
+as ``(copies, targets, dof)`` and enter the flat layout in :func:`_run_from` only.
+
+A *problem* (:class:`diffkin.ik._problem.Problem` for a chain,
+:class:`diffkin.ik._targets.TreeProblem` for a robot) provides ``project(x)``,
+``retract(x, dx)``, ``evaluate(x) -> Eval`` and ``screen_cost(x)``. The search builds one with
+``build(idx, copies)`` for the targets ``idx``, each repeated ``copies`` times.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffkin.ik._problem import Eval
+
+GROUP = 4  # seeds per target in a round
+# Rounds after the first run only for the targets still unsolved, packed into chunks of
+# max(n / 32, 8) targets (one compiled loop serves every later round, and small chunks keep its
+# iterations cheap).
+_CHUNK_DIV, _MIN_CHUNK = 32, 8
+_SCREEN = 8  # each random seed is the best (least screening cost) of this many uniform draws
+POLISH = 3  # LM: final rounds go on from the best seed so far and perturbations of it ...
+_JITTER = 0.05  # ... each a step of this fraction towards a random seed
+
+
+class Seeds(NamedTuple):
+    """Iteration state of every seed (problem axis last)."""
+
+    x: jax.Array  # (n, P)
+    ev: Eval
+    aux: object  # method state: LM damping or optax state
+    success: jax.Array  # (P,) bool, sticky
+    stalled: jax.Array  # (P,) bool
+    iters: jax.Array  # (P,) int32
+
+
+class Settings(NamedTuple):
+    """Static settings of a search (and the traced tolerances)."""
+
+    num_seeds: int
+    max_iters: int
+    polish: int
+    pos_tol: jax.Array
+    rot_tol: jax.Array
+
+
+def succeeded(ev: Eval, pos_tol, rot_tol) -> jax.Array:
+    """``(P,)`` every target of the problem within tolerance (errors ``(P,)`` or ``(k, P)``)."""
+    ok = (ev.pos_err <= pos_tol) & (ev.rot_err <= rot_tol)
+    return jnp.all(ok, axis=tuple(range(ok.ndim - 1)))
+
+
+def _where(mask, new, old):
+    """Per-problem select over a pytree whose leaves all end with the problem axis."""
+    return jax.tree.map(lambda a, b: jnp.where(mask, a, b), new, old)
+
+
+def _seed_configs(key, targets: jax.Array, rounds: jax.Array, lower, upper, count: int, dtype) -> jax.Array:
+    """``(count, len(targets), dof)`` uniform within the limits (one turn / one metre if unlimited).
+
+    Target ``b = targets[i]`` draws its seeds of round ``r = rounds[i]`` from
+    ``fold_in(fold_in(key, b), r)``: they depend neither on the batch nor on the pass that tries them.
+    """
+    lo = jnp.where(jnp.isfinite(lower), lower, -np.pi)
+    hi = jnp.where(jnp.isfinite(upper), upper, np.pi)
+    keys = jax.vmap(lambda b, r: jax.random.fold_in(jax.random.fold_in(key, b), r))(targets, rounds)
+    u = jax.vmap(lambda k: jax.random.uniform(k, (count, lower.shape[0]), dtype))(keys)
+    return jnp.swapaxes(lo + u * (hi - lo), 0, 1)
+
+
+def _start(problem, x: jax.Array, aux, settings: Settings) -> Seeds:
+    """Seeds at ``x`` ``(n, P)``, evaluated (one forward pass)."""
+    ev = problem.evaluate(x)
+    zeros = jnp.zeros(x.shape[1:], bool)
+    return Seeds(x, ev, aux, succeeded(ev, settings.pos_tol, settings.rot_tol), zeros,
+                 jnp.zeros(x.shape[1:], jnp.int32))
+
+
+def _iterate(problem, seeds: Seeds, step_fn, num_targets: int, has_first: bool, settings: Settings) -> Seeds:
+    """Iterate every seed until its target is done or ``max_iters``; finished targets are frozen.
+
+    A target is done once one of its seeds succeeded (with a warm start: once the warm seed,
+    seed 0, also succeeded or stalled), or all its seeds stalled. Seeds of done targets and
+    successful seeds no longer move, so each target's result does not depend on the others in
+    the batch; the loop exits as soon as every target is done.
+    """
+    def active(s: Seeds):
+        success = s.success.reshape(-1, num_targets)
+        finished = success | s.stalled.reshape(-1, num_targets)
+        done = jnp.any(success, axis=0) & (finished[0] if has_first else True)
+        done = done | jnp.all(finished, axis=0)
+        return (~done[None] & ~finished).reshape(-1)
+
+    def body(carry):
+        i, s = carry
+        move = active(s)
+        x_new, ev_new, aux_new, accept, stalled = step_fn(problem, s.x, s.ev, s.aux)
+        take = move & accept
+        new = Seeds(
+            x=_where(take, x_new, s.x),
+            ev=_where(take, ev_new, s.ev),
+            aux=_where(move, aux_new, s.aux),
+            success=s.success | (take & succeeded(ev_new, settings.pos_tol, settings.rot_tol)),
+            stalled=s.stalled | (move & stalled),
+            iters=s.iters + move.astype(jnp.int32),
+        )
+        return i + 1, new
+
+    def cond(carry):
+        i, s = carry
+        return (i < settings.max_iters) & jnp.any(active(s))
+
+    return jax.lax.while_loop(cond, body, (jnp.asarray(0), seeds))[1]
+
+
+def _best(s: Seeds, num_targets: int, rank) -> Seeds:
+    """The best seed of every target (leaves end with ``(num_targets,)``).
+
+    A successful seed wins, the one of least ``rank`` (``(seeds, targets)``, e.g. the distance to
+    a warm start) when given, else of least residual; without a success, the seed of least residual.
+    """
+    def per_target(x):  # (..., P) -> (..., seeds, targets)
+        return x.reshape(x.shape[:-1] + (-1, num_targets))
+
+    success, cost = per_target(s.success), per_target(s.ev.cost)
+    order_by = cost if rank is None else jnp.where(success, rank, cost)
+    order = jnp.lexsort((order_by, ~success), axis=0)[:1]  # (1, targets)
+
+    def take(x):
+        x = per_target(x)
+        return jnp.take_along_axis(x, order.reshape((1,) * (x.ndim - 2) + order.shape), axis=-2)[..., 0, :]
+
+    return jax.tree.map(take, s)
+
+
+def search(build: Callable, lift: Callable, rank: Callable, key, n: int, lower, upper, first, init, step_fn,
+           settings: Settings, moves=None) -> Seeds:
+    """Solve ``n`` targets from seeds in rounds; the best seed of each (leaves end with ``(n,)``).
+
+    Args:
+        build: ``build(idx, copies)``: the problem of the targets ``idx`` ``(m,)``, each repeated
+            ``copies`` times (``P = copies * m``).
+        lift: ``lift(idx, q)``: joint seeds ``(copies, m, dof)`` to states ``(copies, m, n_state)``.
+        rank: ``rank(idx, x)``: ``(seeds, m)`` preference among successful seeds ``x``
+            ``(n_state, seeds, m)`` (lower wins), or ``None`` for the least residual.
+        key: PRNG key of the random seeds.
+        lower, upper: ``(dof,)`` limits the seeds are drawn within.
+        first: ``(n, n_state)`` warm-start states (seed 0 of the first round), or ``None``.
+        init, step_fn: the method: ``init(x) -> aux``, ``step_fn(problem, x, ev, aux)``.
+        settings: seeds, iterations, polishing rounds and tolerances.
+        moves: ``(dof, k)`` bool, which joints move which of ``k`` targets (several targets), or
+            ``None``. Then the random seeds of later rounds keep the best state's joints that
+            move only targets it already reached (and its root pose if it reached any): a
+            two-arm problem with one arm solved searches for the other arm only.
+    """
+    dtype, dof = lower.dtype, lower.shape[0]
+
+    def run_from(idx, x, live=None, x_first=None) -> Seeds:
+        """Iterate the states ``x`` ``(copies, m, n_state)`` of the targets ``idx``; the best of each.
+
+        ``live`` marks the targets that are not padding of a chunk; ``x_first`` is a warm start.
+        """
+        if x_first is not None:
+            x = jnp.concatenate([x_first[None], x], axis=0)
+        copies, m = x.shape[0], idx.shape[0]
+        problem = build(idx, copies)
+        x = problem.project(x.reshape(copies * m, -1).T)
+        start = _start(problem, x, init(x), settings)
+        if live is not None:  # padding: finished before it starts
+            start = start._replace(stalled=~jnp.tile(live, copies))
+        seeds = _iterate(problem, start, step_fn, m, x_first is not None, settings)
+        per_target = seeds.x.reshape(seeds.x.shape[0], copies, m)
+        return _best(seeds, m, rank(idx, per_target))
+
+    def seeds(idx, round_index, group: int, best=None):
+        """``group`` random seeds per target, ``(group, len(idx), n_state)``, each the best of ``_SCREEN`` draws.
+
+        With ``best`` (and ``moves``), joints that move only reached targets keep their best values.
+        """
+        q = _seed_configs(key, idx, round_index, lower, upper, _SCREEN * group, dtype)
+        x = lift(idx, q)
+        if best is not None and moves is not None:
+            near = best.x[:, idx].T  # (m, n_state)
+            reached = (best.ev.pos_err[:, idx] <= settings.pos_tol) & (best.ev.rot_err[:, idx] <= settings.rot_tol)
+            only_reached = ~jnp.any(moves[:, :, None] & ~reached[None], axis=1)  # (dof, m)
+            keep = jnp.concatenate([only_reached.T, jnp.broadcast_to(jnp.any(reached, axis=0)[:, None],
+                                                                     (idx.shape[0], x.shape[-1] - dof))], axis=-1)
+            x = jnp.where(keep, near, x)
+        problem = build(idx, _SCREEN * group)
+        cost = problem.screen_cost(problem.project(x.reshape(-1, x.shape[-1]).T)).reshape(_SCREEN, group, -1)
+        best = jnp.argmin(cost, axis=0)
+        return jnp.take_along_axis(x.reshape((_SCREEN, group) + x.shape[1:]), best[None, ..., None], axis=0)[0]
+
+    first_group = min(settings.num_seeds, GROUP)
+    best = run_from(jnp.arange(n), seeds(jnp.arange(n), jnp.zeros(n, jnp.int32), first_group), x_first=first)
+    random_rounds = -(-(settings.num_seeds - first_group) // GROUP)
+    rounds = 1 + random_rounds + settings.polish
+    if rounds > 1:
+        chunk = min(n, max(_MIN_CHUNK, -(-n // _CHUNK_DIV)))
+
+        def attempt(idx, round_index, live, best):
+            """Round ``round_index`` (per target) for the targets ``idx``: random or polishing seeds."""
+            fresh = seeds(idx, round_index, GROUP, best)
+            near = best.x[:, idx].T  # (m, n_state)
+            joints = near[:, :dof] + _JITTER * (fresh[1:, :, :dof] - near[:, :dof])
+            nearby = jnp.concatenate([joints, jnp.broadcast_to(near[:, dof:], fresh[1:, :, dof:].shape)], axis=-1)
+            nearby = jnp.concatenate([near[None], nearby])
+            polishing = round_index > random_rounds
+            found = run_from(idx, jnp.where(polishing[:, None], nearby, fresh), live)
+            return found._replace(iters=found.iters + jnp.where(polishing, best.iters[idx], 0))
+
+        best = _retry_unsolved(attempt, best, rounds, chunk)
+    return best
+
+
+def _retry_unsolved(attempt, best: Seeds, rounds: int, chunk: int) -> Seeds:
+    """Rounds ``1 .. rounds - 1`` for every unsolved target, ``chunk`` targets at a time.
+
+    Each pass takes the first unsolved targets with rounds left, runs
+    ``attempt(idx, round_index, live, best)`` on them (each at its own next round) and keeps
+    whatever is better per target. A target's result does not depend on the others: its rounds
+    are tried in order, from its own keys and its own best so far.
+    """
+    n = best.success.shape[0]
+
+    def pending(best, done):
+        return ~best.success & (done < rounds)
+
+    def body(state):
+        best, done = state
+        idx = jnp.nonzero(pending(best, done), size=chunk, fill_value=n)[0]
+        live = idx < n
+        safe_idx = jnp.where(live, idx, 0)
+        new = attempt(safe_idx, done[safe_idx], live, best)
+        better = live & (new.success | (new.ev.cost < best.ev.cost[safe_idx]))
+        best = jax.tree.map(lambda old, x: old.at[..., idx].set(jnp.where(better, x, old[..., safe_idx]), mode="drop"),
+                            best, new)
+        return best, done.at[idx].add(1, mode="drop")
+
+    return jax.lax.while_loop(lambda state: jnp.any(pending(*state)), body, (best, jnp.ones(n, jnp.int32)))[0]
