@@ -21,7 +21,7 @@ import numpy as np
 
 from diffkin import _trig
 from diffkin._trig import atan2
-from diffkin._xla import is_concrete, materialize  # noqa: F401 (materialize: diffkin.ik imports it from here)
+from diffkin._xla import is_concrete
 
 Entry = jax.Array | float
 # Three entries, and three rows of three. Variable-length tuple types: the entries are built by

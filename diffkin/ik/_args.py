@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin._checks import real_array, rigid_poses, rigid_tol
-from diffkin._rigid import is_concrete
+from diffkin._xla import is_concrete
 
 METHODS = ("lm", "optax")
 

@@ -11,12 +11,13 @@ import jax
 import jax.numpy as jnp
 
 from diffkin import _rigid as rg
+from diffkin._xla import materialize
 
 
 def _cholesky_solve(A: list[list], b: list) -> list:
     """Solve ``A x = b`` for a symmetric positive definite ``A`` (``n x n`` nested lists)."""
     n = len(b)
-    L = [[0.0] * n for _ in range(n)]
+    L: list[list[rg.Entry]] = [[0.0] * n for _ in range(n)]
     inv_diag = []
     for j in range(n):
         d = rg.add(A[j][j], *(-rg.mul(L[j][k], L[j][k]) for k in range(j)))
@@ -24,19 +25,19 @@ def _cholesky_solve(A: list[list], b: list) -> list:
         inv_diag.append(inv)
         for i in range(j + 1, n):
             L[i][j] = rg.mul(rg.add(A[i][j], *(-rg.mul(L[i][k], L[j][k]) for k in range(j))), inv)
-    y = []
+    y: list[rg.Entry] = []
     for i in range(n):
         y.append(rg.mul(rg.add(b[i], *(-rg.mul(L[i][k], y[k]) for k in range(i))), inv_diag[i]))
-    x = [0.0] * n
+    x: list[rg.Entry] = [0.0] * n
     for i in reversed(range(n)):
         x[i] = rg.mul(rg.add(y[i], *(-rg.mul(L[k][i], x[k]) for k in range(i + 1, n))), inv_diag[i])
     return x
 
 
 def _materialized(A: list[list]) -> list[list]:
-    """A symmetric matrix with its lower triangle computed once (see :func:`rg.materialize`)."""
+    """A symmetric matrix with its lower triangle computed once (see :func:`diffkin._xla.materialize`)."""
     n = len(A)
-    flat = iter(rg.materialize([A[i][j] for i in range(n) for j in range(i + 1)]))
+    flat = iter(materialize([A[i][j] for i in range(n) for j in range(i + 1)]))
     out = [[None] * n for _ in range(n)]
     for i in range(n):
         for j in range(i + 1):
@@ -91,7 +92,7 @@ def _unrolled_step(J, r, lam) -> list:
         A = [[rg.add(*(rg.mul(J[i][k], J[j][k]) for k in range(n))) for j in range(m)] for i in range(m)]
         for i in range(m):
             A[i][i] = rg.add(A[i][i], lam)
-        y = rg.materialize(_cholesky_solve(_materialized(A), r))
+        y = materialize(_cholesky_solve(_materialized(A), r))
         return [rg.add(*(rg.mul(J[i][k], y[i]) for i in range(m))) for k in range(n)]
     A = [[rg.add(*(rg.mul(J[i][k], J[i][j]) for i in range(m))) for j in range(n)] for k in range(n)]
     for k in range(n):

@@ -10,22 +10,18 @@ import jax
 import jax.numpy as jnp
 
 from diffkin._checks import rigid_poses
-from diffkin._rigid import is_concrete
+from diffkin._xla import traced_only
 from diffkin.ik import _lm
 
 
 def detach(tree):
     """``stop_gradient`` on traced leaves only (concrete model constants stay foldable)."""
-    return jax.tree.map(lambda x: x if is_concrete(x) else jax.lax.stop_gradient(x), tree)
+    return traced_only(jax.lax.stop_gradient, tree)
 
 
 def cast(tree, dtype):
     """Traced floating leaves to ``dtype``; concrete ones are folded as Python floats by the model."""
-    def cast_leaf(x):
-        if not is_concrete(x) and jnp.issubdtype(x.dtype, jnp.floating):
-            return x.astype(dtype)
-        return x
-    return jax.tree.map(cast_leaf, tree)
+    return traced_only(lambda x: x.astype(dtype) if jnp.issubdtype(x.dtype, jnp.floating) else x, tree)
 
 
 def inward(limit, dtype, side: int) -> jax.Array:

@@ -15,7 +15,9 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin import kinematics
-from diffkin._trig import atan2
+from diffkin._xla import materialize
+from diffkin.models.dh import DHChain
+from diffkin.models.poe import PoEChain
 
 #: Metres per radian in the residual: the rotation error enters as ``ROT_WEIGHT * angle``, so a
 #: 1e-4 rad rotation error counts like a 2e-5 m position error (about a tenth of an arm's reach).
@@ -27,7 +29,8 @@ class Eval(NamedTuple):
 
     Attributes:
         r: ``(m, P)`` (``m = 6`` for poses, 3 for positions).
-        J: ``(m, dof, P)`` ``d(-r)/dq``: the world Jacobian, rotation rows weighted.
+        J: ``(m, dof, P)`` ``d(-r)/dq``: the world Jacobian, rotation rows weighted (``(m, 0, P)``
+            where only the cost is needed).
         cost: ``(P,)`` ``|r|^2``.
         pos_err: ``(P,)`` metres.
         rot_err: ``(P,)`` radians.
@@ -52,7 +55,7 @@ class Problem(NamedTuple):
         respect_limits: static; clip every iterate to ``[lower, upper]``.
     """
 
-    chain: object
+    chain: DHChain | PoEChain
     p: tuple
     R: tuple | None
     lower: jax.Array
@@ -78,11 +81,11 @@ class Problem(NamedTuple):
         squared angle near 0.
         """
         ee = self.chain._frames(list(q)).ee
-        cost = sum(rg.add(self.p[i], -ee.p[i]) ** 2 for i in range(3))
+        terms = [rg.add(self.p[i], -ee.p[i]) ** 2 for i in range(3)]
         if self.R is not None:
             trace = rg.add(*(rg.mul(ee.R[i][j], self.R[i][j]) for i in range(3) for j in range(3)))
-            cost = cost + ROT_WEIGHT**2 * (3.0 - trace)
-        return cost
+            terms.append(ROT_WEIGHT**2 * (3.0 - trace))
+        return jnp.asarray(rg.add(*terms))
 
 
 def project(q: jax.Array, lower, upper, wrap, respect_limits: bool) -> jax.Array:
@@ -105,40 +108,15 @@ def evaluate(problem: Problem, q: jax.Array) -> Eval:
     if problem.R is None:
         r, rot_err = e_p, jnp.zeros(shape, dtype)
     else:
-        w, rot_err = _log(rg.matmul(problem.R, tuple(rg.column(ee.R, j) for j in range(3))))
+        w, rot_err = rg.so3_log(rg.matmul(problem.R, tuple(rg.column(ee.R, j) for j in range(3))))
         r = e_p + [rg.mul(ROT_WEIGHT, e) for e in w]
         J = J + [[rg.mul(ROT_WEIGHT, c[1][i]) for c in columns] for i in range(3)]
     m, n = len(r), len(J[0])
     cost = rg.add(*(rg.mul(e, e) for e in r))
     # Materialised: XLA's CPU fusion would otherwise recompute the whole forward pass inside
     # every kernel of the solver that consumes these entries (20x slower).
-    flat = rg.materialize([*r, *(e for row in J for e in row), cost, pos_err, rot_err])
+    flat = materialize([*r, *(e for row in J for e in row), cost, pos_err, rot_err])
     return Eval(flat[:m], flat[m : m + m * n].reshape(m, n, -1), *flat[m + m * n :])
-
-
-def _log(M: rg.Mat3) -> tuple[rg.Vec3, jax.Array]:
-    """Rotation vector and angle of ``M`` (entries), elementwise; as :func:`diffkin.se3.so3_log`.
-
-    Near the identity ``w = theta / sin(theta) vee(M)`` (series below 1e-4 rad); near a
-    half-turn the axis is the column of ``(M + M^T)/2 - cos(theta) I`` of largest diagonal,
-    oriented by ``vee(M)``. Written without gathers so that XLA fuses it over the batch.
-    """
-    v = (0.5 * rg.add(M[2][1], -M[1][2]), 0.5 * rg.add(M[0][2], -M[2][0]), 0.5 * rg.add(M[1][0], -M[0][1]))
-    sin2 = rg.dot(v, v)
-    sin_ = jnp.sqrt(sin2)
-    cos_ = 0.5 * (rg.add(M[0][0], M[1][1], M[2][2]) - 1.0)
-    theta = atan2(sin_, cos_)
-    small = theta < 1e-4
-    factor = jnp.where(small, 1.0 + theta * theta / 6.0, theta / jnp.where(small, 1.0, sin_))
-    S = [[rg.add(0.5 * rg.add(M[i][j], M[j][i]), -cos_ if i == j else 0.0) for j in range(3)] for i in range(3)]
-    first = (S[0][0] >= S[1][1]) & (S[0][0] >= S[2][2])
-    second = S[1][1] >= S[2][2]
-    col = [jnp.where(first, S[i][0], jnp.where(second, S[i][1], S[i][2])) for i in range(3)]
-    norm = jnp.sqrt(jnp.maximum(sum(c * c for c in col), jnp.finfo(theta.dtype).tiny))
-    signed = jnp.where(rg.dot(col, v) < 0, -theta, theta) / norm
-    near_pi = cos_ < -0.99
-    w = tuple(jnp.where(near_pi, signed * col[i], factor * v[i]) for i in range(3))
-    return w, theta
 
 
 def gradient(ev: Eval) -> jax.Array:

@@ -110,12 +110,12 @@ def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str 
             ``GradientTransformation``, a bool, complex or float16 target.
     """
     if isinstance(chain, Robot):
-        max_iters = _TREE_ITERS.get(method, max_iters) if max_iters is None else max_iters
+        max_iters = _TREE_ITERS.get(method, 0) if max_iters is None else max_iters
         return _tree.solve(chain, target, weights=weights, locked=locked, q0=q0, rest=rest, secondary=secondary,
                            solve_base=solve_base, base=base, key=key, num_seeds=num_seeds, method=method,
                            max_iters=max_iters, pos_tol=pos_tol, rot_tol=rot_tol, respect_limits=respect_limits,
                            optimizer=optimizer)
-    max_iters = _DEFAULT_ITERS.get(method, max_iters) if max_iters is None else max_iters
+    max_iters = _DEFAULT_ITERS.get(method, 0) if max_iters is None else max_iters  # (an unknown method raises)
     if not isinstance(chain, (DHChain, PoEChain)):
         raise TypeError(f"chain: expected a DHChain, PoEChain or Robot, got {type(chain).__name__}")
     for name, value in (("weights", weights), ("locked", locked), ("rest", rest), ("secondary", secondary),

@@ -20,7 +20,8 @@ import jax.numpy as jnp
 
 from diffkin import _rigid as rg
 from diffkin import kinematics
-from diffkin.ik._problem import ROT_WEIGHT, Eval, _log, project
+from diffkin._xla import materialize
+from diffkin.ik._problem import ROT_WEIGHT, Eval, project
 from diffkin.models.robot import Robot
 
 _ONES = (1.0,) * 6
@@ -98,7 +99,7 @@ class TreeProblem(NamedTuple):
             e = [rg.add(self.p[k][i], -T.p[i]) for i in range(3)]
             angle = None
             if self.R[k] is not None:
-                w, angle = _log(rg.matmul(self.R[k], tuple(rg.column(T.R, j) for j in range(3))))
+                w, angle = rg.so3_log(rg.matmul(self.R[k], tuple(rg.column(T.R, j) for j in range(3))))
                 e += [rg.mul(ROT_WEIGHT, c) for c in w]
             columns = []
             if jacobian:
@@ -108,7 +109,7 @@ class TreeProblem(NamedTuple):
             weights = self.weights[k]
             if weights != _ONES and angle is not None:  # into the target frame: R_t^T e, R_t^T J
                 Rt = tuple(rg.column(self.R[k], j) for j in range(3))
-                e = list(rg.rotate(Rt, e[:3])) + list(rg.rotate(Rt, e[3:]))
+                e = list(rg.rotate(Rt, tuple(e[:3]))) + list(rg.rotate(Rt, tuple(e[3:])))
                 columns = [(rg.rotate(Rt, v), rg.rotate(Rt, w)) for v, w in columns]
             rows = [[c[0][i] for c in columns] for i in range(3)]
             rows += [[rg.mul(ROT_WEIGHT, c[1][i]) for c in columns] for i in range(3)]
@@ -124,9 +125,9 @@ class TreeProblem(NamedTuple):
             J += [[rg.mul(weights[a], c) for c in rows[a]] for a in free] if jacobian else []
         cost = rg.add(*(rg.mul(e, e) for e in r))
         m, n, k = len(r), len(J[0]) if J else 0, len(self.frames)
-        flat = rg.materialize([*r, *(c for row in J for c in row), cost, *pos_err, *rot_err])
+        flat = materialize([*r, *(c for row in J for c in row), cost, *pos_err, *rot_err])
         r_, J_, rest = flat[:m], flat[m : m + m * n], flat[m + m * n :]
-        return Eval(r_, J_.reshape(m, n, -1) if jacobian else None, rest[0], rest[1 : 1 + k], rest[1 + k :])
+        return Eval(r_, J_.reshape((m, n) + r_.shape[1:]), rest[0], rest[1 : 1 + k], rest[1 + k :])
 
     def screen_cost(self, x: jax.Array) -> jax.Array:
         return self.evaluate(x, jacobian=False).cost

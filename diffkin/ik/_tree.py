@@ -106,10 +106,11 @@ def solve(robot: Robot, targets, *, weights, locked, q0, rest, secondary, solve_
         raise TypeError(f"target: for a Robot, expected a non-empty mapping frame name -> target, got {targets!r}")
     names = list(targets)
     frames = tuple(robot.frame_index(name) for name in names)
-    arrays, kinds, batch = [], [], None
-    for name in names:
+    arrays, kinds = [], []
+    batch: tuple[int, ...] = ()
+    for i, name in enumerate(names):
         array, pos_only, b = _args.check_target(targets[name], f"target[{name!r}]")
-        if batch is not None and b != batch:
+        if i and b != batch:
             raise ValueError(f"target[{name!r}]: batch shape {b} differs from target[{names[0]!r}]'s {batch}")
         arrays.append(array)
         kinds.append(pos_only)
