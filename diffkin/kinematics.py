@@ -155,7 +155,7 @@ def _stack_columns(columns, shape, dtype) -> jax.Array:
     rows = [column[part][i] for part in (0, 1) for i in range(3) for column in columns]
     if not rows:  # a robot without joints
         return jnp.zeros(shape + (6, 0), dtype)
-    return rg.stack(rows, shape, dtype).reshape(shape + (6, len(columns)))
+    return rg.outputs(rows, shape, dtype).reshape(shape + (6, len(columns)))
 
 
 def _split(entries) -> rg.Mat3:
