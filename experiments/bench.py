@@ -8,7 +8,9 @@ and reachability maps of the KUKA iiwa14: diffkin's built-in DH model, and pytor
 diffkin's shipped URDF (the same kinematics) where it has the feature and is installed. Everything
 is warmed up (JIT compiled, first call done) before timing; each figure is a median (at least 5
 runs and 0.3 s of runs). On a GPU machine both libraries run there (JAX's default device, torch
-CUDA). ``--write`` saves the table as ``experiments/results/<machine>.md``.
+CUDA) with larger batches (FK up to 10^8 configurations, IK up to 10^5 targets: :data:`GPU`); a
+pytorch-kinematics call that runs out of GPU memory is noted as such. ``--write`` saves the table as
+``experiments/results/<machine>.md``.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from _bench import (
     pk_ik_solver,
     random_configs,
     rate,
+    release_torch_memory,
     table,
     to_torch,
     torch,
@@ -52,19 +55,29 @@ PK_EE = "iiwa14_link_ee"  # the flange link of the shipped iiwa14 URDF
 class Sizes:
     """Batch sizes of each part of the suite."""
 
-    fk: tuple[int, ...]  # FK batches, each in float32 and float64
+    fk: tuple[int, ...]  # FK batches, each in float32 and (up to fk_float64_max) float64
     jacobian: tuple[tuple[int, str], ...]  # (batch, dtype) of the Jacobian rows
-    ik: int  # IK targets
+    ik: tuple[int, ...]  # IK target counts
     srs: int  # closed-form solutions, in float32 and float64
     self_motion: int  # self-motion samples of one pose
     workspace: int  # reachability-map samples
+    fk_float64_max: int | None = None  # largest float64 FK batch (None: all)
 
 
 FULL = Sizes(fk=(1, 1000, 100_000),
              jacobian=((1000, "float32"), (10_000, "float32"), (10_000, "float64"), (100_000, "float32"),
                        (100_000, "float64")),
-             ik=1000, srs=100_000, self_motion=2000, workspace=4_000_000)
-QUICK = Sizes(fk=(1, 1000), jacobian=((1000, "float32"),), ik=100, srs=10_000, self_motion=200, workspace=200_000)
+             ik=(1000,), srs=100_000, self_motion=2000, workspace=4_000_000)
+GPU = Sizes(fk=(1, 1000, 100_000, 1_000_000, 10_000_000, 100_000_000),
+            jacobian=((1000, "float32"), (1_000_000, "float32"), (10_000_000, "float32"), (10_000_000, "float64")),
+            ik=(1, 1000, 100_000), srs=1_000_000, self_motion=2000, workspace=20_000_000,
+            fk_float64_max=10_000_000)  # float64 FK at 10^8 needs 18 GB beside pytorch-kinematics' cache
+QUICK = Sizes(fk=(1, 1000), jacobian=((1000, "float32"),), ik=(100,), srs=10_000, self_motion=200, workspace=200_000)
+
+
+def sizes_for(quick: bool) -> Sizes:
+    """:data:`QUICK`, or the full sizes of JAX's default backend: :data:`FULL` on the CPU, :data:`GPU` elsewhere."""
+    return QUICK if quick else FULL if jax.default_backend() == "cpu" else GPU
 
 
 @dataclass(frozen=True)
@@ -81,10 +94,12 @@ class Row:
     def cells(self) -> list[str]:
         """The row's markdown cells."""
         def timing(seconds):
+            if seconds == OUT_OF_MEMORY:
+                return "out of memory"
             return "n/a" if seconds is None else f"{duration(seconds)} ({rate(self.batch, seconds)})"
 
-        return [self.work, f"{self.batch:,}", self.dtype, timing(self.diffkin), timing(self.pk),
-                "n/a" if self.pk is None else _ratio(self.pk / self.diffkin), self.note]
+        ratio = "n/a" if self.pk in (None, OUT_OF_MEMORY) else _ratio(self.pk / self.diffkin)
+        return [self.work, f"{self.batch:,}", self.dtype, timing(self.diffkin), timing(self.pk), ratio, self.note]
 
 
 # Quiet-machine ratios stay below ~100x (README); far above it, one side was slowed by other load.
@@ -113,13 +128,22 @@ def _pk_chain(dtype: str):
     return pk_chain("iiwa14", PK_EE, dtype)
 
 
+OUT_OF_MEMORY = float("inf")  # pytorch-kinematics' time where it ran out of (GPU) memory
+
+
 @functools.cache
 def _pk_seconds(method: str, n: int, dtype: str) -> float | None:
-    """Median time of pytorch-kinematics' ``method`` on ``n`` configurations; ``None`` without it."""
+    """Median time of pytorch-kinematics' ``method`` on ``n`` configurations; ``None`` without it,
+    :data:`OUT_OF_MEMORY` where it ran out of memory."""
     if pk is None:
         return None
-    q = to_torch(random_configs(_iiwa14(), n, dtype))
-    return median_seconds(torch_synced(getattr(_pk_chain(dtype), method)), q)
+    try:
+        q = to_torch(random_configs(_iiwa14(), n, dtype))
+        return median_seconds(torch_synced(getattr(_pk_chain(dtype), method)), q)
+    except torch.OutOfMemoryError:
+        return OUT_OF_MEMORY
+    finally:
+        release_torch_memory()
 
 
 def _notes(*notes: str | None) -> str:
@@ -157,7 +181,8 @@ def fk_rows(sizes: Sizes) -> list[Row]:
     fk = jax.jit(lambda q: dk.fk(chain, q))
     return [_diffkin_row("FK", n, dtype, fk, jnp.asarray(random_configs(chain, n, dtype)),
                          pk_seconds=functools.partial(_pk_seconds, "forward_kinematics", n, dtype))
-            for n in sizes.fk for dtype in DTYPES]
+            for n in sizes.fk for dtype in DTYPES
+            if dtype == "float32" or sizes.fk_float64_max is None or n <= sizes.fk_float64_max]
 
 
 def jacobian_rows(sizes: Sizes) -> list[Row]:
@@ -175,17 +200,27 @@ def jacobian_rows(sizes: Sizes) -> list[Row]:
 
 def ik_rows(sizes: Sizes) -> list[Row]:
     """``dk.ik.solve`` (LM, jitted) vs ``PseudoInverseIK``, 30 iterations x 10 retries, on reachable float32 pose
-    targets: diffkin with its defaults (1e-5 m / 1e-4 rad) and at pk's own 1 mm / 0.01 rad; the notes give each
-    library's success rate at its tolerances."""
-    chain, n = _iiwa14(), sizes.ik
+    targets, for each target count: diffkin with its defaults (1e-5 m / 1e-4 rad) and at pk's own 1 mm / 0.01 rad;
+    the notes give each library's success rate at its tolerances."""
+    return [row for n in sizes.ik for row in _ik_rows(n)]
+
+
+def _ik_rows(n: int) -> list[Row]:
+    """The IK rows of ``n`` targets."""
+    chain = _iiwa14()
     T = np.asarray(dk.fk(chain, random_configs(chain, n, "float64", seed=1)), np.float32)
     args = (jnp.asarray(T), jax.random.key(1))
     t_pk = note_pk = None
     if pk is not None:
         solver, goal = pk_ik_solver(_pk_chain("float32"), chain.lower, chain.upper), pk.Transform3d(matrix=to_torch(T))
         torch.manual_seed(0)
-        t_pk = median_seconds(torch_synced(solver.solve), goal, repeats=3, warmup=1)
-        note_pk = f"pk {float(solver.solve(goal).converged_any.float().mean()):.1%} (30 iterations x 10 retries)"
+        try:
+            t_pk = median_seconds(torch_synced(solver.solve), goal, repeats=3, warmup=1)
+            note_pk = f"pk {float(solver.solve(goal).converged_any.float().mean()):.1%} (30 iterations x 10 retries)"
+        except torch.OutOfMemoryError:
+            t_pk = OUT_OF_MEMORY
+        finally:
+            release_torch_memory()
     defaults = inspect.signature(dk.ik.solve).parameters
     rows = []
     tight = (defaults["pos_tol"].default, defaults["rot_tol"].default)
@@ -241,7 +276,7 @@ PARTS = {"fk": fk_rows, "jacobian": jacobian_rows, "ik": ik_rows, "srs": srs_row
 def report(parts=tuple(PARTS), quick: bool = False) -> str:
     """The suite's markdown report: a title, the machine, and one table of ``parts`` (keys of :data:`PARTS`)."""
     jax.config.update("jax_enable_x64", True)  # for the float64 rows; float32 rows stay float32
-    busy, sizes = busy_note(), QUICK if quick else FULL
+    busy, sizes = busy_note(), sizes_for(quick)
     rows = [row.cells() for row in _with_float64_costs([row for part in parts for row in PARTS[part](sizes)])]
     header = ["work", "batch", "dtype", "diffkin", "pytorch-kinematics", "pk / diffkin", "notes"]
     only = "" if tuple(parts) == tuple(PARTS) else " --only " + ",".join(parts)
