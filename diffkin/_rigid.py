@@ -195,6 +195,35 @@ def materialize(entries: list[Entry]) -> jax.Array:
     return jax.lax.optimization_barrier(stack(entries, shape, dtype, axis=0))
 
 
+# A serial forward pass is materialised every this many joints (see :func:`segment_end`).
+SEGMENT = 8
+
+
+def segment_end(i: int, dof: int) -> bool:
+    """Whether a serial chain's forward pass materialises its pose after joint ``i`` (of ``dof``).
+
+    XLA's CPU fusion duplicates an elementwise producer into each consumer kernel, and every
+    output of a Jacobian depends on the forward pass up to its joint: without a barrier the
+    compiled program holds ``O(dof^2)`` copies of the pass, and compile time and memory grow
+    accordingly (analytic world Jacobian, 20 joints: COMPILE_NOTE). Materialising the pose every
+    :data:`SEGMENT` joints bounds each copy to one segment; chains of up to :data:`SEGMENT`
+    joints (every arm) compile to the same program as without it.
+    """
+    return (i + 1) % SEGMENT == 0 and i + 1 < dof
+
+
+def checkpoint(A: Rigid) -> Rigid:
+    """``A`` with its array entries computed once (:func:`materialize`); Python-float entries stay folded."""
+    flat = leaves(A)
+    arrays = [i for i, e in enumerate(flat) if not isinstance(e, float)]
+    if not arrays:
+        return A
+    done = materialize([flat[i] for i in arrays])
+    for k, i in enumerate(arrays):
+        flat[i] = done[k]
+    return Rigid(tuple(tuple(flat[3 * r: 3 * r + 3]) for r in range(3)), tuple(flat[9:]))  # type: ignore[arg-type]
+
+
 def _matrix_entries(A: Rigid) -> list[Entry]:
     """The 16 entries of ``A``'s 4x4 matrix, row by row."""
     return [e for i in range(3) for e in (*A.R[i], A.p[i])] + [0.0, 0.0, 0.0, 1.0]
