@@ -5,7 +5,7 @@
     diffkin fk ROBOT_OR_FILE q1 ... qn | --q-file configs.npy [--format text|json|npy] [--output FILE]
     diffkin ik ROBOT_OR_FILE --pose x y z qw qx qy qz | --position x y z [--seeds N] [--q0 ...] [--all ...]
     diffkin workspace ROBOT_OR_FILE --samples N --voxel V --out map.npz [--plot slice.png]
-    diffkin bench [--quick] [--only fk,jacobian,ik,srs,workspace] [--write | --out PATH]
+    diffkin bench [--quick] [--only fk,jacobian,ik,srs,workspace,compile] [--write | --out PATH]
 
 ``ROBOT_OR_FILE`` is a built-in robot (``iiwa7``, ``iiwa14``, ``panda``, ``ur5``, ``puma560``) or a
 URDF or MJCF file (``info`` prints its tree; ``fk --frame NAME`` any frame of it; the other commands use
@@ -964,10 +964,10 @@ def _load_bench():
 def cmd_bench(args) -> int:
     """The benchmark suite ``experiments/bench.py``: diffkin vs pytorch-kinematics, one markdown table."""
     bench = _load_bench()
-    unknown = [part for part in args.only or () if part not in bench.PARTS]
+    unknown = [part for part in args.only or () if part not in bench.ALL_PARTS]
     if unknown:
         raise CLIError(f"--only: unknown part {unknown[0]!r}: expected a comma-separated list of "
-                       f"{', '.join(bench.PARTS)}")
+                       f"{', '.join(bench.ALL_PARTS)}")
     if args.out and not Path(args.out).parent.is_dir():
         raise CLIError(f"--out: no such directory {str(Path(args.out).parent)!r}")
     return bench.main(args)
@@ -1095,7 +1095,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "markdown table. The full run takes a few minutes on a CPU.")
     p.add_argument("--quick", action="store_true", help="small batches and fewer rows")
     p.add_argument("--only", type=_parts, metavar="PARTS",
-                   help="comma-separated parts to run: fk,jacobian,ik,srs,workspace (default all)")
+                   help="comma-separated parts to run: fk,jacobian,ik,srs,workspace,compile (default all)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--write", action="store_true", help="also write the table to experiments/results/<machine>.md")
     where.add_argument("--out", metavar="PATH", help="also write the table to PATH")

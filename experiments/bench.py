@@ -1,6 +1,6 @@
 """The benchmark suite: diffkin and pytorch-kinematics side by side, one markdown table.
 
-    python experiments/bench.py [--quick] [--only fk,jacobian,ik,srs,workspace] [--write | --out PATH]
+    python experiments/bench.py [--quick] [--only fk,jacobian,ik,srs,workspace,compile] [--write | --out PATH]
     diffkin bench ...                     (the same, from a source checkout)
 
 Times forward kinematics, world Jacobians, batched IK, the iiwa closed form, self-motion sampling
@@ -9,7 +9,10 @@ diffkin's shipped URDF (the same kinematics) where it has the feature and is ins
 is warmed up (JIT compiled, first call done) before timing; each figure is a median (at least 5
 runs and 0.3 s of runs). On a GPU machine both libraries run there (JAX's default device, torch
 CUDA) with larger batches (FK up to 10^8 configurations, IK up to 10^5 targets: :data:`GPU`); a
-pytorch-kinematics call that runs out of GPU memory is noted as such. ``--write`` saves the table as
+pytorch-kinematics call that runs out of GPU memory is noted as such. The ``compile`` part adds a
+second table, what the first call costs (``experiments/bench_compile.py``: trace, lower and compile
+times and peak memory of FK, Jacobians and IK for 7, 20 and 50 joints and a humanoid tree; with
+``--quick`` the 7-joint arm and the tree). ``--write`` saves the tables as
 ``experiments/results/<machine>.md``.
 """
 
@@ -22,6 +25,7 @@ import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import bench_compile
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -268,24 +272,29 @@ def workspace_rows(sizes: Sizes) -> list[Row]:
 
 
 PARTS = {"fk": fk_rows, "jacobian": jacobian_rows, "ik": ik_rows, "srs": srs_rows, "workspace": workspace_rows}
+SECTIONS = {"compile": bench_compile.section}  # parts with a table of their own: (quick) -> markdown
+ALL_PARTS = (*PARTS, *SECTIONS)
 
 
 # --------------------------------------------------------------------------------------------- report
 
 
-def report(parts=tuple(PARTS), quick: bool = False) -> str:
-    """The suite's markdown report: a title, the machine, and one table of ``parts`` (keys of :data:`PARTS`)."""
+def report(parts=ALL_PARTS, quick: bool = False) -> str:
+    """The suite's markdown report: a title, the machine, one table of the ``parts`` in :data:`PARTS`, then
+    the table of each part in :data:`SECTIONS`."""
     jax.config.update("jax_enable_x64", True)  # for the float64 rows; float32 rows stay float32
     busy, sizes = busy_note(), sizes_for(quick)
-    rows = [row.cells() for row in _with_float64_costs([row for part in parts for row in PARTS[part](sizes)])]
+    timed = [row for part in parts if part in PARTS for row in PARTS[part](sizes)]
+    rows = [row.cells() for row in _with_float64_costs(timed)]
     header = ["work", "batch", "dtype", "diffkin", "pytorch-kinematics", "pk / diffkin", "notes"]
-    only = "" if tuple(parts) == tuple(PARTS) else " --only " + ",".join(parts)
+    only = "" if tuple(parts) == ALL_PARTS else " --only " + ",".join(parts)
     command = "diffkin bench" + " --quick" * quick + only
     about = (f"`{command}`, {datetime.date.today()}. KUKA iiwa14 (diffkin: built-in DH model; pytorch-kinematics: "
              "the shipped URDF, the same kinematics). Median of warm runs (compiled first; at least 0.3 s and 5 runs, "
              "diffkin IK 15, pk IK and maps 3); rates are items (configurations, targets, samples) per second; "
              "pk / diffkin > 1: diffkin is faster.")
-    paragraphs = ["# diffkin benchmark", machine_line(), busy, about, table(header, rows)]
+    paragraphs = ["# diffkin benchmark", machine_line(), busy, about, table(header, rows) if rows else ""]
+    paragraphs += [SECTIONS[part](quick) for part in parts if part in SECTIONS]
     return "\n\n".join(p for p in paragraphs if p)
 
 
@@ -297,7 +306,7 @@ def default_path() -> Path:
 def main(args) -> int:
     """``diffkin bench``: print the report of ``args.only`` (default all parts; ``args.quick`` sizes) and write it
     to ``args.out`` (or, with ``args.write``, to :func:`default_path`)."""
-    text = report(args.only or tuple(PARTS), args.quick)
+    text = report(args.only or ALL_PARTS, args.quick)
     print(text)
     out = Path(args.out) if args.out else default_path() if args.write else None
     if out is not None:
