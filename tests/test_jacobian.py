@@ -204,12 +204,13 @@ def test_poe_and_urdf_parameter_gradients(name, field):
     _fd_check(chain, field, random_q(chain, 5, seed=29), seed=30)
 
 
-@pytest.mark.parametrize("name, field", [("iiwa14", "a"), ("iiwa14", "base"), ("rpr_poe", "screws")])
+@pytest.mark.parametrize("name, field", [("iiwa14", "a"), ("iiwa14", "base")])
 def test_jacobian_parameter_gradients_agree_between_methods(name, field):
     """Calibrating through a Jacobian: the default (analytic) and autodiff give the same parameter gradient.
 
     The base is moved rigidly (``base @ expm([xi])``, gradient in ``xi`` at 0): off the rigid
-    transforms the two formulas extend differently, and only rigid bases are valid models.
+    transforms the two formulas extend differently, and only rigid bases are valid models. (Traced PoE
+    screws agree too, measured, but compiling their second derivatives took 88 s: not in the suite.)
     """
     chain = MODELS[name]
     q = random_q(chain, 5, seed=32)
