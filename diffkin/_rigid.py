@@ -21,7 +21,7 @@ import numpy as np
 
 from diffkin import _trig
 from diffkin._trig import atan2
-from diffkin._xla import is_concrete
+from diffkin._xla import is_concrete, materialize
 
 Entry = jax.Array | float
 # Three entries, and three rows of three. Variable-length tuple types: the entries are built by
@@ -151,6 +151,65 @@ def stack(entries: list[Entry], shape: tuple[int, ...], dtype, axis: int = -1) -
     return jnp.stack(arrays, axis=axis)
 
 
+def outputs(entries: list[Entry], shape: tuple[int, ...], dtype) -> jax.Array:
+    """The entries stacked into one ``shape + (len(entries),)`` array (:func:`stack` on the last axis).
+
+    On the CPU, and in float64, a plain stack. In float32 off the CPU (a GPU) the computed entries
+    are first materialised behind an optimization barrier: XLA's GPU concatenate emits each
+    operand's expression on its own, so a stack of the entries of a forward pass recomputes the
+    shared part of the pass for every entry. Measured on an H100 (jax 0.11.2, iiwa14, median of
+    warm calls, both versions in one process; ``experiments/probe_gpu_trig.py``): float32 FK at
+    10^7 configurations 7.34 -> 2.25 ms, at 10^8 41.9 -> 19.6 ms; the float32 world Jacobian at
+    10^7 28.0 -> 6.2 ms (analytic), 48.6 -> 6.1 ms (autodiff), at 1,000 1.9 ms -> 66 us
+    (analytic). In float64 the barrier made FK slower (10^7: 5.7 -> 18.7 ms; Jacobians 1.2x
+    faster), so float64 stays plain.
+    """
+    arrays = [jnp.broadcast_to(jnp.asarray(e, dtype=dtype), shape) for e in entries]
+    computed = [i for i, e in enumerate(entries) if not isinstance(e, float)]
+    if shape and computed and jnp.dtype(dtype) == jnp.float32:
+        done = jax.lax.platform_dependent(*(arrays[i] for i in computed), cpu=_as_is, default=_materialized)
+        for i, a in zip(computed, done, strict=True):
+            arrays[i] = a
+    return jnp.stack(arrays, axis=-1)
+
+
+def _as_is(*arrays):
+    return arrays
+
+
+def _materialized(*arrays):
+    return jax.lax.optimization_barrier(arrays)
+
+
+# A serial forward pass is materialised every this many joints (see :func:`segment_end`).
+SEGMENT = 8
+
+
+def segment_end(i: int, dof: int) -> bool:
+    """Whether a serial chain's forward pass materialises its pose after joint ``i`` (of ``dof``).
+
+    XLA's CPU fusion duplicates an elementwise producer into each consumer kernel, and every
+    output of a Jacobian depends on the forward pass up to its joint: without a barrier the
+    compiled program holds ``O(dof^2)`` copies of the pass, and compile time and memory grow
+    accordingly (analytic world Jacobian, 20 joints: COMPILE_NOTE). Materialising the pose every
+    :data:`SEGMENT` joints bounds each copy to one segment; chains of up to :data:`SEGMENT`
+    joints (every arm) compile to the same program as without it.
+    """
+    return (i + 1) % SEGMENT == 0 and i + 1 < dof
+
+
+def checkpoint(A: Rigid) -> Rigid:
+    """``A`` with its array entries computed once (:func:`materialize`); Python-float entries stay folded."""
+    flat = leaves(A)
+    arrays = [i for i, e in enumerate(flat) if not isinstance(e, float)]
+    if not arrays:
+        return A
+    done = materialize([flat[i] for i in arrays])
+    for k, i in enumerate(arrays):
+        flat[i] = done[k]
+    return Rigid(tuple(tuple(flat[3 * r: 3 * r + 3]) for r in range(3)), tuple(flat[9:]))  # type: ignore[arg-type]
+
+
 def _matrix_entries(A: Rigid) -> list[Entry]:
     """The 16 entries of ``A``'s 4x4 matrix, row by row."""
     return [e for i in range(3) for e in (*A.R[i], A.p[i])] + [0.0, 0.0, 0.0, 1.0]
@@ -158,7 +217,7 @@ def _matrix_entries(A: Rigid) -> list[Entry]:
 
 def to_matrix(A: Rigid, shape: tuple[int, ...], dtype) -> jax.Array:
     """The ``shape + (4, 4)`` matrix of ``A``."""
-    return stack(_matrix_entries(A), shape, dtype).reshape(shape + (4, 4))
+    return outputs(_matrix_entries(A), shape, dtype).reshape(shape + (4, 4))
 
 
 def to_matrices(poses: list[Rigid], shape: tuple[int, ...], dtype) -> jax.Array:
@@ -168,7 +227,7 @@ def to_matrices(poses: list[Rigid], shape: tuple[int, ...], dtype) -> jax.Array:
     (Talos) at batch 100,000 took 308 ms the second way and 166 ms this way (float32, 2 CPU cores;
     ``experiments/bench_robots.py``); stacking on a leading axis and transposing took 344 ms.
     """
-    flat = stack([e for A in poses for e in _matrix_entries(A)], shape, dtype)
+    flat = outputs([e for A in poses for e in _matrix_entries(A)], shape, dtype)
     return flat.reshape(shape + (len(poses), 4, 4))
 
 

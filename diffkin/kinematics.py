@@ -14,7 +14,7 @@ from diffkin.models.forward import Model
 from diffkin.models.robot import Robot
 
 _FRAMES = ("world", "space", "body")
-_METHODS = ("autodiff", "analytic")
+_METHODS = ("analytic", "autodiff")
 
 
 def _base(model: Model, base) -> rg.Rigid:
@@ -156,7 +156,7 @@ def _stack_columns(columns, shape, dtype) -> jax.Array:
     rows = [column[part][i] for part in (0, 1) for i in range(3) for column in columns]
     if not rows:  # a robot without joints
         return jnp.zeros(shape + (6, 0), dtype)
-    return rg.stack(rows, shape, dtype).reshape(shape + (6, len(columns)))
+    return rg.outputs(rows, shape, dtype).reshape(shape + (6, len(columns)))
 
 
 def _split(entries) -> rg.Mat3:
@@ -209,10 +209,12 @@ def jacobian(model: Model, q: ArrayLike, *where: str, frame: str | None = None, 
             ``"space"``: spatial twist Jacobian ``J_s`` (column ``i`` is the current screw axis of
             joint ``i`` in the base frame; Pinocchio's ``WORLD``); ``"body"``: body twist
             Jacobian ``J_b = Ad(T^-1) J_s`` in the frame itself (Pinocchio's ``LOCAL``).
-        method: ``"autodiff"`` differentiates :func:`fk` with JAX (forward mode); ``"analytic"``
-            uses the screw axes of the forward pass. Both agree to rounding. Default
-            ``"autodiff"`` for chains, ``"analytic"`` for robots (its compile time grows
-            linearly with the number of joints, which matters for humanoids and hands).
+        method: ``"analytic"`` (the default) uses the screw axes of the forward pass;
+            ``"autodiff"`` differentiates :func:`fk` with JAX (forward mode). Both agree to
+            rounding. The analytic one is as fast or faster on every backend (iiwa14, float32:
+            10^6 configurations on an H100 0.77 against 0.90 ms, 10^7 the same 6.2 ms, float64
+            10^7 10.8 against 72 ms; 100,000 on 2 CPU cores 2.2 against 3.2 ms) and its compile
+            time grows linearly with the number of joints.
         base: robots only: ``(..., 4, 4)`` pose ``T_world_root`` (default identity).
         include_base: robots only: prepend the six columns of the root's body twist ``[v; w]``
             (a floating base moving as ``T_world_root exp([V] t)``).
@@ -224,8 +226,7 @@ def jacobian(model: Model, q: ArrayLike, *where: str, frame: str | None = None, 
     """
     forward.check(model)
     f, frame = _where(model, where, frame, frame_name)
-    if method is None:
-        method = "analytic" if isinstance(model, Robot) else "autodiff"
+    method = "analytic" if method is None else method
     if method not in _METHODS:
         raise ValueError(f"method: expected one of {_METHODS}, got {method!r}")
     if include_base and not isinstance(model, Robot):

@@ -3,6 +3,7 @@ pytorch-kinematics side (optional: ``pk`` and ``torch`` are ``None`` where it is
 
 from __future__ import annotations
 
+import gc
 import importlib.metadata
 import os
 import platform
@@ -88,13 +89,14 @@ def _accelerator() -> str | None:
 
 
 def machine_line() -> str:
-    """One line naming the machine, the JAX devices and the software versions."""
+    """One line naming the machine, the JAX devices, the software versions and JAX's memory settings (GPU)."""
     devices = jax.devices()
     parts = [f"CPU: {cpu_model()} ({cpu_cores()} cores)", f"jax {jax.__version__}",
              f"jax devices: {devices[0].device_kind} x{len(devices)}"]
     if pk is not None:
         parts += [f"torch {torch.__version__} on {torch_device()}",
                   f"pytorch-kinematics {importlib.metadata.version('pytorch-kinematics')}"]
+    parts += [f"{k}={v}" for k, v in sorted(os.environ.items()) if k.startswith("XLA_PYTHON_CLIENT_")]
     return ", ".join(parts)
 
 
@@ -159,6 +161,13 @@ def torch_synced(fn):
         return out
 
     return synced
+
+
+def release_torch_memory() -> None:
+    """Give torch's cached GPU memory back to the device (JAX allocates from the same GPU); nothing on a CPU."""
+    if torch_device() == "cuda":
+        gc.collect()
+        torch.cuda.empty_cache()
 
 
 def to_torch(x: np.ndarray):

@@ -1,13 +1,18 @@
 """The benchmark suite: diffkin and pytorch-kinematics side by side, one markdown table.
 
-    python experiments/bench.py [--quick] [--only fk,jacobian,ik,srs,workspace] [--write | --out PATH]
+    python experiments/bench.py [--quick] [--only fk,jacobian,ik,srs,workspace,compile] [--write | --out PATH]
 
 Times forward kinematics, world Jacobians, batched IK, the iiwa closed form, self-motion sampling
 and reachability maps of the KUKA iiwa14: diffkin's built-in DH model, and pytorch-kinematics on
 diffkin's shipped URDF (the same kinematics) where it has the feature and is installed. Everything
 is warmed up (JIT compiled, first call done) before timing; each figure is a median (at least 5
 runs and 0.3 s of runs). On a GPU machine both libraries run there (JAX's default device, torch
-CUDA). ``--write`` saves the table as ``experiments/results/<machine>.md``.
+CUDA) with larger batches (FK up to 10^8 configurations, IK up to 10^5 targets: :data:`GPU`); a
+pytorch-kinematics call that runs out of GPU memory is noted as such. The ``compile`` part adds a
+second table, what the first call costs (``experiments/bench_compile.py``: trace, lower and compile
+times and peak memory of FK, Jacobians and IK for 7, 20 and 50 joints and a humanoid tree; with
+``--quick`` the 7-joint arm and the tree). ``--write`` saves the tables as
+``experiments/results/<machine>.md``.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import bench_compile
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -36,6 +42,7 @@ from _bench import (
     pk_ik_solver,
     random_configs,
     rate,
+    release_torch_memory,
     table,
     to_torch,
     torch,
@@ -52,19 +59,29 @@ PK_EE = "iiwa14_link_ee"  # the flange link of the shipped iiwa14 URDF
 class Sizes:
     """Batch sizes of each part of the suite."""
 
-    fk: tuple[int, ...]  # FK batches, each in float32 and float64
+    fk: tuple[int, ...]  # FK batches, each in float32 and (up to fk_float64_max) float64
     jacobian: tuple[tuple[int, str], ...]  # (batch, dtype) of the Jacobian rows
-    ik: int  # IK targets
+    ik: tuple[int, ...]  # IK target counts
     srs: int  # closed-form solutions, in float32 and float64
     self_motion: int  # self-motion samples of one pose
     workspace: int  # reachability-map samples
+    fk_float64_max: int | None = None  # largest float64 FK batch (None: all)
 
 
 FULL = Sizes(fk=(1, 1000, 100_000),
              jacobian=((1000, "float32"), (10_000, "float32"), (10_000, "float64"), (100_000, "float32"),
                        (100_000, "float64")),
-             ik=1000, srs=100_000, self_motion=2000, workspace=4_000_000)
-QUICK = Sizes(fk=(1, 1000), jacobian=((1000, "float32"),), ik=100, srs=10_000, self_motion=200, workspace=200_000)
+             ik=(1000,), srs=100_000, self_motion=2000, workspace=4_000_000)
+GPU = Sizes(fk=(1, 1000, 100_000, 1_000_000, 10_000_000, 100_000_000),
+            jacobian=((1000, "float32"), (1_000_000, "float32"), (10_000_000, "float32"), (10_000_000, "float64")),
+            ik=(1, 1000, 100_000), srs=1_000_000, self_motion=2000, workspace=20_000_000,
+            fk_float64_max=10_000_000)  # float64 FK at 10^8 needs 18 GB beside pytorch-kinematics' cache
+QUICK = Sizes(fk=(1, 1000), jacobian=((1000, "float32"),), ik=(100,), srs=10_000, self_motion=200, workspace=200_000)
+
+
+def sizes_for(quick: bool) -> Sizes:
+    """:data:`QUICK`, or the full sizes of JAX's default backend: :data:`FULL` on the CPU, :data:`GPU` elsewhere."""
+    return QUICK if quick else FULL if jax.default_backend() == "cpu" else GPU
 
 
 @dataclass(frozen=True)
@@ -81,10 +98,12 @@ class Row:
     def cells(self) -> list[str]:
         """The row's markdown cells."""
         def timing(seconds):
+            if seconds == OUT_OF_MEMORY:
+                return "out of memory"
             return "n/a" if seconds is None else f"{duration(seconds)} ({rate(self.batch, seconds)})"
 
-        return [self.work, f"{self.batch:,}", self.dtype, timing(self.diffkin), timing(self.pk),
-                "n/a" if self.pk is None else _ratio(self.pk / self.diffkin), self.note]
+        ratio = "n/a" if self.pk in (None, OUT_OF_MEMORY) else _ratio(self.pk / self.diffkin)
+        return [self.work, f"{self.batch:,}", self.dtype, timing(self.diffkin), timing(self.pk), ratio, self.note]
 
 
 # Quiet-machine ratios stay below ~100x (README); far above it, one side was slowed by other load.
@@ -113,13 +132,22 @@ def _pk_chain(dtype: str):
     return pk_chain("iiwa14", PK_EE, dtype)
 
 
+OUT_OF_MEMORY = float("inf")  # pytorch-kinematics' time where it ran out of (GPU) memory
+
+
 @functools.cache
 def _pk_seconds(method: str, n: int, dtype: str) -> float | None:
-    """Median time of pytorch-kinematics' ``method`` on ``n`` configurations; ``None`` without it."""
+    """Median time of pytorch-kinematics' ``method`` on ``n`` configurations; ``None`` without it,
+    :data:`OUT_OF_MEMORY` where it ran out of memory."""
     if pk is None:
         return None
-    q = to_torch(random_configs(_iiwa14(), n, dtype))
-    return median_seconds(torch_synced(getattr(_pk_chain(dtype), method)), q)
+    try:
+        q = to_torch(random_configs(_iiwa14(), n, dtype))
+        return median_seconds(torch_synced(getattr(_pk_chain(dtype), method)), q)
+    except torch.OutOfMemoryError:
+        return OUT_OF_MEMORY
+    finally:
+        release_torch_memory()
 
 
 def _notes(*notes: str | None) -> str:
@@ -157,7 +185,8 @@ def fk_rows(sizes: Sizes) -> list[Row]:
     fk = jax.jit(lambda q: dk.fk(chain, q))
     return [_diffkin_row("FK", n, dtype, fk, jnp.asarray(random_configs(chain, n, dtype)),
                          pk_seconds=functools.partial(_pk_seconds, "forward_kinematics", n, dtype))
-            for n in sizes.fk for dtype in DTYPES]
+            for n in sizes.fk for dtype in DTYPES
+            if dtype == "float32" or sizes.fk_float64_max is None or n <= sizes.fk_float64_max]
 
 
 def jacobian_rows(sizes: Sizes) -> list[Row]:
@@ -175,17 +204,27 @@ def jacobian_rows(sizes: Sizes) -> list[Row]:
 
 def ik_rows(sizes: Sizes) -> list[Row]:
     """``dk.ik.solve`` (LM, jitted) vs ``PseudoInverseIK``, 30 iterations x 10 retries, on reachable float32 pose
-    targets: diffkin with its defaults (1e-5 m / 1e-4 rad) and at pk's own 1 mm / 0.01 rad; the notes give each
-    library's success rate at its tolerances."""
-    chain, n = _iiwa14(), sizes.ik
+    targets, for each target count: diffkin with its defaults (1e-5 m / 1e-4 rad) and at pk's own 1 mm / 0.01 rad;
+    the notes give each library's success rate at its tolerances."""
+    return [row for n in sizes.ik for row in _ik_rows(n)]
+
+
+def _ik_rows(n: int) -> list[Row]:
+    """The IK rows of ``n`` targets."""
+    chain = _iiwa14()
     T = np.asarray(dk.fk(chain, random_configs(chain, n, "float64", seed=1)), np.float32)
     args = (jnp.asarray(T), jax.random.key(1))
     t_pk = note_pk = None
     if pk is not None:
         solver, goal = pk_ik_solver(_pk_chain("float32"), chain.lower, chain.upper), pk.Transform3d(matrix=to_torch(T))
         torch.manual_seed(0)
-        t_pk = median_seconds(torch_synced(solver.solve), goal, repeats=3, warmup=1)
-        note_pk = f"pk {float(solver.solve(goal).converged_any.float().mean()):.1%} (30 iterations x 10 retries)"
+        try:
+            t_pk = median_seconds(torch_synced(solver.solve), goal, repeats=3, warmup=1)
+            note_pk = f"pk {float(solver.solve(goal).converged_any.float().mean()):.1%} (30 iterations x 10 retries)"
+        except torch.OutOfMemoryError:
+            t_pk = OUT_OF_MEMORY
+        finally:
+            release_torch_memory()
     defaults = inspect.signature(dk.ik.solve).parameters
     rows = []
     tight = (defaults["pos_tol"].default, defaults["rot_tol"].default)
@@ -233,24 +272,29 @@ def workspace_rows(sizes: Sizes) -> list[Row]:
 
 
 PARTS = {"fk": fk_rows, "jacobian": jacobian_rows, "ik": ik_rows, "srs": srs_rows, "workspace": workspace_rows}
+SECTIONS = {"compile": bench_compile.section}  # parts with a table of their own: (quick) -> markdown
+ALL_PARTS = (*PARTS, *SECTIONS)
 
 
 # --------------------------------------------------------------------------------------------- report
 
 
-def report(parts=tuple(PARTS), quick: bool = False) -> str:
-    """The suite's markdown report: a title, the machine, and one table of ``parts`` (keys of :data:`PARTS`)."""
+def report(parts=ALL_PARTS, quick: bool = False) -> str:
+    """The suite's markdown report: a title, the machine, one table of the ``parts`` in :data:`PARTS`, then
+    the table of each part in :data:`SECTIONS`."""
     jax.config.update("jax_enable_x64", True)  # for the float64 rows; float32 rows stay float32
-    busy, sizes = busy_note(), QUICK if quick else FULL
-    rows = [row.cells() for row in _with_float64_costs([row for part in parts for row in PARTS[part](sizes)])]
+    busy, sizes = busy_note(), sizes_for(quick)
+    timed = [row for part in parts if part in PARTS for row in PARTS[part](sizes)]
+    rows = [row.cells() for row in _with_float64_costs(timed)]
     header = ["work", "batch", "dtype", "diffkin", "pytorch-kinematics", "pk / diffkin", "notes"]
-    only = "" if tuple(parts) == tuple(PARTS) else " --only " + ",".join(parts)
-    command = "diffkin bench" + " --quick" * quick + only
+    only = "" if tuple(parts) == ALL_PARTS else " --only " + ",".join(parts)
+    command = "python experiments/bench.py" + " --quick" * quick + only
     about = (f"`{command}`, {datetime.date.today()}. KUKA iiwa14 (diffkin: built-in DH model; pytorch-kinematics: "
              "the shipped URDF, the same kinematics). Median of warm runs (compiled first; at least 0.3 s and 5 runs, "
              "diffkin IK 15, pk IK and maps 3); rates are items (configurations, targets, samples) per second; "
              "pk / diffkin > 1: diffkin is faster.")
-    paragraphs = ["# diffkin benchmark", machine_line(), busy, about, table(header, rows)]
+    paragraphs = ["# diffkin benchmark", machine_line(), busy, about, table(header, rows) if rows else ""]
+    paragraphs += [SECTIONS[part](quick) for part in parts if part in SECTIONS]
     return "\n\n".join(p for p in paragraphs if p)
 
 
@@ -262,7 +306,7 @@ def default_path() -> Path:
 def main(args) -> int:
     """Print the report of ``args.only`` (default all parts; ``args.quick`` sizes) and write it
     to ``args.out`` (or, with ``args.write``, to :func:`default_path`)."""
-    text = report(args.only or tuple(PARTS), args.quick)
+    text = report(args.only or ALL_PARTS, args.quick)
     print(text)
     out = Path(args.out) if args.out else default_path() if args.write else None
     if out is not None:
@@ -279,17 +323,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                                      "where it has the feature, pytorch-kinematics; prints one markdown table.")
     parser.add_argument("--quick", action="store_true", help="small batches and fewer rows")
     parser.add_argument("--only", metavar="PARTS",
-                        help=f"comma-separated parts to run: {','.join(PARTS)} (default all)")
+                        help=f"comma-separated parts to run: {','.join(ALL_PARTS)} (default all)")
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--write", action="store_true", help="also write the table to experiments/results/<machine>.md")
     where.add_argument("--out", metavar="PATH", help="also write the table to PATH")
     args = parser.parse_args(argv)
     if args.only is not None:
         args.only = tuple(part.strip() for part in args.only.split(",") if part.strip())
-        unknown = [part for part in args.only if part not in PARTS]
+        unknown = [part for part in args.only if part not in ALL_PARTS]
         if unknown or not args.only:
             found = f"unknown part {unknown[0]!r}" if unknown else "no part"
-            parser.error(f"--only: {found}: expected a comma-separated list of {', '.join(PARTS)}")
+            parser.error(f"--only: {found}: expected a comma-separated list of {', '.join(ALL_PARTS)}")
     if args.out and not Path(args.out).parent.is_dir():
         parser.error(f"--out: no such directory {str(Path(args.out).parent)!r}")
     return args

@@ -11,6 +11,7 @@ from _reference import dh_fk, poe_fk
 from conftest import BUILTIN, URDF_ROBOTS, random_q
 
 import diffkin as dk
+from diffkin import se3
 
 N = 200
 
@@ -273,3 +274,51 @@ def test_numpy_reference_matches_modified_and_prismatic_chains():
         q = np.random.default_rng(0).uniform(-1, 1, (5, chain.dof))
         np.testing.assert_allclose(dh_fk(chain, q), np.asarray(dk.fk(chain, q)), atol=1e-12)
         np.testing.assert_allclose(poe_fk(dk.to_poe(chain), q), np.asarray(dk.fk(chain, q)), atol=1e-12)
+
+
+def _dh_matrix(a, alpha, d, theta, modified):
+    """One DH link as a numpy matrix (the reference of the long-chain test)."""
+    ct, st, ca, sa = np.cos(theta), np.sin(theta), np.cos(alpha), np.sin(alpha)
+    if modified:  # Rx(alpha) Tx(a) Rz(theta) Tz(d)
+        return np.array([[ct, -st, 0, a], [st * ca, ct * ca, -sa, -sa * d], [st * sa, ct * sa, ca, ca * d],
+                         [0, 0, 0, 1]])
+    return np.array([[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st], [0, sa, ca, d], [0, 0, 0, 1]])
+
+
+@pytest.mark.parametrize("modified", [False, True])
+def test_long_chain_against_numpy(modified):
+    """20 joints (the forward pass is materialised after joints 8 and 16): poses, the Jacobian, gradients."""
+    rng = np.random.default_rng(40)
+    table = np.stack([rng.uniform(0, 0.3, 20), rng.uniform(-2, 2, 20), rng.uniform(0, 0.3, 20),
+                      rng.uniform(-1, 1, 20)], axis=1)
+    types = "RRRRRRRRP" + "R" * 11  # a prismatic joint right after the first materialised pose
+    chain = dk.DHChain.from_table(table, types, modified=modified, lower=-np.ones(20), upper=np.ones(20))
+    q = random_q(chain, 4, seed=41)
+
+    def reference(q1, table=table):
+        Ts = [np.eye(4)]
+        for (a, alpha, d, off), kind, x in zip(table, types, q1, strict=True):
+            theta, d = (x + off, d) if kind == "R" else (off, d + x)
+            Ts.append(Ts[-1] @ _dh_matrix(a, alpha, d, theta, modified))
+        return np.stack(Ts)
+
+    ref = np.stack([reference(qk) for qk in q])
+    np.testing.assert_allclose(dk.link_poses(chain, q), ref, atol=1e-12)
+    np.testing.assert_allclose(dk.fk(dk.to_poe(chain), q), ref[:, -1], atol=1e-12)
+    # World Jacobian against central differences of the reference.
+    J, h = np.asarray(dk.jacobian(chain, q)), 1e-6
+    for i in range(20):
+        dq = np.zeros(20)
+        dq[i] = h
+        dT = (np.stack([reference(qk + dq)[-1] for qk in q]) - np.stack([reference(qk - dq)[-1] for qk in q])) / (2 * h)
+        w = se3.vee(dT[:, :3, :3] @ np.swapaxes(ref[:, -1, :3, :3], 1, 2))
+        np.testing.assert_allclose(J[:, :3, i], dT[:, :3, 3], atol=1e-8)
+        np.testing.assert_allclose(J[:, 3:, i], w, atol=1e-8)
+    # Parameter gradients flow through the materialised poses.
+    W = rng.normal(size=(4, 4, 4))
+    g = jax.grad(lambda a: jnp.sum(W * dk.fk(chain.replace(a=a), q)))(chain.a)
+    step = h * np.eye(20)
+    fd = [(np.sum(W * np.stack([reference(qk, np.c_[table[:, 0] + step[k], table[:, 1:]])[-1] for qk in q]))
+           - np.sum(W * np.stack([reference(qk, np.c_[table[:, 0] - step[k], table[:, 1:]])[-1] for qk in q])))
+          / (2 * h) for k in range(20)]
+    np.testing.assert_allclose(g, fd, atol=1e-7)

@@ -151,5 +151,7 @@ class DHChain:
                 T = rg.compose(T, A)
             z, origin = rg.column(axis_frame.R, 2), axis_frame.p
             screws.append((rg.cross(origin, z), z) if revolute else (z, (0.0, 0.0, 0.0)))
+            if rg.segment_end(i, self.dof):
+                T = rg.checkpoint(T)
             links.append(T)
         return rg.Frames(links, rg.compose(T, rg.from_matrix(self.tool)), screws)

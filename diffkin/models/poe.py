@@ -146,6 +146,8 @@ class PoEChain:
             w_now = rg.rotate(T.R, w)
             screws.append((rg.vadd(rg.rotate(T.R, v), rg.cross(T.p, w_now)), w_now))
             T = rg.compose(T, rg.screw_exp(v, w, q[i]))
+            if rg.segment_end(i, self.dof):
+                T = rg.checkpoint(T)
             links.append(rg.compose(T, rg.from_matrix(L[i])))
         return rg.Frames(links, rg.compose(T, rg.from_matrix(self.home)), screws)
 

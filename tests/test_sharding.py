@@ -1,0 +1,54 @@
+"""FK and IK on inputs sharded over several devices give the results of one device (4 host CPU devices)."""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+SCRIPT = """
+    import json, jax, numpy as np
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+    jax.config.update("jax_enable_x64", True)
+    import diffkin as dk
+
+    chain = dk.robots.iiwa14()
+    devices = jax.devices()
+    sharded = NamedSharding(Mesh(np.array(devices), ("batch",)), P("batch"))  # automatic axes: jit partitions
+    one = devices[0]
+    rng = np.random.default_rng(3)
+    q = rng.uniform(chain.lower, chain.upper, (64, 7))
+    fk = jax.jit(lambda q: dk.fk(chain, q))
+    T1, T4 = fk(jax.device_put(q, one)), fk(jax.device_put(q, sharded))
+
+    targets = np.asarray(T1[:8])
+    solve = jax.jit(lambda T, key: dk.ik.solve(chain, T, key=key))
+    key = jax.random.key(5)
+    r1, r4 = solve(jax.device_put(targets, one), key), solve(jax.device_put(targets, sharded), key)
+    print(json.dumps(dict(
+        n_devices=len(devices),
+        fk_devices=len(T4.sharding.device_set),
+        ik_devices=len(r4.q.sharding.device_set),
+        fk_diff=float(np.abs(np.asarray(T1) - np.asarray(T4)).max()),
+        ik_q_diff=float(np.abs(np.asarray(r1.q) - np.asarray(r4.q)).max()),
+        ik_err_diff=float(max(np.abs(np.asarray(r1.pos_err) - np.asarray(r4.pos_err)).max(),
+                              np.abs(np.asarray(r1.rot_err) - np.asarray(r4.rot_err)).max())),
+        success=[bool(np.all(r1.success)), bool(np.all(r4.success))],
+    )))
+"""
+
+
+@pytest.mark.slow
+def test_fk_and_ik_sharded_over_4_devices_match_one_device():
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=4", "JAX_PLATFORMS": "cpu"}
+    out = subprocess.run([sys.executable, "-c", textwrap.dedent(SCRIPT)], capture_output=True, text=True, env=env,
+                         timeout=600, check=False)
+    assert out.returncode == 0, out.stderr[-3000:]
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    assert (r["n_devices"], r["fk_devices"], r["ik_devices"]) == (4, 4, 4)
+    assert r["fk_diff"] < 1e-14
+    assert r["success"] == [True, True]
+    # The same solutions in float64: only the last bits may differ between the two compiled programs.
+    assert r["ik_q_diff"] < 1e-10 and r["ik_err_diff"] < 1e-12, r
