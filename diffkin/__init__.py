@@ -17,17 +17,40 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from diffkin.models import DHChain, PoEChain, Robot, load_robot, load_urdf, to_poe
 
 _HOMES = {
-    "ik": None, "robots": None, "se3": None, "srs": None, "workspace": None,  # submodules
+    "ik": None,
+    "robots": None,
+    "se3": None,
+    "srs": None,
+    "workspace": None,  # submodules
     "viewer": None,  # optional: needs viser and trimesh (pip install "diffkin[viewer]")
-    "fk": "diffkin.kinematics", "jacobian": "diffkin.kinematics", "link_poses": "diffkin.kinematics",
+    "fk": "diffkin.kinematics",
+    "jacobian": "diffkin.kinematics",
+    "link_poses": "diffkin.kinematics",
     "manipulability": "diffkin.kinematics",
-    "DHChain": "diffkin.models", "PoEChain": "diffkin.models", "load_urdf": "diffkin.models",
-    "to_poe": "diffkin.models", "Robot": "diffkin.models", "load_robot": "diffkin.models",
+    "DHChain": "diffkin.models",
+    "PoEChain": "diffkin.models",
+    "load_urdf": "diffkin.models",
+    "to_poe": "diffkin.models",
+    "Robot": "diffkin.models",
+    "load_robot": "diffkin.models",
 }
 
 __all__ = [
-    "DHChain", "PoEChain", "Robot", "fk", "jacobian", "link_poses", "load_robot", "load_urdf", "manipulability",
-    "ik", "robots", "se3", "srs", "to_poe", "workspace",
+    "DHChain",
+    "PoEChain",
+    "Robot",
+    "fk",
+    "jacobian",
+    "link_poses",
+    "load_robot",
+    "load_urdf",
+    "manipulability",
+    "ik",
+    "robots",
+    "se3",
+    "srs",
+    "to_poe",
+    "workspace",
 ]
 __version__ = "0.1.0"
 

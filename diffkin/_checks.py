@@ -31,12 +31,17 @@ def rigid_poses(T: jax.Array) -> jax.Array:
     """
     tol = rigid_tol(T.dtype)
     R = [[T[..., i, j] for j in range(3)] for i in range(3)]  # entries: no batched 3x3 matmuls (slow on CPU)
-    gram = [jnp.abs(sum(R[k][i] * R[k][j] for k in range(3)) - (1.0 if i == j else 0.0))
-            for i in range(3) for j in range(i, 3)]
+    gram = [
+        jnp.abs(sum(R[k][i] * R[k][j] for k in range(3)) - (1.0 if i == j else 0.0))
+        for i in range(3)
+        for j in range(i, 3)
+    ]
     row = [jnp.abs(T[..., 3, j] - (1.0 if j == 3 else 0.0)) for j in range(4)]
-    det = (R[0][0] * (R[1][1] * R[2][2] - R[1][2] * R[2][1])
-           - R[0][1] * (R[1][0] * R[2][2] - R[1][2] * R[2][0])
-           + R[0][2] * (R[1][0] * R[2][1] - R[1][1] * R[2][0]))
+    det = (
+        R[0][0] * (R[1][1] * R[2][2] - R[1][2] * R[2][1])
+        - R[0][1] * (R[1][0] * R[2][2] - R[1][2] * R[2][0])
+        + R[0][2] * (R[1][0] * R[2][1] - R[1][1] * R[2][0])
+    )
     worst = functools.reduce(jnp.maximum, [*gram, *row, jnp.abs(det - 1.0)])
     return worst <= tol  # false for NaN
 

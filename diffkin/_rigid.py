@@ -207,7 +207,7 @@ def checkpoint(A: Rigid) -> Rigid:
     done = materialize([flat[i] for i in arrays])
     for k, i in enumerate(arrays):
         flat[i] = done[k]
-    return Rigid(tuple(tuple(flat[3 * r: 3 * r + 3]) for r in range(3)), tuple(flat[9:]))  # type: ignore[arg-type]
+    return Rigid(tuple(tuple(flat[3 * r : 3 * r + 3]) for r in range(3)), tuple(flat[9:]))  # type: ignore[arg-type]
 
 
 def _matrix_entries(A: Rigid) -> list[Entry]:
@@ -258,10 +258,7 @@ def screw_exp(v: Vec3, w: Vec3, theta: Entry) -> Rigid:
             A, B, C = _exp_coefficients(jnp.asarray(n2), theta)
     else:
         A, B, C = _exp_coefficients(dot(w, w), theta)
-    R = tuple(
-        tuple(add(1.0 if i == j else 0.0, mul(A, W[i][j]), mul(B, W2[i][j])) for j in range(3))
-        for i in range(3)
-    )
+    R = tuple(tuple(add(1.0 if i == j else 0.0, mul(A, W[i][j]), mul(B, W2[i][j])) for j in range(3)) for i in range(3))
     p = vadd(scale(theta, v), scale(B, Wv), scale(C, W2v))
     return Rigid(R, p)
 

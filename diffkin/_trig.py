@@ -55,15 +55,25 @@ _PI_2 = {
 # sin r = r + r^3 S(r^2), cos r = 1 - r^2/2 + r^4 C(r^2); coefficients highest power first.
 _SIN = {
     np.dtype(np.float32): (-1.9515295891e-4, 8.3321608736e-3, -1.6666654611e-1),
-    np.dtype(np.float64): (1.58962301576546568060e-10, -2.50507477628578072866e-8,
-                           2.75573136213857245213e-6, -1.98412698295895385996e-4,
-                           8.33333333332211858878e-3, -1.66666666666666307295e-1),
+    np.dtype(np.float64): (
+        1.58962301576546568060e-10,
+        -2.50507477628578072866e-8,
+        2.75573136213857245213e-6,
+        -1.98412698295895385996e-4,
+        8.33333333332211858878e-3,
+        -1.66666666666666307295e-1,
+    ),
 }
 _COS = {
     np.dtype(np.float32): (2.443315711809948e-5, -1.388731625493765e-3, 4.166664568298827e-2),
-    np.dtype(np.float64): (-1.13585365213876817300e-11, 2.08757008419747316778e-9,
-                           -2.75573141792967388112e-7, 2.48015872888517045348e-5,
-                           -1.38888888888730564116e-3, 4.16666666666665929218e-2),
+    np.dtype(np.float64): (
+        -1.13585365213876817300e-11,
+        2.08757008419747316778e-9,
+        -2.75573141792967388112e-7,
+        2.48015872888517045348e-5,
+        -1.38888888888730564116e-3,
+        4.16666666666665929218e-2,
+    ),
 }
 
 
@@ -148,11 +158,22 @@ _TAN_PI_8 = 0.41421356237309504880
 # coefficients highest power first (Cephes atanf.c and atan.c).
 _P = {
     np.dtype(np.float32): (8.05374449538e-2, -1.38776856032e-1, 1.99777106478e-1, -3.33329491539e-1),
-    np.dtype(np.float64): (-8.750608600031904122785e-1, -1.615753718733365076637e1, -7.500855792314704667340e1,
-                           -1.228866684490136173410e2, -6.485021904942025371773e1),
+    np.dtype(np.float64): (
+        -8.750608600031904122785e-1,
+        -1.615753718733365076637e1,
+        -7.500855792314704667340e1,
+        -1.228866684490136173410e2,
+        -6.485021904942025371773e1,
+    ),
 }
-_Q = (1.0, 2.485846490142306297962e1, 1.650270098316988542046e2, 4.328810604912902668951e2,
-      4.853903996359136964868e2, 1.945506571482613964425e2)
+_Q = (
+    1.0,
+    2.485846490142306297962e1,
+    1.650270098316988542046e2,
+    4.328810604912902668951e2,
+    4.853903996359136964868e2,
+    1.945506571482613964425e2,
+)
 
 
 # Per dtype: (precision p, exponent of the smallest subnormal, the integer type of the bits).
@@ -204,8 +225,12 @@ def _atan2_any(y, x):
     nx, ny = (jax.lax.bitcast_convert_type(v, itype) != 0 for v in (ax, ay))
     small = dtype.type(2.0 ** -_SMALL[dtype])
     lo, hi = jnp.minimum(ax, ay), jnp.maximum(ax, ay)
-    special = ((jnp.isinf(ax) & jnp.isinf(ay)) | (nx & (ax < small)) | (ny & (ay < small))
-               | (nx & ny & (lo < hi * dtype.type(2.0 ** -(2 * p)))))
+    special = (
+        (jnp.isinf(ax) & jnp.isinf(ay))
+        | (nx & (ax < small))
+        | (ny & (ay < small))
+        | (nx & ny & (lo < hi * dtype.type(2.0 ** -(2 * p))))
+    )
     return jax.lax.cond(jnp.any(special), _atan2_careful, _atan2_fast, y, x)
 
 
@@ -263,7 +288,8 @@ def _atan2_careful(y, x):
     tiny = lo < hi * dtype.type(2.0 ** -(2 * p))
     lo_up = lo < 1.0
     scaled = jnp.where(lo_up, _times_pow2(jnp.where(lo_up, lo, 0.0), k), lo) / jnp.where(
-        lo_up, hi, hi * dtype.type(2.0**-k))
+        lo_up, hi, hi * dtype.type(2.0**-k)
+    )
     r = jnp.where(tiny, _over_pow2(jnp.where(tiny, scaled, 0.0), k), r)
     r = jnp.where(steep, 0.5 * np.pi - r, r)
     r = jnp.where(jnp.signbit(x) & (bx != 0), np.pi - r, r)

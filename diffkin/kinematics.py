@@ -137,7 +137,7 @@ def _autodiff(model: Model, q, frame: str, f: int | None, base, include_base: bo
         steps = [(e, zero) for e in unit] + [(zero, e) for e in unit]
         t0 = jnp.zeros(shape, q.dtype)
         moves += [(lambda t, v=v, w=w: pose(qs, rg.compose(B, rg.screw_exp(v, w, t))), t0) for v, w in steps]
-    moves += [(lambda x, i=i: pose(qs[:i] + [x] + qs[i + 1:], B), qs[i]) for i in range(model.dof)]
+    moves += [(lambda x, i=i: pose(qs[:i] + [x] + qs[i + 1 :], B), qs[i]) for i in range(model.dof)]
     columns = []
     for fn, x in moves:
         T, dT = jax.jvp(fn, (x,), (jnp.ones_like(x),))
@@ -161,7 +161,7 @@ def _stack_columns(columns, shape, dtype) -> jax.Array:
 
 def _split(entries) -> rg.Mat3:
     """The rotation of a pose's :func:`rg.leaves`."""
-    return tuple(tuple(entries[3 * i: 3 * i + 3]) for i in range(3))
+    return tuple(tuple(entries[3 * i : 3 * i + 3]) for i in range(3))
 
 
 def _vee_of_product(A: rg.Mat3, B: rg.Mat3) -> rg.Vec3:
@@ -193,8 +193,16 @@ def _where(model: Model, where: tuple, frame: str | None, frame_name: str | None
     return f, frame
 
 
-def jacobian(model: Model, q: ArrayLike, *where: str, frame: str | None = None, frame_name: str | None = None,
-             method: str | None = None, base=None, include_base: bool = False) -> jax.Array:
+def jacobian(
+    model: Model,
+    q: ArrayLike,
+    *where: str,
+    frame: str | None = None,
+    frame_name: str | None = None,
+    method: str | None = None,
+    base=None,
+    include_base: bool = False,
+) -> jax.Array:
     """Geometric Jacobian of a chain's end effector or of a robot's frame, rows ``[v; w]``.
 
     Called as ``jacobian(chain, q, frame="world")`` or ``jacobian(robot, q, frame_name, frame="world")``

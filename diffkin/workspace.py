@@ -130,9 +130,14 @@ class ReachabilityMap:
         if fields["counts"].ndim != 3:
             raise ValueError(f"{path}: field counts: expected a 3-d grid, got shape {fields['counts'].shape}")
         return cls(
-            counts=fields["counts"], manipulability=fields["manipulability"], dexterity=fields["dexterity"],
-            origin=fields["origin"], voxel_size=float(fields["voxel_size"]), n_samples=int(fields["n_samples"]),
-            n_outside=int(fields["n_outside"]), orientation_bins=int(fields["orientation_bins"]),
+            counts=fields["counts"],
+            manipulability=fields["manipulability"],
+            dexterity=fields["dexterity"],
+            origin=fields["origin"],
+            voxel_size=float(fields["voxel_size"]),
+            n_samples=int(fields["n_samples"]),
+            n_outside=int(fields["n_outside"]),
+            orientation_bins=int(fields["orientation_bins"]),
             chain_name=str(fields["chain_name"]),
         )
 
@@ -152,8 +157,9 @@ def _joint_ranges(chain) -> tuple[np.ndarray, np.ndarray]:
     lo, hi = np.asarray(chain.lower, np.float64), np.asarray(chain.upper, np.float64)
     for i, kind in enumerate(chain.actuated_types if isinstance(chain, Robot) else chain.joint_types):
         if kind == "P" and not (np.isfinite(lo[i]) and np.isfinite(hi[i])):
-            raise ValueError(f"chain.lower/upper[{i}]: expected finite limits for prismatic joint {i}, "
-                             f"got [{lo[i]}, {hi[i]}]")
+            raise ValueError(
+                f"chain.lower/upper[{i}]: expected finite limits for prismatic joint {i}, got [{lo[i]}, {hi[i]}]"
+            )
     return np.where(np.isfinite(lo), lo, -np.pi), np.where(np.isfinite(hi), hi, np.pi)
 
 
@@ -224,8 +230,9 @@ def _grid(chain, voxel_size, bounds) -> tuple[np.ndarray, float, tuple[int, ...]
         except (TypeError, ValueError):
             b = np.full(0, np.nan)
         if b.shape != (2, 3) or not np.all(np.isfinite(b)) or np.any(b[1] <= b[0]):
-            raise ValueError(f"bounds: expected [[xmin, ymin, zmin], [xmax, ymax, zmax]] (metres) with min < max, "
-                             f"got {bounds!r}")
+            raise ValueError(
+                f"bounds: expected [[xmin, ymin, zmin], [xmax, ymax, zmax]] (metres) with min < max, got {bounds!r}"
+            )
         origin, shape = b[0], tuple(int(max(1, math.ceil(s))) for s in (b[1] - b[0]) / voxel_size)
     return origin, voxel_size, shape
 
@@ -265,8 +272,12 @@ def _manipulability(frames: rg.Frames, dof: int) -> jax.Array:
     minors: dict[tuple[int, ...], rg.Entry] = {(): 1.0}  # column subset -> minor over the first len(subset) rows
     for k, row in enumerate(rows):
         minors = {
-            subset: rg.add(*(rg.mul((-1.0) ** (k + j), rg.mul(row[c], minors[subset[:j] + subset[j + 1:]]))
-                             for j, c in enumerate(subset)))
+            subset: rg.add(
+                *(
+                    rg.mul((-1.0) ** (k + j), rg.mul(row[c], minors[subset[:j] + subset[j + 1 :]]))
+                    for j, c in enumerate(subset)
+                )
+            )
             for subset in itertools.combinations(range(len(row)), k + 1)
         }
     det = rg.add(*(rg.mul(m, m) for m in minors.values()))
@@ -319,8 +330,11 @@ def _compiled(chain_key: _ChainKey, shape: tuple[int, int, int], n_bins: int, ch
     sharded, replicated = NamedSharding(mesh, P(_AXIS)), NamedSharding(mesh, P())
 
     def zeros():
-        return (jnp.zeros((n_dev, nvox), jnp.int32), jnp.zeros((n_dev, nvox), dtype),
-                jnp.zeros((n_dev, nvox * n_bins), jnp.uint8))
+        return (
+            jnp.zeros((n_dev, nvox), jnp.int32),
+            jnp.zeros((n_dev, nvox), dtype),
+            jnp.zeros((n_dev, nvox * n_bins), jnp.uint8),
+        )
 
     def local_step(counts, best, seen, key, chunk_index, n_full, n_last, origin, inv_voxel, n_slots):
         c = chunk_index[0]  # this device's chunk: no axis_index, so one per-device program for any device count
@@ -330,8 +344,9 @@ def _compiled(chain_key: _ChainKey, shape: tuple[int, int, int], n_bins: int, ch
         p = [jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in frames.ee.p]
         R = tuple(tuple(jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in row) for row in frames.ee.R)
         flat, inside = _flat_index(p, origin, inv_voxel, shape)
-        slot = jnp.where(inside & (jnp.arange(chunk) < n_valid), flat * n_bins + _orientation_bin(R, n_bins // 6),
-                         n_slots)  # out of range: dropped by the scatters
+        slot = jnp.where(
+            inside & (jnp.arange(chunk) < n_valid), flat * n_bins + _orientation_bin(R, n_bins // 6), n_slots
+        )  # out of range: dropped by the scatters
         slot = opaque_index(slot, n_slots + 1)  # one forward pass for the three scatters, not one per scatter
         m = _manipulability(frames, chain.dof).astype(dtype)
         counts = counts.reshape(-1).at[slot // n_bins].add(1, mode="drop").reshape(counts.shape)
@@ -340,8 +355,13 @@ def _compiled(chain_key: _ChainKey, shape: tuple[int, int, int], n_bins: int, ch
         return counts, best, seen, jnp.sum(n_valid)
 
     step = jax.jit(
-        jax.shard_map(local_step, mesh=mesh, in_specs=(P(_AXIS),) * 3 + (P(), P(_AXIS)) + (P(),) * 5,
-                      out_specs=(P(_AXIS),) * 3 + (P(),), check_vma=False),
+        jax.shard_map(
+            local_step,
+            mesh=mesh,
+            in_specs=(P(_AXIS),) * 3 + (P(), P(_AXIS)) + (P(),) * 5,
+            out_specs=(P(_AXIS),) * 3 + (P(),),
+            check_vma=False,
+        ),
         donate_argnums=(0, 1, 2),
     )
 
@@ -349,8 +369,7 @@ def _compiled(chain_key: _ChainKey, shape: tuple[int, int, int], n_bins: int, ch
         dexterity = jnp.max(seen, axis=0).reshape(nvox, n_bins).sum(axis=1, dtype=jnp.int32)
         return counts.sum(axis=0), best.max(axis=0), dexterity
 
-    return (jax.jit(zeros, out_shardings=(sharded,) * 3), step,
-            jax.jit(reduce, out_shardings=(replicated,) * 3))
+    return (jax.jit(zeros, out_shardings=(sharded,) * 3), step, jax.jit(reduce, out_shardings=(replicated,) * 3))
 
 
 def _host(x: jax.Array) -> np.ndarray:
@@ -425,8 +444,9 @@ def reachability(
     chunk = positive_int(chunk, "chunk")
     orientation_bins = positive_int(orientation_bins, "orientation_bins")
     if orientation_bins % 6:
-        raise ValueError(f"orientation_bins: expected a multiple of 6 (6 cube faces x roll sectors), "
-                         f"got {orientation_bins}")
+        raise ValueError(
+            f"orientation_bins: expected a multiple of 6 (6 cube faces x roll sectors), got {orientation_bins}"
+        )
     origin, voxel_size, shape = _grid(chain, voxel_size, bounds)
     n_chunks = -(-n_samples // chunk)
     if n_chunks > _INT32_MAX:
@@ -434,8 +454,10 @@ def reachability(
     chunk = min(chunk, n_samples)  # a larger chunk would only compute masked samples
     n_slots = math.prod(shape) * orientation_bins
     if n_slots >= _INT32_MAX:
-        raise ValueError(f"voxel_size: grid of {shape} voxels x {orientation_bins} orientation bins exceeds 2**31 "
-                         f"cells; expected a coarser voxel_size, smaller bounds or fewer orientation_bins")
+        raise ValueError(
+            f"voxel_size: grid of {shape} voxels x {orientation_bins} orientation bins exceeds 2**31 "
+            f"cells; expected a coarser voxel_size, smaller bounds or fewer orientation_bins"
+        )
     devices = list(jax.devices() if devices is None else devices)
     if not devices or not all(isinstance(d, jax.Device) for d in devices):
         raise TypeError(f"devices: expected a non-empty sequence of jax.Device, got {devices!r}")
@@ -443,21 +465,29 @@ def reachability(
     # Per voxel: every device's counts, best manipulability and orientation flags; the reduction's
     # maximum of the flags and its three maps; the host's int64 counts and copies of the maps.
     item = dtype.itemsize
-    grid_bytes = math.prod(shape) * (len(devices) * (4 + item + orientation_bins) + orientation_bins
-                                     + 2 * (8 + item) + 8)
+    grid_bytes = math.prod(shape) * (
+        len(devices) * (4 + item + orientation_bins) + orientation_bins + 2 * (8 + item) + 8
+    )
     if grid_bytes > MAX_GRID_BYTES:
-        raise ValueError(f"voxel_size: {voxel_size} m gives a grid of {shape} voxels x {orientation_bins} orientation "
-                         f"bins on {len(devices)} device(s), about {grid_bytes / 2**30:.1f} GiB of maps (limit "
-                         f"diffkin.workspace.MAX_GRID_BYTES = {MAX_GRID_BYTES / 2**30:.1f} GiB); expected a coarser "
-                         f"voxel_size, smaller bounds or fewer orientation_bins")
+        raise ValueError(
+            f"voxel_size: {voxel_size} m gives a grid of {shape} voxels x {orientation_bins} orientation "
+            f"bins on {len(devices)} device(s), about {grid_bytes / 2**30:.1f} GiB of maps (limit "
+            f"diffkin.workspace.MAX_GRID_BYTES = {MAX_GRID_BYTES / 2**30:.1f} GiB); expected a coarser "
+            f"voxel_size, smaller bounds or fewer orientation_bins"
+        )
     mesh = Mesh(np.array(devices), (_AXIS,))
     zeros, step, reduce = _compiled(_ChainKey(chain), shape, orientation_bins, chunk, dtype, mesh)
 
     n_full, n_last = divmod(n_samples, chunk)
     n_steps = -(-(n_full + (n_last > 0)) // len(devices))
     steps_per_flush = max(1, _INT32_MAX // (chunk * len(devices)))  # int32 device counts cannot overflow
-    args = (jnp.asarray(n_full, jnp.int32), jnp.asarray(n_last, jnp.int32),
-            jnp.asarray(origin, dtype), jnp.asarray(1.0 / voxel_size, dtype), jnp.asarray(n_slots, jnp.int32))
+    args = (
+        jnp.asarray(n_full, jnp.int32),
+        jnp.asarray(n_last, jnp.int32),
+        jnp.asarray(origin, dtype),
+        jnp.asarray(1.0 / voxel_size, dtype),
+        jnp.asarray(n_slots, jnp.int32),
+    )
     sharded = NamedSharding(mesh, P(_AXIS))
     state, counts, bar = zeros(), np.zeros(shape, np.int64), _progress(n_samples, progress)
     done: jax.Array | None = None  # the valid samples of the step in flight
@@ -479,14 +509,21 @@ def reachability(
     if bar is not None:
         bar.close()
     return ReachabilityMap(
-        counts=counts, manipulability=_host(best).reshape(shape), dexterity=_host(dexterity).reshape(shape),
-        origin=origin, voxel_size=voxel_size, n_samples=n_samples, n_outside=n_samples - int(counts.sum()),
-        orientation_bins=orientation_bins, chain_name=chain.name,
+        counts=counts,
+        manipulability=_host(best).reshape(shape),
+        dexterity=_host(dexterity).reshape(shape),
+        origin=origin,
+        voxel_size=voxel_size,
+        n_samples=n_samples,
+        n_outside=n_samples - int(counts.sum()),
+        orientation_bins=orientation_bins,
+        chain_name=chain.name,
     )
 
 
-def plot_slice(reach_map: ReachabilityMap, axis: str = "y", value: float = 0.0, quantity: str = "count", *,
-               path=None, ax=None):
+def plot_slice(
+    reach_map: ReachabilityMap, axis: str = "y", value: float = 0.0, quantity: str = "count", *, path=None, ax=None
+):
     """Heatmap of one quantity on the voxel layer that contains the plane ``axis = value``.
 
     The layer is a slab one voxel thick; the title and colour bar say what is plotted: samples
@@ -524,8 +561,12 @@ def plot_slice(reach_map: ReachabilityMap, axis: str = "y", value: float = 0.0, 
     plane = np.take(data, layer, axis=a).astype(np.float64)
     plane[np.take(m.counts, layer, axis=a) == 0] = np.nan  # unreached voxels blank
     u, v = (i for i in range(3) if i != a)
-    extent = [m.origin[u], m.origin[u] + m.voxel_size * data.shape[u],
-              m.origin[v], m.origin[v] + m.voxel_size * data.shape[v]]
+    extent = [
+        m.origin[u],
+        m.origin[u] + m.voxel_size * data.shape[u],
+        m.origin[v],
+        m.origin[v] + m.voxel_size * data.shape[v],
+    ]
     slab = (m.origin[a] + layer * m.voxel_size, m.origin[a] + (layer + 1) * m.voxel_size)
     limits = {"vmin": 0, "vmax": m.orientation_bins} if quantity == "dexterity" else {}
     image = ax.imshow(plane.T, origin="lower", extent=extent, interpolation="nearest", **limits)
@@ -540,9 +581,13 @@ def plot_slice(reach_map: ReachabilityMap, axis: str = "y", value: float = 0.0, 
         "manipulability": "best manipulability per voxel (J: world Jacobian of the end effector)",
         "dexterity": f"dexterity: orientation bins of {m.orientation_bins} reached per voxel",
     }[quantity]
-    ax.set(xlabel=f"{_AXES[u]} (m)", ylabel=f"{_AXES[v]} (m)", aspect="equal",
-           title=f"{m.chain_name} {what}\nslab {axis} in [{slab[0]:.3g}, {slab[1]:.3g}) m ({m.voxel_size:g} m "
-           f"voxels)\n{m.n_samples:,} samples uniform in joint space; blank: none reached")
+    ax.set(
+        xlabel=f"{_AXES[u]} (m)",
+        ylabel=f"{_AXES[v]} (m)",
+        aspect="equal",
+        title=f"{m.chain_name} {what}\nslab {axis} in [{slab[0]:.3g}, {slab[1]:.3g}) m ({m.voxel_size:g} m "
+        f"voxels)\n{m.n_samples:,} samples uniform in joint space; blank: none reached",
+    )
     ax.title.set_fontsize("medium")
     if path is not None:
         ax.figure.savefig(path, dpi=120)

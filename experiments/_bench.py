@@ -91,11 +91,16 @@ def _accelerator() -> str | None:
 def machine_line() -> str:
     """One line naming the machine, the JAX devices, the software versions and JAX's memory settings (GPU)."""
     devices = jax.devices()
-    parts = [f"CPU: {cpu_model()} ({cpu_cores()} cores)", f"jax {jax.__version__}",
-             f"jax devices: {devices[0].device_kind} x{len(devices)}"]
+    parts = [
+        f"CPU: {cpu_model()} ({cpu_cores()} cores)",
+        f"jax {jax.__version__}",
+        f"jax devices: {devices[0].device_kind} x{len(devices)}",
+    ]
     if pk is not None:
-        parts += [f"torch {torch.__version__} on {torch_device()}",
-                  f"pytorch-kinematics {importlib.metadata.version('pytorch-kinematics')}"]
+        parts += [
+            f"torch {torch.__version__} on {torch_device()}",
+            f"pytorch-kinematics {importlib.metadata.version('pytorch-kinematics')}",
+        ]
     parts += [f"{k}={v}" for k, v in sorted(os.environ.items()) if k.startswith("XLA_PYTHON_CLIENT_")]
     return ", ".join(parts)
 
@@ -105,8 +110,10 @@ def busy_note() -> str:
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else 0.0
     if load <= cpu_cores() / 2:
         return ""
-    return (f"**The machine was busy** (1-minute load average {load:.1f} on {cpu_cores()} cores before the run): "
-            "these timings are unreliable.")
+    return (
+        f"**The machine was busy** (1-minute load average {load:.1f} on {cpu_cores()} cores before the run): "
+        "these timings are unreliable."
+    )
 
 
 def machine_slug() -> str:
@@ -188,5 +195,12 @@ def pk_ik_solver(chain, lower, upper, *, iterations: int = 30, retries: int = 10
     Its retries are drawn from torch's global RNG: seed it (``torch.manual_seed``) for a reproducible run.
     """
     limits = to_torch(np.stack([lower, upper], -1).astype(np.float32))
-    return pk.PseudoInverseIK(chain, max_iterations=iterations, num_retries=retries, joint_limits=limits,
-                              early_stopping_any_converged=True, pos_tolerance=tol[0], rot_tolerance=tol[1])
+    return pk.PseudoInverseIK(
+        chain,
+        max_iterations=iterations,
+        num_retries=retries,
+        joint_limits=limits,
+        early_stopping_any_converged=True,
+        pos_tolerance=tol[0],
+        rot_tolerance=tol[1],
+    )

@@ -68,14 +68,23 @@ class Sizes:
     fk_float64_max: int | None = None  # largest float64 FK batch (None: all)
 
 
-FULL = Sizes(fk=(1, 1000, 100_000),
-             jacobian=((1000, "float32"), (10_000, "float32"), (10_000, "float64"), (100_000, "float32"),
-                       (100_000, "float64")),
-             ik=(1000,), srs=100_000, self_motion=2000, workspace=4_000_000)
-GPU = Sizes(fk=(1, 1000, 100_000, 1_000_000, 10_000_000, 100_000_000),
-            jacobian=((1000, "float32"), (1_000_000, "float32"), (10_000_000, "float32"), (10_000_000, "float64")),
-            ik=(1, 1000, 100_000), srs=1_000_000, self_motion=2000, workspace=20_000_000,
-            fk_float64_max=10_000_000)  # float64 FK at 10^8 needs 18 GB beside pytorch-kinematics' cache
+FULL = Sizes(
+    fk=(1, 1000, 100_000),
+    jacobian=((1000, "float32"), (10_000, "float32"), (10_000, "float64"), (100_000, "float32"), (100_000, "float64")),
+    ik=(1000,),
+    srs=100_000,
+    self_motion=2000,
+    workspace=4_000_000,
+)
+GPU = Sizes(
+    fk=(1, 1000, 100_000, 1_000_000, 10_000_000, 100_000_000),
+    jacobian=((1000, "float32"), (1_000_000, "float32"), (10_000_000, "float32"), (10_000_000, "float64")),
+    ik=(1, 1000, 100_000),
+    srs=1_000_000,
+    self_motion=2000,
+    workspace=20_000_000,
+    fk_float64_max=10_000_000,
+)  # float64 FK at 10^8 needs 18 GB beside pytorch-kinematics' cache
 QUICK = Sizes(fk=(1, 1000), jacobian=((1000, "float32"),), ik=(100,), srs=10_000, self_motion=200, workspace=200_000)
 
 
@@ -97,6 +106,7 @@ class Row:
 
     def cells(self) -> list[str]:
         """The row's markdown cells."""
+
         def timing(seconds):
             if seconds == OUT_OF_MEMORY:
                 return "out of memory"
@@ -183,10 +193,19 @@ def fk_rows(sizes: Sizes) -> list[Row]:
     """``dk.fk`` (jitted) vs ``forward_kinematics``."""
     chain = _iiwa14()
     fk = jax.jit(lambda q: dk.fk(chain, q))
-    return [_diffkin_row("FK", n, dtype, fk, jnp.asarray(random_configs(chain, n, dtype)),
-                         pk_seconds=functools.partial(_pk_seconds, "forward_kinematics", n, dtype))
-            for n in sizes.fk for dtype in DTYPES
-            if dtype == "float32" or sizes.fk_float64_max is None or n <= sizes.fk_float64_max]
+    return [
+        _diffkin_row(
+            "FK",
+            n,
+            dtype,
+            fk,
+            jnp.asarray(random_configs(chain, n, dtype)),
+            pk_seconds=functools.partial(_pk_seconds, "forward_kinematics", n, dtype),
+        )
+        for n in sizes.fk
+        for dtype in DTYPES
+        if dtype == "float32" or sizes.fk_float64_max is None or n <= sizes.fk_float64_max
+    ]
 
 
 def jacobian_rows(sizes: Sizes) -> list[Row]:
@@ -197,8 +216,16 @@ def jacobian_rows(sizes: Sizes) -> list[Row]:
         q = jnp.asarray(random_configs(chain, n, dtype))
         for method in ("analytic", "autodiff"):
             jac = jax.jit(lambda q, method=method: dk.jacobian(chain, q, "world", method=method))
-            rows.append(_diffkin_row(f"Jacobian (world, {method})", n, dtype, jac, q,
-                                     pk_seconds=functools.partial(_pk_seconds, "jacobian", n, dtype)))
+            rows.append(
+                _diffkin_row(
+                    f"Jacobian (world, {method})",
+                    n,
+                    dtype,
+                    jac,
+                    q,
+                    pk_seconds=functools.partial(_pk_seconds, "jacobian", n, dtype),
+                )
+            )
     return rows
 
 
@@ -245,14 +272,24 @@ def srs_rows(sizes: Sizes) -> list[Row]:
     for dtype in DTYPES:
         q = jnp.asarray(random_configs(arm.chain(), sizes.srs, dtype))
         T, (psi, gc) = dk.fk(arm.chain(), q), dk.srs.arm_angle(arm, q)
-        rows.append(_diffkin_row("SRS closed-form IK (`dk.srs.ik`)", sizes.srs, dtype, solve, T, psi, gc,
-                                 note="no closed form in pk"))
+        rows.append(
+            _diffkin_row(
+                "SRS closed-form IK (`dk.srs.ik`)", sizes.srs, dtype, solve, T, psi, gc, note="no closed form in pk"
+            )
+        )
     n = sizes.self_motion
     sample = jax.jit(lambda T, key: dk.srs.sample_self_motion(arm, T, n, key=key))
     args = (dk.fk(arm.chain(), jnp.asarray(random_configs(arm.chain(), 1, "float32")[0])), jax.random.key(0))
     valid = int(sample(*args)[1].sum())
-    rows.append(Row("self-motion sampling of one pose (`dk.srs`)", n, "float32", median_seconds(sample, *args),
-                    note=f"{valid:,} of {n:,} valid, spread over every global configuration"))
+    rows.append(
+        Row(
+            "self-motion sampling of one pose (`dk.srs`)",
+            n,
+            "float32",
+            median_seconds(sample, *args),
+            note=f"{valid:,} of {n:,} valid, spread over every global configuration",
+        )
+    )
     return rows
 
 
@@ -262,13 +299,13 @@ def workspace_rows(sizes: Sizes) -> list[Row]:
     devices = jax.devices()
 
     def run():
-        return dk.workspace.reachability(chain, n, key=jax.random.key(0), voxel_size=0.05, dtype="float32",
-                                         progress=False)
+        return dk.workspace.reachability(
+            chain, n, key=jax.random.key(0), voxel_size=0.05, dtype="float32", progress=False
+        )
 
     count = len(devices)
     note = f"5 cm voxels, 48 orientation bins, {count} {devices[0].platform.upper()} device{'s' * (count > 1)}"
-    return [Row("reachability map (`dk.workspace`)", n, "float32", median_seconds(run, repeats=3, warmup=1),
-                note=note)]
+    return [Row("reachability map (`dk.workspace`)", n, "float32", median_seconds(run, repeats=3, warmup=1), note=note)]
 
 
 PARTS = {"fk": fk_rows, "jacobian": jacobian_rows, "ik": ik_rows, "srs": srs_rows, "workspace": workspace_rows}
@@ -289,10 +326,12 @@ def report(parts=ALL_PARTS, quick: bool = False) -> str:
     header = ["work", "batch", "dtype", "diffkin", "pytorch-kinematics", "pk / diffkin", "notes"]
     only = "" if tuple(parts) == ALL_PARTS else " --only " + ",".join(parts)
     command = "python experiments/bench.py" + " --quick" * quick + only
-    about = (f"`{command}`, {datetime.date.today()}. KUKA iiwa14 (diffkin: built-in DH model; pytorch-kinematics: "
-             "the shipped URDF, the same kinematics). Median of warm runs (compiled first; at least 0.3 s and 5 runs, "
-             "diffkin IK 15, pk IK and maps 3); rates are items (configurations, targets, samples) per second; "
-             "pk / diffkin > 1: diffkin is faster.")
+    about = (
+        f"`{command}`, {datetime.date.today()}. KUKA iiwa14 (diffkin: built-in DH model; pytorch-kinematics: "
+        "the shipped URDF, the same kinematics). Median of warm runs (compiled first; at least 0.3 s and 5 runs, "
+        "diffkin IK 15, pk IK and maps 3); rates are items (configurations, targets, samples) per second; "
+        "pk / diffkin > 1: diffkin is faster."
+    )
     paragraphs = ["# diffkin benchmark", machine_line(), busy, about, table(header, rows) if rows else ""]
     paragraphs += [SECTIONS[part](quick) for part in parts if part in SECTIONS]
     return "\n\n".join(p for p in paragraphs if p)
@@ -318,12 +357,15 @@ def main(args) -> int:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """The options of :func:`main`; unknown parts and a missing output folder are usage errors (exit status 2)."""
-    parser = argparse.ArgumentParser(description="FK, Jacobians, IK, the iiwa closed form, self-motion sampling and "
-                                     "reachability maps of the iiwa14, timed for diffkin and, where installed and "
-                                     "where it has the feature, pytorch-kinematics; prints one markdown table.")
+    parser = argparse.ArgumentParser(
+        description="FK, Jacobians, IK, the iiwa closed form, self-motion sampling and "
+        "reachability maps of the iiwa14, timed for diffkin and, where installed and "
+        "where it has the feature, pytorch-kinematics; prints one markdown table."
+    )
     parser.add_argument("--quick", action="store_true", help="small batches and fewer rows")
-    parser.add_argument("--only", metavar="PARTS",
-                        help=f"comma-separated parts to run: {','.join(ALL_PARTS)} (default all)")
+    parser.add_argument(
+        "--only", metavar="PARTS", help=f"comma-separated parts to run: {','.join(ALL_PARTS)} (default all)"
+    )
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--write", action="store_true", help="also write the table to experiments/results/<machine>.md")
     where.add_argument("--out", metavar="PATH", help="also write the table to PATH")

@@ -38,10 +38,16 @@ def chain(dof: int):
     if dof == 7:
         return dk.robots.iiwa14()
     rng = np.random.default_rng(dof)
-    table = np.stack([rng.uniform(0.0, 0.3, dof), rng.choice([-np.pi / 2, 0.0, np.pi / 2], dof),
-                      rng.uniform(0.0, 0.3, dof), np.zeros(dof)], axis=1)
-    return dk.DHChain.from_table(table, lower=-np.pi * np.ones(dof), upper=np.pi * np.ones(dof),
-                                 name=f"dh{dof}")
+    table = np.stack(
+        [
+            rng.uniform(0.0, 0.3, dof),
+            rng.choice([-np.pi / 2, 0.0, np.pi / 2], dof),
+            rng.uniform(0.0, 0.3, dof),
+            np.zeros(dof),
+        ],
+        axis=1,
+    )
+    return dk.DHChain.from_table(table, lower=-np.pi * np.ones(dof), upper=np.pi * np.ones(dof), name=f"dh{dof}")
 
 
 def talos():
@@ -104,10 +110,17 @@ def run_case(work: str, model: str) -> dict:
 
 def measure(work: str, model: str, timeout: float, max_gb: float) -> dict:
     """One case in a fresh subprocess, stopped beyond ``timeout`` seconds or ``max_gb`` of resident memory."""
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(__file__).resolve().parents[1]),
-                                                       os.environ.get("PYTHONPATH", "")]))
-    proc = subprocess.Popen([sys.executable, __file__, "--case", work, model], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=env)
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join([str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")]),
+    )
+    proc = subprocess.Popen(
+        [sys.executable, __file__, "--case", work, model],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     start, peak, stopped = time.perf_counter(), 0.0, None
     while proc.poll() is None:
         time.sleep(0.2)
@@ -142,8 +155,11 @@ def cases(parts, sizes) -> list[tuple[str, str]]:
         if "ik" in parts:
             out.append(("IK (LM defaults, 1,000 targets)", str(dof)))
     if talos() is not None:
-        out += [(w, "talos") for w in ("FK", "Jacobian (analytic)", "Jacobian (autodiff)")
-                if (w == "FK" and "fk" in parts) or (w != "FK" and "jacobian" in parts)]
+        out += [
+            (w, "talos")
+            for w in ("FK", "Jacobian (analytic)", "Jacobian (autodiff)")
+            if (w == "FK" and "fk" in parts) or (w != "FK" and "jacobian" in parts)
+        ]
     return out
 
 
@@ -152,13 +168,24 @@ def rows(parts=("fk", "jacobian", "ik"), quick: bool = False, timeout: float = 3
     out = []
     for work, model in cases(parts, QUICK_SIZES if quick else SIZES):
         r = measure(work, model, timeout, max_gb)
-        name = "Talos (tree, 32 joints)" if model == "talos" else (
-            "iiwa14 (7 joints)" if model == "7" else f"DH chain, {model} joints")
+        name = (
+            "Talos (tree, 32 joints)"
+            if model == "talos"
+            else ("iiwa14 (7 joints)" if model == "7" else f"DH chain, {model} joints")
+        )
         if "stopped" in r:
             out.append([work, name, r["stopped"], "", "", ""])
         else:
-            out.append([work, name, f"{r['trace']:.2f} s", f"{r['lower']:.2f} s", f"{r['compile']:.2f} s",
-                        f"{r['peak_gb']:.2f} GB (before tracing {r['rss_before_gb']:.2f} GB)"])
+            out.append(
+                [
+                    work,
+                    name,
+                    f"{r['trace']:.2f} s",
+                    f"{r['lower']:.2f} s",
+                    f"{r['compile']:.2f} s",
+                    f"{r['peak_gb']:.2f} GB (before tracing {r['rss_before_gb']:.2f} GB)",
+                ]
+            )
         print(" | ".join(out[-1]), file=sys.stderr, flush=True)
     return out
 
@@ -170,9 +197,11 @@ def section(quick: bool = False) -> str:
     """The markdown section of ``experiments/bench.py``: a heading, what was measured, and the table."""
     from _bench import table  # the parent only: a case's subprocess imports neither torch nor pk
 
-    about = (f"`jax.jit(f).trace(x)`, `.lower()`, `.compile()` timed apart, float32, batch {BATCH:,}, each case "
-             "in a fresh subprocess (peak resident memory, and the same process just before tracing); cases "
-             "stopped after 300 s or above 4 GB say so.")
+    about = (
+        f"`jax.jit(f).trace(x)`, `.lower()`, `.compile()` timed apart, float32, batch {BATCH:,}, each case "
+        "in a fresh subprocess (peak resident memory, and the same process just before tracing); cases "
+        "stopped after 300 s or above 4 GB say so."
+    )
     return "\n\n".join(["## Compile cost (the first call)", about, table(HEADER, rows(quick=quick))])
 
 

@@ -54,14 +54,25 @@ def main():
 
     print(f"# IK benchmark: iiwa14, {N} targets, float32. {machine_line()}\n")
     torch.manual_seed(0)  # pk draws its retries from torch's RNG
-    solver, goal = pk_ik_solver(pk32, chain.lower, chain.upper), pk.Transform3d(matrix=torch.as_tensor(target64,
-                                                                                                       dtype=torch.float32))
+    solver, goal = (
+        pk_ik_solver(pk32, chain.lower, chain.upper),
+        pk.Transform3d(matrix=torch.as_tensor(target64, dtype=torch.float32)),
+    )
     pk_time = median_seconds(solver.solve, goal, repeats=3, warmup=1, min_time=0.0)
     pk_success = float(solver.solve(goal).converged_any.float().mean())
-    rows = [["pytorch-kinematics PseudoInverseIK 30 x 10, 1 mm / 0.01 rad", f"{pk_success:.1%}",
-             f"{pk_time * 1e3:.1f}", f"{N / pk_time:,.0f}", "1.0x"]]
-    for label, tol in (("diffkin LM, defaults, 1e-5 m / 1e-4 rad", TIGHT_TOL),
-                       ("diffkin LM, defaults, pk's 1 mm / 0.01 rad", PK_IK_TOL)):
+    rows = [
+        [
+            "pytorch-kinematics PseudoInverseIK 30 x 10, 1 mm / 0.01 rad",
+            f"{pk_success:.1%}",
+            f"{pk_time * 1e3:.1f}",
+            f"{N / pk_time:,.0f}",
+            "1.0x",
+        ]
+    ]
+    for label, tol in (
+        ("diffkin LM, defaults, 1e-5 m / 1e-4 rad", TIGHT_TOL),
+        ("diffkin LM, defaults, pk's 1 mm / 0.01 rad", PK_IK_TOL),
+    ):
         dt, res = run(pos_tol=tol[0], rot_tol=tol[1])
         ok = np.asarray(res.success)
         assert np.all(verified(res.q, tol)[ok]), "a reported success fails float64 FK"
@@ -84,8 +95,19 @@ def main():
         tight = np.mean((pos <= TIGHT_TOL[0]) & (rot <= TIGHT_TOL[1]))
         loose = np.mean((pos <= PK_IK_TOL[0]) & (rot <= PK_IK_TOL[1]))
         rows.append([method, iters, f"{tight:.1%}", f"{loose:.1%}", f"{np.median(pos):.2e}", f"{dt * 1e3:.0f}"])
-    print(table(["method", "iters", "success 1e-5 m / 1e-4 rad", "success 1 mm / 0.01 rad", "median pos err (m)",
-                 "time (ms)"], rows))
+    print(
+        table(
+            [
+                "method",
+                "iters",
+                "success 1e-5 m / 1e-4 rad",
+                "success 1 mm / 0.01 rad",
+                "median pos err (m)",
+                "time (ms)",
+            ],
+            rows,
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -64,7 +64,7 @@ def pinocchio_poses(path, robot, q, names, base=None):
         for name, value in values.items():
             joint = model.joints[model.getJointId(name)]
             if joint.nq == 2:
-                qp[joint.idx_q: joint.idx_q + 2] = np.cos(value), np.sin(value)
+                qp[joint.idx_q : joint.idx_q + 2] = np.cos(value), np.sin(value)
             else:
                 qp[joint.idx_q] = value
         pin.framesForwardKinematics(model, data, qp)
@@ -99,8 +99,17 @@ def several_targets(n: int):
     compile_s, dt, res = timed(fn, {h: jnp.asarray(T[:, k], jnp.float32) for k, h in enumerate(hands)})
     ok = np.asarray(res.success)
     assert np.all(verified(pinocchio_poses(BAXTER, baxter, res.q, hands), T)[ok]), "a success fails Pinocchio FK"
-    rows.append(["Baxter, two grippers (2 poses)", baxter.dof, f"{ok.mean():.1%}", f"{np.mean(res.iters):.1f}",
-                 f"{dt * 1e3:.0f}", f"{n / dt:,.0f}", f"{compile_s:.1f}"])
+    rows.append(
+        [
+            "Baxter, two grippers (2 poses)",
+            baxter.dof,
+            f"{ok.mean():.1%}",
+            f"{np.mean(res.iters):.1f}",
+            f"{dt * 1e3:.0f}",
+            f"{n / dt:,.0f}",
+            f"{compile_s:.1f}",
+        ]
+    )
 
     talos = dk.load_robot(TALOS, floating=True)
     contacts = ["left_sole_link", "right_sole_link", "gripper_left_base_link", "gripper_right_base_link"]
@@ -113,8 +122,17 @@ def several_targets(n: int):
     ok = np.asarray(res.success)
     got = pinocchio_poses(TALOS, talos, res.q, contacts, base=np.asarray(res.base))
     assert np.all(verified(got, T)[ok]), "a success fails Pinocchio FK"
-    rows.append(["Talos, 2 soles + 2 grippers (4 poses), root solved", f"{talos.dof} + 6", f"{ok.mean():.1%}",
-                 f"{np.mean(res.iters):.1f}", f"{dt * 1e3:.0f}", f"{n / dt:,.0f}", f"{compile_s:.1f}"])
+    rows.append(
+        [
+            "Talos, 2 soles + 2 grippers (4 poses), root solved",
+            f"{talos.dof} + 6",
+            f"{ok.mean():.1%}",
+            f"{np.mean(res.iters):.1f}",
+            f"{dt * 1e3:.0f}",
+            f"{n / dt:,.0f}",
+            f"{compile_s:.1f}",
+        ]
+    )
     print(table(["problem", "joints", "success", "mean iters", "time (ms)", "problems/s", "compile (s)"], rows))
 
 
@@ -123,26 +141,57 @@ def secondary_objectives(n: int):
     for path, frame in ((dk.robots.urdf_path("iiwa14"), "iiwa14_link_ee"), (PANDA, "panda_hand")):
         robot = dk.load_robot(path)
         T = np.array(dk.fk(robot, random_q(robot, n, 3), frame))
-        T[:, :3, :3] = T[:, :3, :3] @ rotations(np.asarray([0.0, 0.0, 1.0]) * np.random.default_rng(4).uniform(
-            -np.pi, np.pi, (n, 1)))  # the tool turned about its z axis: that rotation is free below
+        T[:, :3, :3] = T[:, :3, :3] @ rotations(
+            np.asarray([0.0, 0.0, 1.0]) * np.random.default_rng(4).uniform(-np.pi, np.pi, (n, 1))
+        )  # the tool turned about its z axis: that rotation is free below
         target = {frame: jnp.asarray(T, jnp.float32)}
         weights = {frame: (1.0, 1.0, 1.0, 1.0, 1.0, 0.0)}
         rest = np.clip(np.zeros(robot.dof), robot.lower, robot.upper).astype(np.float32)
         free = jnp.ones(robot.dof, bool)
         for name in ("rest", "limits"):
+
             def cost(q, name=name, rest=rest, robot=robot, free=free):
-                return np.asarray(_secondary.cost_and_step(((name, 1.0),), jnp.asarray(q).T, rest[:, None],
-                                                               robot.lower, robot.upper, free)[0])
+                return np.asarray(
+                    _secondary.cost_and_step(
+                        ((name, 1.0),), jnp.asarray(q).T, rest[:, None], robot.lower, robot.upper, free
+                    )[0]
+                )
+
             for secondary in (None, name):
-                fn = jax.jit(lambda t, s=secondary, robot=robot, weights=weights, rest=rest: dk.ik.solve(
-                    robot, t, weights=weights, rest=rest if s == "rest" else None, secondary=s))
+                fn = jax.jit(
+                    lambda t, s=secondary, robot=robot, weights=weights, rest=rest: dk.ik.solve(
+                        robot, t, weights=weights, rest=rest if s == "rest" else None, secondary=s
+                    )
+                )
                 compile_s, dt, res = timed(fn, target)
                 ok = np.asarray(res.success)
-                rows.append([robot.name, name, "with" if secondary else "without", f"{ok.mean():.1%}",
-                             f"{np.max(np.asarray(res.pos_err)[ok]):.1e}", f"{np.max(np.asarray(res.rot_err)[ok]):.1e}",
-                             f"{np.mean(cost(res.q)[ok]):.3f}", f"{dt * 1e3:.0f}"])
-    print(table(["robot", "objective", "solved", "success", "max pos err (m)", "max rot err (rad)",
-                 "mean secondary cost", "time (ms)"], rows))
+                rows.append(
+                    [
+                        robot.name,
+                        name,
+                        "with" if secondary else "without",
+                        f"{ok.mean():.1%}",
+                        f"{np.max(np.asarray(res.pos_err)[ok]):.1e}",
+                        f"{np.max(np.asarray(res.rot_err)[ok]):.1e}",
+                        f"{np.mean(cost(res.q)[ok]):.3f}",
+                        f"{dt * 1e3:.0f}",
+                    ]
+                )
+    print(
+        table(
+            [
+                "robot",
+                "objective",
+                "solved",
+                "success",
+                "max pos err (m)",
+                "max rot err (rad)",
+                "mean secondary cost",
+                "time (ms)",
+            ],
+            rows,
+        )
+    )
 
 
 def main():

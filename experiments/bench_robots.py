@@ -62,16 +62,27 @@ def arm_rows(batches) -> list[list[str]]:
         cols = [robot.joint_names.index(n) for n in chain.joint_names]
         work = {
             "FK": (functools.partial(dk.fk, robot, frames=end), functools.partial(dk.fk, chain)),
-            "Jacobian (world, analytic)": (functools.partial(dk.jacobian, robot, frame_name=end, method="analytic"),
-                                           functools.partial(dk.jacobian, chain, method="analytic")),
+            "Jacobian (world, analytic)": (
+                functools.partial(dk.jacobian, robot, frame_name=end, method="analytic"),
+                functools.partial(dk.jacobian, chain, method="analytic"),
+            ),
         }
         for label, (tree_fn, chain_fn) in work.items():
             for n in batches:
                 q = jnp.asarray(_uniform(robot.lower, robot.upper, n, "float32"))
                 t_tree = median_seconds(jax.jit(tree_fn), q)
                 t_chain = median_seconds(jax.jit(chain_fn), q[:, cols])  # the chain's joints, outside the timing
-                rows.append([f"{name} {label}", f"{n:,}", "float32", f"{duration(t_tree)} ({rate(n, t_tree)})",
-                             f"chain: {duration(t_chain)}", f"**{t_chain / t_tree:.2f}x**", ""])
+                rows.append(
+                    [
+                        f"{name} {label}",
+                        f"{n:,}",
+                        "float32",
+                        f"{duration(t_tree)} ({rate(n, t_tree)})",
+                        f"chain: {duration(t_chain)}",
+                        f"**{t_chain / t_tree:.2f}x**",
+                        "",
+                    ]
+                )
     return rows
 
 
@@ -92,8 +103,14 @@ def talos_rows(n: int) -> list[list[str]]:
         peers, ratios = [], []
         if pk_tree is not None:
             tree = pk_tree.to(dtype=getattr(torch, dtype))
-            q_pk = torch.as_tensor(_uniform(-np.full(len(tree.get_joint_parameter_names()), np.pi),
-                                            np.full(len(tree.get_joint_parameter_names()), np.pi), n, dtype))
+            q_pk = torch.as_tensor(
+                _uniform(
+                    -np.full(len(tree.get_joint_parameter_names()), np.pi),
+                    np.full(len(tree.get_joint_parameter_names()), np.pi),
+                    n,
+                    dtype,
+                )
+            )
             t_pk = median_seconds(tree.forward_kinematics, q_pk, repeats=3, warmup=1)
             peers.append(f"pytorch-kinematics: {duration(t_pk)} ({rate(n, t_pk)})")
             ratios.append(f"pk **{t_pk / t_dk:.0f}x**")
@@ -101,9 +118,17 @@ def talos_rows(n: int) -> list[list[str]]:
             t_pin = _pinocchio_seconds(path, robot, np.asarray(q[: min(n, 2000)]))
             peers.append(f"Pinocchio: {duration(t_pin * n)} ({rate(n, t_pin * n)}, one call per configuration)")
             ratios.append(f"Pinocchio **{t_pin * n / t_dk:.1f}x**")
-        rows.append([f"Talos, all {len(robot.frame_names)} link poses ({robot.dof} joints + {len(robot.mimic)} mimic)",
-                     f"{n:,}", dtype, f"{duration(t_dk)} ({rate(n, t_dk)})", "; ".join(peers) or "n/a",
-                     "; ".join(ratios) or "n/a", ""])
+        rows.append(
+            [
+                f"Talos, all {len(robot.frame_names)} link poses ({robot.dof} joints + {len(robot.mimic)} mimic)",
+                f"{n:,}",
+                dtype,
+                f"{duration(t_dk)} ({rate(n, t_dk)})",
+                "; ".join(peers) or "n/a",
+                "; ".join(ratios) or "n/a",
+                "",
+            ]
+        )
     return rows
 
 
@@ -136,12 +161,15 @@ def main(argv=None) -> int:
     rows = arm_rows(batches) + talos_rows(1000 if args.quick else 100_000)
     header = ["work", "batch", "dtype", "diffkin (tree)", "compared with", "ratio (> 1: tree faster)", "notes"]
     command = "python experiments/bench_robots.py" + " --quick" * args.quick
-    about = (f"`{command}`, {datetime.date.today()}. Median of warm runs (jitted, compiled first). Tree rows: "
-             "the same URDF loaded as a `dk.Robot` and as a chain (`dk.load_urdf`); ratio = chain / tree. Talos: "
-             "pytorch-kinematics' `forward_kinematics` of its tree (all links), Pinocchio's `framesForwardKinematics` "
-             "timed per configuration over 2,000 configurations and scaled to the batch.")
-    text = "\n\n".join(p for p in ["# diffkin whole-robot benchmark", machine_line(), busy_note(), about,
-                                   table(header, rows)] if p)
+    about = (
+        f"`{command}`, {datetime.date.today()}. Median of warm runs (jitted, compiled first). Tree rows: "
+        "the same URDF loaded as a `dk.Robot` and as a chain (`dk.load_urdf`); ratio = chain / tree. Talos: "
+        "pytorch-kinematics' `forward_kinematics` of its tree (all links), Pinocchio's `framesForwardKinematics` "
+        "timed per configuration over 2,000 configurations and scaled to the batch."
+    )
+    text = "\n\n".join(
+        p for p in ["# diffkin whole-robot benchmark", machine_line(), busy_note(), about, table(header, rows)] if p
+    )
     print(text)
     if args.write:
         out = HERE / "results" / f"{machine_slug()}-robots.md"

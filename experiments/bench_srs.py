@@ -62,10 +62,14 @@ def main() -> None:
     print("| work | batch | dtype | time | rate |")
     print("| --- | --- | --- | --- | --- |")
     for dtype, t in t_ik.items():
-        print(f"| `srs.ik` closed form | {args.batch:,} | {np.dtype(dtype).name} | {t * 1e3:.1f} ms | "
-              f"{args.batch / t / 1e6:.2f} M solutions/s |")
-    print(f"| `srs.sample_self_motion` (8 global configurations) | {args.samples:,} | float32 | "
-          f"{t_sample * 1e3:.2f} ms | {int(ok.sum())} valid samples |")
+        print(
+            f"| `srs.ik` closed form | {args.batch:,} | {np.dtype(dtype).name} | {t * 1e3:.1f} ms | "
+            f"{args.batch / t / 1e6:.2f} M solutions/s |"
+        )
+    print(
+        f"| `srs.sample_self_motion` (8 global configurations) | {args.samples:,} | float32 | "
+        f"{t_sample * 1e3:.2f} ms | {int(ok.sum())} valid samples |"
+    )
 
 
 if __name__ == "__main__":

@@ -47,8 +47,14 @@ def calibrate(n_configs=50, iters=8, seed=0):
     nominal = dk.robots.iiwa14()
     theta_nom = jnp.concatenate([getattr(nominal, f) for f in FIELDS])
     dof = nominal.dof
-    error = np.concatenate([rng.uniform(-1e-3, 1e-3, dof), np.deg2rad(rng.uniform(-0.2, 0.2, dof)),
-                            rng.uniform(-1e-3, 1e-3, dof), np.deg2rad(rng.uniform(-0.2, 0.2, dof))])
+    error = np.concatenate(
+        [
+            rng.uniform(-1e-3, 1e-3, dof),
+            np.deg2rad(rng.uniform(-0.2, 0.2, dof)),
+            rng.uniform(-1e-3, 1e-3, dof),
+            np.deg2rad(rng.uniform(-0.2, 0.2, dof)),
+        ]
+    )
     theta_true = theta_nom + error
     q = jnp.asarray(rng.uniform(nominal.lower, nominal.upper, (n_configs, dof)))
     T_true = dk.fk(_unpack(theta_true, nominal), q)
@@ -72,8 +78,13 @@ def calibrate(n_configs=50, iters=8, seed=0):
             lam *= 10
     history.append(float(jnp.sqrt(jnp.mean(res(theta) ** 2))))
     seconds = time.perf_counter() - start
-    return dict(history=history, seconds=seconds, error_before=np.asarray(theta_nom - theta_true),
-                error_after=np.asarray(theta - theta_true), res_true=float(jnp.sqrt(jnp.mean(res(theta_true) ** 2))))
+    return dict(
+        history=history,
+        seconds=seconds,
+        error_before=np.asarray(theta_nom - theta_true),
+        error_after=np.asarray(theta - theta_true),
+        res_true=float(jnp.sqrt(jnp.mean(res(theta_true) ** 2))),
+    )
 
 
 def _rotations(w):
@@ -91,15 +102,17 @@ def _report(result) -> str:
 
     b, a = split(result["error_before"]), split(result["error_after"])
     h = result["history"]
-    return "\n".join([
-        f"pose residual RMS: nominal model {h[0]:.3e}, calibrated {h[-1]:.3e} "
-        f"(the true parameters give {result['res_true']:.3e}: the measurement noise)",
-        f"max |a| error (mm):       {1e3 * b[0]:.4f} -> {1e3 * a[0]:.4f}",
-        f"max |alpha| error (deg):  {np.rad2deg(b[1]):.4f} -> {np.rad2deg(a[1]):.4f}",
-        f"max |d| error (mm):       {1e3 * b[2]:.4f} -> {1e3 * a[2]:.4f}",
-        f"max |theta_offset| (deg): {np.rad2deg(b[3]):.4f} -> {np.rad2deg(a[3]):.4f}",
-        f"{len(h) - 1} Levenberg-Marquardt iterations in {result['seconds']:.2f} s (JIT compiled beforehand)",
-    ])
+    return "\n".join(
+        [
+            f"pose residual RMS: nominal model {h[0]:.3e}, calibrated {h[-1]:.3e} "
+            f"(the true parameters give {result['res_true']:.3e}: the measurement noise)",
+            f"max |a| error (mm):       {1e3 * b[0]:.4f} -> {1e3 * a[0]:.4f}",
+            f"max |alpha| error (deg):  {np.rad2deg(b[1]):.4f} -> {np.rad2deg(a[1]):.4f}",
+            f"max |d| error (mm):       {1e3 * b[2]:.4f} -> {1e3 * a[2]:.4f}",
+            f"max |theta_offset| (deg): {np.rad2deg(b[3]):.4f} -> {np.rad2deg(a[3]):.4f}",
+            f"{len(h) - 1} Levenberg-Marquardt iterations in {result['seconds']:.2f} s (JIT compiled beforehand)",
+        ]
+    )
 
 
 def main():

@@ -45,7 +45,7 @@ def main() -> int:
             qp = pin.neutral(model)
             for joint, value in values.items():
                 jm = model.joints[model.getJointId(joint)]
-                qp[jm.idx_q: jm.idx_q + jm.nq] = (np.cos(value), np.sin(value)) if jm.nq == 2 else value
+                qp[jm.idx_q : jm.idx_q + jm.nq] = (np.cos(value), np.sin(value)) if jm.nq == 2 else value
             pin.framesForwardKinematics(model, data, qp)
             for f, frame in enumerate(robot.frame_names):
                 worst = max(worst, np.abs(data.oMf[model.getFrameId(frame, pin.BODY)].homogeneous - poses[k, f]).max())

@@ -35,8 +35,11 @@ def skeleton(robot, T_frames):
     first = {}
     for f, b in enumerate(robot.frame_bodies):
         first.setdefault(b, f)
-    return [(T_frames[first[robot.parents[j]], :3, 3], T_frames[first[j + 1], :3, 3])
-            for j in range(len(robot.parents)) if robot.parents[j] in first and j + 1 in first]
+    return [
+        (T_frames[first[robot.parents[j]], :3, 3], T_frames[first[j + 1], :3, 3])
+        for j in range(len(robot.parents))
+        if robot.parents[j] in first and j + 1 in first
+    ]
 
 
 def main():
@@ -52,16 +55,19 @@ def main():
     hands = dk.fk(talos, q_reach, HANDS, base=low)
     targets = {FEET[0]: feet[0], FEET[1]: feet[1], HANDS[0]: hands[0], HANDS[1]: hands[1]}
     res = dk.ik.solve(talos, targets, solve_base=True, rest=stand, key=jax.random.key(0))
-    print(f"success {bool(res.success)}, position errors {np.asarray(res.pos_err)} m, "
-          f"rotation errors {np.asarray(res.rot_err)} rad, iterations {int(res.iters)}")
+    print(
+        f"success {bool(res.success)}, position errors {np.asarray(res.pos_err)} m, "
+        f"rotation errors {np.asarray(res.rot_err)} rad, iterations {int(res.iters)}"
+    )
     print(f"root height {float(res.base[2, 3]):+.3f} m (standing: 0)")
     check = dk.fk(talos, res.q, FEET + HANDS, base=res.base)
     target_stack = jnp.stack([targets[name] for name in FEET + HANDS])
     print(f"re-checked by FK: largest position error {float(jnp.abs(check - target_stack)[:, :3, 3].max()):.1e} m")
 
     fig = plt.figure(figsize=(9, 6))
-    for k, (title, q, base) in enumerate((("standing (zero posture)", stand, jnp.eye(4)),
-                                          ("solved: feet fixed, hands reaching", res.q, res.base))):
+    for k, (title, q, base) in enumerate(
+        (("standing (zero posture)", stand, jnp.eye(4)), ("solved: feet fixed, hands reaching", res.q, res.base))
+    ):
         ax = fig.add_subplot(1, 2, k + 1, projection="3d")
         T = np.asarray(dk.link_poses(talos, q, base=base))
         for a, b in skeleton(talos, T):

@@ -28,8 +28,13 @@ def main() -> None:
     jax.config.update("jax_enable_x64", True)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "out"))
-    parser.add_argument("--q", type=float, nargs=7, default=[0.4, 0.7, -0.3, -1.1, 0.6, 0.9, -0.2],
-                        help="configuration whose flange pose is the target (radians)")
+    parser.add_argument(
+        "--q",
+        type=float,
+        nargs=7,
+        default=[0.4, 0.7, -0.3, -1.1, 0.6, 0.9, -0.2],
+        help="configuration whose flange pose is the target (radians)",
+    )
     args = parser.parse_args()
     os.makedirs(args.out, exist_ok=True)
 
@@ -60,8 +65,11 @@ def main() -> None:
                 ax.set_ylabel(f"gc = {tuple(int(x) for x in srs.ALL_GC[g])}\nangle (deg)")
             if row == len(shown) - 1:
                 ax.set_xlabel("arm angle psi (deg)")
-    fig.suptitle("iiwa14 self-motion at q = " + np.array2string(np.array(args.q), precision=2)
-                 + ": joint angles vs psi (limits dashed, feasible psi shaded)")
+    fig.suptitle(
+        "iiwa14 self-motion at q = "
+        + np.array2string(np.array(args.q), precision=2)
+        + ": joint angles vs psi (limits dashed, feasible psi shaded)"
+    )
     fig.tight_layout(rect=(0, 0, 1, 0.97))
     path = os.path.join(args.out, "iiwa_self_motion_joints.png")
     fig.savefig(path, dpi=110)

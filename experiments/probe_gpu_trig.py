@@ -43,7 +43,7 @@ DEFAULT = ("xla", "entries|")
 
 def kernels(compiled_text: str) -> int:
     """Kernel-launching instructions of the entry computation of an optimized HLO module."""
-    entry = compiled_text[compiled_text.index("\nENTRY"):]
+    entry = compiled_text[compiled_text.index("\nENTRY") :]
     entry = entry[: entry.index("\n}")]
     return len(re.findall(r"\b(fusion|custom-call|conditional|while|copy|reduce|sort)\(%", entry))
 
@@ -109,13 +109,19 @@ def main() -> int:
                 if dump:
                     (dump / f"fk-{'_'.join(v)}-{jnp.dtype(dtype).name}-{n}.txt".replace("|", "B")).write_text(text)
                 seconds = median_seconds(c, q, repeats=10)
-                rows.append(["FK", *v, jnp.dtype(dtype).name, f"{n:,}", duration(seconds), rate(n, seconds),
-                             kernels(text)])
+                rows.append(
+                    ["FK", *v, jnp.dtype(dtype).name, f"{n:,}", duration(seconds), rate(n, seconds), kernels(text)]
+                )
                 print(" | ".join(map(str, rows[-1])), flush=True)
             del q
 
-    for n, dtype in ((1, jnp.float32), (1000, jnp.float32), (1_000_000, jnp.float32), (10_000_000, jnp.float32),
-                     (10_000_000, jnp.float64)):
+    for n, dtype in (
+        (1, jnp.float32),
+        (1000, jnp.float32),
+        (1_000_000, jnp.float32),
+        (10_000_000, jnp.float32),
+        (10_000_000, jnp.float64),
+    ):
         q = configs(n, dtype)
         for method in ("analytic", "autodiff"):
             for v in (DEFAULT, ("xla", "stack")):
@@ -124,8 +130,17 @@ def main() -> int:
                     name = f"jac-{method}-{'_'.join(v)}-{jnp.dtype(dtype).name}-{n}.txt".replace("|", "B")
                     (dump / name).write_text(c.as_text())
                 s = median_seconds(c, q, repeats=10)
-                rows.append([f"Jacobian ({method})", *v, jnp.dtype(dtype).name, f"{n:,}", duration(s), rate(n, s),
-                             kernels(c.as_text())])
+                rows.append(
+                    [
+                        f"Jacobian ({method})",
+                        *v,
+                        jnp.dtype(dtype).name,
+                        f"{n:,}",
+                        duration(s),
+                        rate(n, s),
+                        kernels(c.as_text()),
+                    ]
+                )
                 print(" | ".join(map(str, rows[-1])), flush=True)
         del q
 

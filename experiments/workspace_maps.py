@@ -34,19 +34,27 @@ def main() -> None:
     for name, shoulder in (("iiwa14", 0.36), ("panda", 0.333)):
         chain = getattr(dk.robots, name)()
         run = lambda n, chain=chain: ws.reachability(  # noqa: E731
-            chain, n, key=jax.random.key(args.seed), voxel_size=args.voxel, chunk=args.chunk, dtype="float32")
+            chain, n, key=jax.random.key(args.seed), voxel_size=args.voxel, chunk=args.chunk, dtype="float32"
+        )
         run(args.chunk * len(devices))  # compile outside the timing
         start = time.perf_counter()
         m = run(args.n)
         seconds = time.perf_counter() - start
-        print(f"{name}: {args.n / seconds / 1e6:.2f} M samples/s (n={args.n}, chunk={args.chunk}, float32, "
-              f"{len(devices)} {devices[0].platform} device(s), grid {m.counts.shape}, voxel {args.voxel} m, "
-              f"{m.orientation_bins} orientation bins, {seconds:.1f} s)")
+        print(
+            f"{name}: {args.n / seconds / 1e6:.2f} M samples/s (n={args.n}, chunk={args.chunk}, float32, "
+            f"{len(devices)} {devices[0].platform} device(s), grid {m.counts.shape}, voxel {args.voxel} m, "
+            f"{m.orientation_bins} orientation bins, {seconds:.1f} s)"
+        )
         m.save(os.path.join(args.out, f"workspace_{name}.npz"))
         for quantity in ("count", "manipulability", "dexterity"):
             for axis, value in (("y", 0.0), ("z", shoulder)):
-                ws.plot_slice(m, axis=axis, value=value, quantity=quantity,
-                              path=os.path.join(args.out, f"workspace_{name}_{quantity}_{axis}.png"))
+                ws.plot_slice(
+                    m,
+                    axis=axis,
+                    value=value,
+                    quantity=quantity,
+                    path=os.path.join(args.out, f"workspace_{name}_{quantity}_{axis}.png"),
+                )
     print(f"maps and PNGs in {args.out}")
 
 

@@ -41,13 +41,22 @@ def main() -> None:
     args = parser.parse_args()
     jax.distributed.initialize(args.coordinator, args.num_processes, args.process_id)
     chain = getattr(dk.robots, args.robot)()
-    m = ws.reachability(chain, args.n, key=jax.random.key(args.seed), voxel_size=args.voxel, chunk=args.chunk,
-                        devices=jax.devices(), dtype="float32")
+    m = ws.reachability(
+        chain,
+        args.n,
+        key=jax.random.key(args.seed),
+        voxel_size=args.voxel,
+        chunk=args.chunk,
+        devices=jax.devices(),
+        dtype="float32",
+    )
     if jax.process_index() == 0:
         os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
         m.save(args.out)
-        print(f"{args.robot}: {m.counts.sum()} of {m.n_samples} samples in {int((m.counts > 0).sum())} voxels over "
-              f"{jax.device_count()} devices of {jax.process_count()} processes; map in {args.out}")
+        print(
+            f"{args.robot}: {m.counts.sum()} of {m.n_samples} samples in {int((m.counts > 0).sum())} voxels over "
+            f"{jax.device_count()} devices of {jax.process_count()} processes; map in {args.out}"
+        )
 
 
 if __name__ == "__main__":

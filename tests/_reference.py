@@ -61,7 +61,7 @@ def poe_fk(chain, q) -> np.ndarray:
         if chain.joint_types[i] == "R":
             K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
             E[..., :3, :3] = np.eye(3) + np.sin(t) * K + (1 - np.cos(t)) * K @ K
-            E[..., :3, 3] = ((np.eye(3) * t + (1 - np.cos(t)) * K + (t - np.sin(t)) * K @ K) @ v)
+            E[..., :3, 3] = (np.eye(3) * t + (1 - np.cos(t)) * K + (t - np.sin(t)) * K @ K) @ v
         else:
             E[..., :3, 3] = v * q[..., i, None]
         T = T @ E

@@ -43,12 +43,15 @@ def test_without_pytorch_kinematics(bench, capsys, monkeypatch):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("argv, match", [
-    (["--only", "fk,nope"], "unknown part 'nope'"),
-    (["--only", ","], "no part"),
-    (["--write", "--out", "x.md"], "not allowed with"),
-    (["--out", "/nonexistent/dir/b.md"], "no such directory"),
-])
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        (["--only", "fk,nope"], "unknown part 'nope'"),
+        (["--only", ","], "no part"),
+        (["--write", "--out", "x.md"], "not allowed with"),
+        (["--out", "/nonexistent/dir/b.md"], "no such directory"),
+    ],
+)
 def test_usage_errors(bench, capsys, argv, match):
     with pytest.raises(SystemExit) as exit_:
         bench.parse_args(argv)
@@ -59,4 +62,3 @@ def test_usage_errors(bench, capsys, argv, match):
 def test_implausible_ratios_are_marked(bench):
     assert bench._ratio(42.0) == "**42x**"
     assert bench._ratio(850.0) == "850x (implausible: busy machine? rerun)"
-

@@ -85,8 +85,9 @@ def test_fk_text_json_npy(capsys, tmp_path):
     np.testing.assert_allclose(doc["poses"][0]["T"], T, atol=1e-12)
     qs = np.random.default_rng(0).uniform(chain.lower, chain.upper, (4, 7))
     np.save(tmp_path / "q.npy", qs)
-    code, out, _ = run(capsys, "fk", "iiwa14", "--q-file", tmp_path / "q.npy", "--format", "npy",
-                       "--output", tmp_path / "T.npy")
+    code, out, _ = run(
+        capsys, "fk", "iiwa14", "--q-file", tmp_path / "q.npy", "--format", "npy", "--output", tmp_path / "T.npy"
+    )
     assert code == 0
     np.testing.assert_allclose(np.load(tmp_path / "T.npy"), dh_fk(chain, qs), atol=1e-12)
 
@@ -108,14 +109,26 @@ def test_ik_all(capsys):
     rows = [line for line in out.splitlines() if " yes " in line]
     q = np.array([[float(v) for v in r.split("[")[1].split("]")[0].split()] for r in rows])
     assert pose_errors(dh_fk(dk.robots.iiwa14(), q), TARGET)[0].max() < 1e-5  # printed to 6 digits
-    code, out, _ = run(capsys, "ik", "iiwa14", "--pose", 0.5, 0.1, 0.6, 0, 1, 0, 0, "--all", "--psi", 0.3,
-                       "--gc", 1, -1, 1)
+    code, out, _ = run(
+        capsys, "ik", "iiwa14", "--pose", 0.5, 0.1, 0.6, 0, 1, 0, 0, "--all", "--psi", 0.3, "--gc", 1, -1, 1
+    )
     assert code == 0 and "1 of 1 valid" in out and "+1 -1 +1" in out
 
 
 def test_workspace(capsys, tmp_path):
-    code, out, err = run(capsys, "workspace", "iiwa14", "--samples", 20_000, "--voxel", 0.2,
-                         "--out", tmp_path / "map.npz", "--plot", tmp_path / "slice.png")
+    code, out, err = run(
+        capsys,
+        "workspace",
+        "iiwa14",
+        "--samples",
+        20_000,
+        "--voxel",
+        0.2,
+        "--out",
+        tmp_path / "map.npz",
+        "--plot",
+        tmp_path / "slice.png",
+    )
     assert code == 0, err
     wmap = dk.workspace.ReachabilityMap.load(tmp_path / "map.npz")
     assert wmap.n_samples == 20_000 and wmap.counts.sum() + wmap.n_outside == 20_000
@@ -130,33 +143,36 @@ def test_cli_does_not_import_jax():
     assert res.returncode == 0 and res.stdout.strip() == "fk", res.stderr
 
 
-@pytest.mark.parametrize("argv, match", [
-    (["info", "nosuchrobot"], "unknown robot 'nosuchrobot'"),
-    (["info", "iiwa14", "--end-link", "x"], "apply to URDF and MJCF files"),
-    (["fk", "iiwa14", "0.1", "0.2"], "7 joint values"),
-    (["fk", "iiwa14", "0.1", "zero", "0", "0", "0", "0", "0"], "invalid number: 'zero'"),
-    (["fk", "iiwa14", "nan", "0", "0", "0", "0", "0", "0"], "finite"),
-    (["fk", "iiwa14"], "either on the command line or with --q-file"),
-    (["fk", "iiwa14", "--q-file", "/nonexistent/q.npy"], "no such file"),
-    (["fk", "iiwa14", "0", "0", "0", "0", "0", "0", "0", "--format", "npy"], "--output"),
-    (["ik", "iiwa14"], "one of the arguments --pose --position is required"),
-    (["ik", "iiwa14", "--pose", "0", "0", "0.5", "0", "0", "0", "0"], "must not be zero, got 0 0 0 0"),
-    (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--seeds", "0"], "positive integer"),
-    (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--q0", "0", "0"], "--q0"),
-    (["ik", "panda", "--pose", "0.5", "0", "0.5", "1", "0", "0", "0", "--all"], "iiwa7 or iiwa14"),
-    (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--all"], "full --pose"),
-    (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--psi", "0.1"], "go with --all"),
-    (["ik", "iiwa14", "--pose", "0.5", "0", "0.5", "1", "0", "0", "0", "--all", "--gc", "1", "0", "1"], "+1 or -1"),
-    (["workspace", "iiwa14", "--samples", "10", "--voxel", "-1", "--out", "m.npz"], "positive number"),
-    (["workspace", "iiwa14", "--out", "/nonexistent/dir/m.npz"], "no such directory"),
-    (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--seed", str(2**80)], "--seed: expected a seed"),
-    (["workspace", "iiwa14", "--samples", "1e20", "--out", "m.npz"], "--samples: expected at most"),
-    (["workspace", "iiwa14", "--samples", "2.5", "--out", "m.npz"], "invalid integer: '2.5'"),
-    (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--pos-tol", "-1"], "non-negative"),
-    (["ik", "iiwa14", "--pose", "0.5", "0", "0.5", "1", "0", "0", "0", "--all", "--rot-tol", "0.1"], "--all"),
-    (["frobnicate"], "invalid choice"),
-    ([], "required"),
-])
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        (["info", "nosuchrobot"], "unknown robot 'nosuchrobot'"),
+        (["info", "iiwa14", "--end-link", "x"], "apply to URDF and MJCF files"),
+        (["fk", "iiwa14", "0.1", "0.2"], "7 joint values"),
+        (["fk", "iiwa14", "0.1", "zero", "0", "0", "0", "0", "0"], "invalid number: 'zero'"),
+        (["fk", "iiwa14", "nan", "0", "0", "0", "0", "0", "0"], "finite"),
+        (["fk", "iiwa14"], "either on the command line or with --q-file"),
+        (["fk", "iiwa14", "--q-file", "/nonexistent/q.npy"], "no such file"),
+        (["fk", "iiwa14", "0", "0", "0", "0", "0", "0", "0", "--format", "npy"], "--output"),
+        (["ik", "iiwa14"], "one of the arguments --pose --position is required"),
+        (["ik", "iiwa14", "--pose", "0", "0", "0.5", "0", "0", "0", "0"], "must not be zero, got 0 0 0 0"),
+        (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--seeds", "0"], "positive integer"),
+        (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--q0", "0", "0"], "--q0"),
+        (["ik", "panda", "--pose", "0.5", "0", "0.5", "1", "0", "0", "0", "--all"], "iiwa7 or iiwa14"),
+        (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--all"], "full --pose"),
+        (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--psi", "0.1"], "go with --all"),
+        (["ik", "iiwa14", "--pose", "0.5", "0", "0.5", "1", "0", "0", "0", "--all", "--gc", "1", "0", "1"], "+1 or -1"),
+        (["workspace", "iiwa14", "--samples", "10", "--voxel", "-1", "--out", "m.npz"], "positive number"),
+        (["workspace", "iiwa14", "--out", "/nonexistent/dir/m.npz"], "no such directory"),
+        (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--seed", str(2**80)], "--seed: expected a seed"),
+        (["workspace", "iiwa14", "--samples", "1e20", "--out", "m.npz"], "--samples: expected at most"),
+        (["workspace", "iiwa14", "--samples", "2.5", "--out", "m.npz"], "invalid integer: '2.5'"),
+        (["ik", "iiwa14", "--position", "0.5", "0", "0.5", "--pos-tol", "-1"], "non-negative"),
+        (["ik", "iiwa14", "--pose", "0.5", "0", "0.5", "1", "0", "0", "0", "--all", "--rot-tol", "0.1"], "--all"),
+        (["frobnicate"], "invalid choice"),
+        ([], "required"),
+    ],
+)
 def test_user_errors(capsys, argv, match):
     assert_user_error(capsys, *argv, match=match)
 
@@ -171,8 +187,23 @@ def test_user_errors_from_files_and_diffkin(capsys, tmp_path):
     np.save(tmp_path / "q6.npy", np.zeros((3, 6)))
     assert_user_error(capsys, "fk", "iiwa14", "--q-file", tmp_path / "q6.npy", match="7 joint values")
     # a ValueError raised by diffkin itself: the slice plane outside the grid
-    assert_user_error(capsys, "workspace", "iiwa14", "--samples", 100, "--voxel", 0.2, "--out", tmp_path / "m.npz",
-                      "--plot", tmp_path / "s.png", "--value", 9, "--no-progress", match="value")
+    assert_user_error(
+        capsys,
+        "workspace",
+        "iiwa14",
+        "--samples",
+        100,
+        "--voxel",
+        0.2,
+        "--out",
+        tmp_path / "m.npz",
+        "--plot",
+        tmp_path / "s.png",
+        "--value",
+        9,
+        "--no-progress",
+        match="value",
+    )
 
 
 # --------------------------------------------------------------------------------------------- issue 14
@@ -181,8 +212,9 @@ def test_user_errors_from_files_and_diffkin(capsys, tmp_path):
 def test_options_between_positionals_and_negative_scientific_numbers(capsys):
     path = os.path.join(DATA, "ur5.urdf")
     q = [0.0, -1e-3, 0.0, -1.5, 0.0, -2.5e-1]
-    code, out, err = run(capsys, "fk", path, "--end-link", "tool0", "0", "-1e-3", "0", "-1.5", "0", "-2.5E-1",
-                         "--format", "json")
+    code, out, err = run(
+        capsys, "fk", path, "--end-link", "tool0", "0", "-1e-3", "0", "-1.5", "0", "-2.5E-1", "--format", "json"
+    )
     assert code == 0, err
     pose = json.loads(out)["poses"][0]
     assert pose["q"] == q
@@ -196,8 +228,9 @@ def test_quaternion_not_of_unit_norm_is_normalised_and_said(capsys):
 
 
 def test_ik_tolerances(capsys):
-    code, out, _ = run(capsys, "ik", "iiwa14", "--pose", 0.5, 0.1, 0.6, 0, 1, 0, 0, "--pos-tol", "1e-3",
-                       "--rot-tol", "1e-2")
+    code, out, _ = run(
+        capsys, "ik", "iiwa14", "--pose", 0.5, 0.1, 0.6, 0, 1, 0, 0, "--pos-tol", "1e-3", "--rot-tol", "1e-2"
+    )
     assert code == 0 and "tolerances 0.001 m / 0.01 rad" in out
     assert float(out.split("pos_err")[1].split()[0]) <= 1e-3
 
@@ -209,8 +242,19 @@ def test_errors_name_flags_not_parameters(capsys):
 
 def test_bad_slice_is_reported_before_the_map_is_computed(capsys, tmp_path, monkeypatch):
     monkeypatch.setattr(dk.workspace, "reachability", lambda *a, **k: pytest.fail("map computed"))
-    line = assert_user_error(capsys, "workspace", "iiwa14", "--samples", 10**9, "--out", tmp_path / "m.npz",
-                             "--plot", tmp_path / "s.png", "--value", 9)
+    line = assert_user_error(
+        capsys,
+        "workspace",
+        "iiwa14",
+        "--samples",
+        10**9,
+        "--out",
+        tmp_path / "m.npz",
+        "--plot",
+        tmp_path / "s.png",
+        "--value",
+        9,
+    )
     assert "--value" in line and "outside the grid" in line
     assert not (tmp_path / "m.npz").exists()
 
@@ -236,10 +280,13 @@ def test_info_says_home_is_outside_the_limits(capsys):
     assert code == 0 and "outside the limits" not in out
 
 
-@pytest.mark.parametrize("argv, module, extra", [
-    (["demo", "--quick"], "matplotlib", "demo"),
-    (["workspace", "iiwa14", "--samples", "100", "--out", "m.npz", "--plot", "s.png"], "matplotlib", "plot"),
-])
+@pytest.mark.parametrize(
+    "argv, module, extra",
+    [
+        (["demo", "--quick"], "matplotlib", "demo"),
+        (["workspace", "iiwa14", "--samples", "100", "--out", "m.npz", "--plot", "s.png"], "matplotlib", "plot"),
+    ],
+)
 def test_missing_optional_dependency_is_one_line(capsys, monkeypatch, tmp_path, argv, module, extra):
     monkeypatch.chdir(tmp_path)
     monkeypatch.setitem(sys.modules, module, None)  # import raises ImportError
@@ -261,8 +308,13 @@ def test_cache_dir_choice(monkeypatch, tmp_path):
 
 
 def _diffkin(*argv, env=None, timeout=300):
-    return subprocess.run([sys.executable, "-m", "diffkin", *map(str, argv)], capture_output=True, text=True,
-                          timeout=timeout, env={**os.environ, **(env or {})})
+    return subprocess.run(
+        [sys.executable, "-m", "diffkin", *map(str, argv)],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, **(env or {})},
+    )
 
 
 @pytest.mark.slow
@@ -279,17 +331,22 @@ def test_cli_writes_the_persistent_cache(tmp_path):
 @pytest.mark.slow
 def test_without_optional_dependencies_subprocess(tmp_path):
     """As after ``pip install -e .`` alone: each command runs or says in one line which extra to install."""
-    hide = ("import sys\nfor m in ('optax', 'matplotlib', 'tqdm', 'torch', 'pytorch_kinematics', 'pinocchio'):\n"
-            "    sys.modules[m] = None\nfrom diffkin.cli import main\nsys.exit(main())\n")
+    hide = (
+        "import sys\nfor m in ('optax', 'matplotlib', 'tqdm', 'torch', 'pytorch_kinematics', 'pinocchio'):\n"
+        "    sys.modules[m] = None\nfrom diffkin.cli import main\nsys.exit(main())\n"
+    )
     script = tmp_path / "bare.py"
     script.write_text(hide)
 
     def bare(*argv):
-        return subprocess.run([sys.executable, str(script), *map(str, argv)], capture_output=True, text=True,
-                              timeout=300, cwd=tmp_path)
+        return subprocess.run(
+            [sys.executable, str(script), *map(str, argv)], capture_output=True, text=True, timeout=300, cwd=tmp_path
+        )
 
-    for argv, extra in ((["demo", "--quick"], "demo"),
-                        (["workspace", "iiwa14", "--samples", 100, "--out", "m.npz", "--plot", "s.png"], "plot")):
+    for argv, extra in (
+        (["demo", "--quick"], "demo"),
+        (["workspace", "iiwa14", "--samples", 100, "--out", "m.npz", "--plot", "s.png"], "plot"),
+    ):
         res = bare(*argv)
         assert res.returncode == 2 and res.stderr.count("\n") == 1 and f"diffkin[{extra}]" in res.stderr, res.stderr
     res = bare("workspace", "iiwa14", "--samples", 1000, "--voxel", 0.2, "--out", "m.npz")
@@ -301,8 +358,12 @@ def test_ctrl_c_exits_130(tmp_path):
     import signal
     import time
 
-    proc = subprocess.Popen([sys.executable, "-m", "diffkin", "demo", "--quick", "--out", tmp_path / "demo"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "diffkin", "demo", "--quick", "--out", tmp_path / "demo"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     time.sleep(4)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=120)

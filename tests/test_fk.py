@@ -269,8 +269,10 @@ def test_fk_at_zero_angle_is_exact_and_gradient_finite():
 
 def test_numpy_reference_matches_modified_and_prismatic_chains():
     """The tests' NumPy DH product (``_reference.dh_fk``) on chains the robots do not cover."""
-    for chain in (dk.robots.panda(), dk.DHChain.from_table([[0.1, 0.3, 0.2, 0.1], [0.2, -0.5, 0.1, 0.0]], "RP",
-                                                           modified=True)):
+    for chain in (
+        dk.robots.panda(),
+        dk.DHChain.from_table([[0.1, 0.3, 0.2, 0.1], [0.2, -0.5, 0.1, 0.0]], "RP", modified=True),
+    ):
         q = np.random.default_rng(0).uniform(-1, 1, (5, chain.dof))
         np.testing.assert_allclose(dh_fk(chain, q), np.asarray(dk.fk(chain, q)), atol=1e-12)
         np.testing.assert_allclose(poe_fk(dk.to_poe(chain), q), np.asarray(dk.fk(chain, q)), atol=1e-12)
@@ -280,8 +282,9 @@ def _dh_matrix(a, alpha, d, theta, modified):
     """One DH link as a numpy matrix (the reference of the long-chain test)."""
     ct, st, ca, sa = np.cos(theta), np.sin(theta), np.cos(alpha), np.sin(alpha)
     if modified:  # Rx(alpha) Tx(a) Rz(theta) Tz(d)
-        return np.array([[ct, -st, 0, a], [st * ca, ct * ca, -sa, -sa * d], [st * sa, ct * sa, ca, ca * d],
-                         [0, 0, 0, 1]])
+        return np.array(
+            [[ct, -st, 0, a], [st * ca, ct * ca, -sa, -sa * d], [st * sa, ct * sa, ca, ca * d], [0, 0, 0, 1]]
+        )
     return np.array([[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st], [0, sa, ca, d], [0, 0, 0, 1]])
 
 
@@ -289,8 +292,9 @@ def _dh_matrix(a, alpha, d, theta, modified):
 def test_long_chain_against_numpy(modified):
     """20 joints (the forward pass is materialised after joints 8 and 16): poses, the Jacobian, gradients."""
     rng = np.random.default_rng(40)
-    table = np.stack([rng.uniform(0, 0.3, 20), rng.uniform(-2, 2, 20), rng.uniform(0, 0.3, 20),
-                      rng.uniform(-1, 1, 20)], axis=1)
+    table = np.stack(
+        [rng.uniform(0, 0.3, 20), rng.uniform(-2, 2, 20), rng.uniform(0, 0.3, 20), rng.uniform(-1, 1, 20)], axis=1
+    )
     types = "RRRRRRRRP" + "R" * 11  # a prismatic joint right after the first materialised pose
     chain = dk.DHChain.from_table(table, types, modified=modified, lower=-np.ones(20), upper=np.ones(20))
     q = random_q(chain, 4, seed=41)
@@ -318,7 +322,12 @@ def test_long_chain_against_numpy(modified):
     W = rng.normal(size=(4, 4, 4))
     g = jax.grad(lambda a: jnp.sum(W * dk.fk(chain.replace(a=a), q)))(chain.a)
     step = h * np.eye(20)
-    fd = [(np.sum(W * np.stack([reference(qk, np.c_[table[:, 0] + step[k], table[:, 1:]])[-1] for qk in q]))
-           - np.sum(W * np.stack([reference(qk, np.c_[table[:, 0] - step[k], table[:, 1:]])[-1] for qk in q])))
-          / (2 * h) for k in range(20)]
+    fd = [
+        (
+            np.sum(W * np.stack([reference(qk, np.c_[table[:, 0] + step[k], table[:, 1:]])[-1] for qk in q]))
+            - np.sum(W * np.stack([reference(qk, np.c_[table[:, 0] - step[k], table[:, 1:]])[-1] for qk in q]))
+        )
+        / (2 * h)
+        for k in range(20)
+    ]
     np.testing.assert_allclose(g, fd, atol=1e-7)

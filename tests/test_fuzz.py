@@ -28,8 +28,12 @@ import diffkin as dk
 from diffkin.ik import _args
 
 EXAMPLES = int(os.environ.get("DIFFKIN_FUZZ_EXAMPLES", "25"))
-FUZZ = settings(max_examples=EXAMPLES, deadline=None, derandomize="DIFFKIN_FUZZ_EXAMPLES" not in os.environ,
-                suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+FUZZ = settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    derandomize="DIFFKIN_FUZZ_EXAMPLES" not in os.environ,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
 
 # (joint types, modified DH): 1 to 8 joints, revolute and prismatic mixes, both conventions.
 DH_STRUCTURES = [("R", False), ("RPR", True), ("PRRPRRRR", False)]
@@ -44,6 +48,7 @@ jacobians = jax.jit(lambda chain, q: {(f, m): dk.jacobian(chain, q, f, method=m)
 
 # ----- strategies -----------------------------------------------------------------------------------
 
+
 def _floats(lo, hi):
     return st.floats(lo, hi, allow_nan=False, allow_infinity=False)
 
@@ -53,9 +58,13 @@ def rigid(draw, reach=1.0):
     """A random rigid transform: unit quaternion (not too close to 0) and translation."""
     quat = draw(hnp.arrays(np.float64, 4, elements=_floats(-1, 1)).filter(lambda v: np.linalg.norm(v) > 0.1))
     w, x, y, z = quat / np.linalg.norm(quat)
-    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                  [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                  [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    R = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, draw(hnp.arrays(np.float64, 3, elements=_floats(-reach, reach)))
     return T
@@ -74,8 +83,9 @@ def dh_chains(draw, structure=None):
     dof = len(types)
     table = draw(hnp.arrays(np.float64, (dof, 4), elements=_floats(-2, 2)))
     lower, upper = draw(limits(dof))
-    return dk.DHChain.from_table(table, types, modified=modified, lower=lower, upper=upper,
-                                 base=draw(rigid()), tool=draw(rigid(0.3)))
+    return dk.DHChain.from_table(
+        table, types, modified=modified, lower=lower, upper=upper, base=draw(rigid()), tool=draw(rigid(0.3))
+    )
 
 
 @st.composite
@@ -108,6 +118,7 @@ def configs(chain, bound):
 
 # ----- properties -------------------------------------------------------------------------------------
 
+
 @FUZZ
 @given(st.data())
 def test_fk_is_rigid_finite_and_matches_numpy(data):
@@ -131,8 +142,9 @@ def test_fk_and_jacobian_finite_for_any_finite_q(data):
     # Revolute: any finite float (DH), up to 1e300 (PoE: with traced screws, as here a jit argument,
     # n * theta overflows near the float maximum when |w| rounds above 1); prismatic: up to 1e150
     # metres (beyond, sums of a few such offsets leave the float range: a true position, not a defect).
-    revolute = st.floats(allow_nan=False, allow_infinity=False) if isinstance(chain, dk.DHChain) else _floats(
-        -1e300, 1e300)
+    revolute = (
+        st.floats(allow_nan=False, allow_infinity=False) if isinstance(chain, dk.DHChain) else _floats(-1e300, 1e300)
+    )
     q = np.array([data.draw(revolute if t == "R" else _floats(-1e150, 1e150)) for t in types])
     T = np.asarray(fk(chain, q))
     assert np.all(np.isfinite(T)), (q, T)
@@ -204,17 +216,39 @@ def test_ik_success_means_the_pose_is_reached(data):
 # ----- garbage in: ValueError or TypeError, nothing else -------------------------------------------------
 
 garbage = st.one_of(
-    st.none(), st.booleans(), st.integers(-10**400, 10**400), st.floats(), st.complex_numbers(),
-    st.text(max_size=8), st.binary(max_size=4), st.lists(st.floats(), max_size=9),
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**400), 10**400),
+    st.floats(),
+    st.complex_numbers(),
+    st.text(max_size=8),
+    st.binary(max_size=4),
+    st.lists(st.floats(), max_size=9),
     st.lists(st.lists(st.floats(), max_size=6), max_size=9),
     st.dictionaries(st.text(max_size=2), st.integers(), max_size=2),
-    hnp.arrays(st.sampled_from([np.float64, np.float32, np.float16, np.int32, np.bool_, np.complex128, np.uint8]),
-               hnp.array_shapes(min_dims=0, max_dims=3, min_side=0, max_side=8)),
-    st.just(object()), st.just(jnp.zeros((4, 4))), st.just(np.eye(4) * 2),
+    hnp.arrays(
+        st.sampled_from([np.float64, np.float32, np.float16, np.int32, np.bool_, np.complex128, np.uint8]),
+        hnp.array_shapes(min_dims=0, max_dims=3, min_side=0, max_side=8),
+    ),
+    st.just(object()),
+    st.just(jnp.zeros((4, 4))),
+    st.just(np.eye(4) * 2),
 )
 
-_DH_FIELDS = ("a", "alpha", "d", "theta_offset", "lower", "upper", "base", "tool", "joint_types", "modified",
-              "joint_names", "name")
+_DH_FIELDS = (
+    "a",
+    "alpha",
+    "d",
+    "theta_offset",
+    "lower",
+    "upper",
+    "base",
+    "tool",
+    "joint_types",
+    "modified",
+    "joint_names",
+    "name",
+)
 _POE_FIELDS = ("screws", "home", "link_homes", "lower", "upper", "joint_types", "joint_names", "name")
 
 
@@ -232,8 +266,9 @@ def test_bad_inputs_raise_value_or_type_errors(data):
     poe = dk.to_poe(chain)
     junk = data.draw(garbage)
     table = np.zeros((3, 4))
-    keyword = data.draw(st.sampled_from(["joint_types", "modified", "lower", "upper", "base", "tool", "joint_names",
-                                         "name"]))
+    keyword = data.draw(
+        st.sampled_from(["joint_types", "modified", "lower", "upper", "base", "tool", "joint_names", "name"])
+    )
     _value_or_type_error_only(dk.DHChain.from_table, junk)
     _value_or_type_error_only(dk.DHChain.from_table, table, **{keyword: junk})
     _value_or_type_error_only(chain.replace, **{data.draw(st.sampled_from(_DH_FIELDS)): junk})

@@ -85,8 +85,9 @@ def test_warm_start_returns_nearby_solution(name):
     q_true = random_q(chain, 50, seed=3) * 0.8
     target = dh_fk(chain, q_true)
     q0 = q_true + np.random.default_rng(4).normal(0, 0.02, q_true.shape)
-    res = ik.solve(chain, jnp.asarray(target), q0=jnp.asarray(q0), key=jax.random.key(1), num_seeds=8,
-                   pos_tol=1e-9, rot_tol=1e-9)
+    res = ik.solve(
+        chain, jnp.asarray(target), q0=jnp.asarray(q0), key=jax.random.key(1), num_seeds=8, pos_tol=1e-9, rot_tol=1e-9
+    )
     assert np.all(res.success)
     if chain.dof == 6:
         np.testing.assert_allclose(res.q, q_true, atol=1e-6)
@@ -170,8 +171,11 @@ def test_implicit_gradient_matches_finite_differences_ur5():
     def moved(h):  # T exp-perturbed by the world twist h * xi
         w, v = h * xi[3:], h * xi[:3]
         W = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
-        R = np.eye(3) + np.sin(np.linalg.norm(w)) / np.linalg.norm(w) * W + \
-            (1 - np.cos(np.linalg.norm(w))) / np.linalg.norm(w) ** 2 * W @ W
+        R = (
+            np.eye(3)
+            + np.sin(np.linalg.norm(w)) / np.linalg.norm(w) * W
+            + (1 - np.cos(np.linalg.norm(w))) / np.linalg.norm(w) ** 2 * W @ W
+        )
         out = np.array(T)
         out[:3, :3] = R @ out[:3, :3]
         out[:3, 3] = out[:3, 3] + v
@@ -194,8 +198,9 @@ def test_implicit_gradient_redundant_arm_moves_the_end_effector_as_the_target():
     T = jnp.asarray(dh_fk(chain, q_star))
     dT = jnp.asarray(np.random.default_rng(10).normal(size=(4, 4)) * np.r_[1, 1, 1, 0][:, None])
     dT = dT.at[:3, :3].set((dT[:3, :3] - dT[:3, :3].T) @ T[:3, :3])  # a tangent of SE(3) at T
-    _, dq = jax.jvp(lambda t: ik.solve(chain, t, q0=jnp.asarray(q_star), num_seeds=1, pos_tol=1e-12,
-                                       rot_tol=1e-12).q, (T,), (dT,))
+    _, dq = jax.jvp(
+        lambda t: ik.solve(chain, t, q0=jnp.asarray(q_star), num_seeds=1, pos_tol=1e-12, rot_tol=1e-12).q, (T,), (dT,)
+    )
     _, dT_fk = jax.jvp(lambda q: dk.fk(chain, q), (jnp.asarray(q_star),), (dq,))
     np.testing.assert_allclose(dT_fk, dT, atol=1e-8)
     J = dk.jacobian(chain, jnp.asarray(q_star), method="analytic")
@@ -208,14 +213,14 @@ def test_optax_method_reaches_loose_tolerance(urdf_chains):
     chain, fk64 = urdf_chains["iiwa14"], _pk_fk("iiwa14")
     target = fk64(random_q(chain, 100, seed=11))
     res = jax.jit(lambda t: ik.solve(chain, t, method="optax", num_seeds=4, pos_tol=5e-3, rot_tol=5e-2))(
-        jnp.asarray(target, jnp.float32))
+        jnp.asarray(target, jnp.float32)
+    )
     success = np.asarray(res.success)
     pos, rot = pose_errors(fk64(np.asarray(res.q, np.float64)), target)
     assert np.all(pos[success] <= 5e-3 + 1e-6) and np.all(rot[success] <= 5e-2 + 1e-6)
     np.testing.assert_allclose(np.asarray(res.pos_err), pos, atol=1e-6)
     assert success.mean() >= 0.7  # measured 0.74; LM reaches 1e-5 m on all of these (see test above)
-    sgd = ik.solve(chain, jnp.asarray(target[0]), method="optax", optimizer=optax.sgd(0.5), num_seeds=2,
-                   max_iters=5)
+    sgd = ik.solve(chain, jnp.asarray(target[0]), method="optax", optimizer=optax.sgd(0.5), num_seeds=2, max_iters=5)
     assert sgd.q.shape == (7,) and np.isfinite(float(sgd.pos_err))
 
 
@@ -337,11 +342,13 @@ def test_lm_needs_no_optax(monkeypatch):
 @pytest.mark.slow
 def test_import_and_lm_without_optax_subprocess():
     """A fresh interpreter without optax imports diffkin.ik and solves with LM."""
-    code = ("import sys; sys.modules['optax'] = None\n"
-            "import jax.numpy as jnp, diffkin as dk\n"
-            "chain = dk.robots.planar([1.0, 1.0])\n"
-            "T = dk.fk(chain, jnp.array([0.3, 0.5]))\n"
-            "print(bool(dk.ik.solve(chain, T, num_seeds=4).success))")
+    code = (
+        "import sys; sys.modules['optax'] = None\n"
+        "import jax.numpy as jnp, diffkin as dk\n"
+        "chain = dk.robots.planar([1.0, 1.0])\n"
+        "T = dk.fk(chain, jnp.array([0.3, 0.5]))\n"
+        "print(bool(dk.ik.solve(chain, T, num_seeds=4).success))"
+    )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0 and res.stdout.strip() == "True", res.stderr[-2000:]
 
@@ -355,8 +362,12 @@ def test_tolerances_are_traced():
     assert np.all(loose.success)
     key = jax.random.key(0)
     tight = []
-    assert _compilations(lambda: tight.append(ik.solve(chain, T, key=key, num_seeds=4, pos_tol=1e-12,
-                                                       rot_tol=1e-12)) or tight[0].q) == []
+    assert (
+        _compilations(
+            lambda: tight.append(ik.solve(chain, T, key=key, num_seeds=4, pos_tol=1e-12, rot_tol=1e-12)) or tight[0].q
+        )
+        == []
+    )
     assert np.all(tight[0].iters >= loose.iters) and np.any(tight[0].iters > loose.iters)  # the value is used
     jaxpr = jax.make_jaxpr(lambda tol: ik.solve(chain, T, num_seeds=4, pos_tol=tol, rot_tol=tol).q)(1e-3)
     assert jaxpr.out_avals[0].shape == (3, 2)

@@ -66,8 +66,10 @@ def _rate(success) -> float:
 def _check_successes(res, T_pin, targets):
     ok = np.asarray(res.success)
     pos, rot = _errors(T_pin, targets)
-    assert np.all(pos[ok] <= POS_TOL + SLACK_POS) and np.all(rot[ok] <= ROT_TOL + SLACK_ROT), (pos[ok].max(),
-                                                                                                rot[ok].max())
+    assert np.all(pos[ok] <= POS_TOL + SLACK_POS) and np.all(rot[ok] <= ROT_TOL + SLACK_ROT), (
+        pos[ok].max(),
+        rot[ok].max(),
+    )
     assert np.all(np.isfinite(np.asarray(res.q)))
 
 
@@ -91,8 +93,11 @@ def baxter_problem(baxter):
     targets = np.asarray(dk.fk(baxter, q_true, HANDS))
     locked = {"head_pan": 0.3, "right_e0": jnp.asarray(q_true[:, baxter.joint_names.index("right_e0")], jnp.float32)}
     q0 = jnp.asarray(_random_q(baxter, N, seed=1), jnp.float32)
-    solve = jax.jit(lambda t: dk.ik.solve(baxter, {h: t[:, k] for k, h in enumerate(HANDS)}, locked=locked, q0=q0,
-                                          key=jax.random.key(1)))
+    solve = jax.jit(
+        lambda t: dk.ik.solve(
+            baxter, {h: t[:, k] for k, h in enumerate(HANDS)}, locked=locked, q0=q0, key=jax.random.key(1)
+        )
+    )
     return targets, locked, q0, solve
 
 
@@ -195,8 +200,9 @@ IIWA_REST = np.zeros(7, np.float32)
 @pytest.fixture(scope="module")
 def iiwa_solve(iiwa):
     """The iiwa's flange with its z rotation free (5 constraints, 7 joints); with or without a rest posture."""
-    return jax.jit(lambda t, rest=None: dk.ik.solve(iiwa, {"iiwa14_link_ee": t}, weights=FREE_Z, rest=rest,
-                                                    key=jax.random.key(2)))
+    return jax.jit(
+        lambda t, rest=None: dk.ik.solve(iiwa, {"iiwa14_link_ee": t}, weights=FREE_Z, rest=rest, key=jax.random.key(2))
+    )
 
 
 def test_free_rotation_axis_is_free(iiwa, iiwa_solve):
@@ -220,8 +226,14 @@ def test_rest_objective_lowers_its_cost_and_keeps_the_targets(iiwa, iiwa_solve):
     assert _rate(ok) >= 0.99
     assert np.all(np.asarray(rested.pos_err)[ok] <= POS_TOL) and np.all(np.asarray(rested.rot_err)[ok] <= ROT_TOL)
     free = jnp.ones(7, bool)
-    cost = lambda q: np.asarray(_secondary.cost_and_step(  # noqa: E731
-        (("rest", 1.0),), jnp.asarray(q).T, IIWA_REST[:, None], iiwa.lower, iiwa.upper, free)[0])
+
+    def cost(q):
+        return np.asarray(
+            _secondary.cost_and_step(
+                (("rest", 1.0),), jnp.asarray(q).T, IIWA_REST[:, None], iiwa.lower, iiwa.upper, free
+            )[0]
+        )
+
     assert np.all(cost(rested.q)[ok] <= cost(plain.q)[ok] + 1e-6)
     assert np.mean(cost(rested.q)[ok]) < 0.9 * np.mean(cost(plain.q)[ok])
 
@@ -233,16 +245,19 @@ def test_implicit_gradient_with_respect_to_two_targets(iiwa):
         q_star = np.asarray([0.3, 0.6, -0.2, -1.1, 0.4, 0.7, 0.5])
         names = ["iiwa14_link_4", "iiwa14_link_ee"]
         T = np.asarray(dk.fk(robot, q_star, names))
+
         # The elbow (link 4) by position, the flange by pose: 3 + 6 = 9 rows, 7 joints (least squares).
         def solved(p4, T_ee):
-            return dk.ik.solve(robot, {names[0]: p4, names[1]: T_ee}, q0=q_star, num_seeds=1, pos_tol=1e-12,
-                               rot_tol=1e-12).q
+            return dk.ik.solve(
+                robot, {names[0]: p4, names[1]: T_ee}, q0=q_star, num_seeds=1, pos_tol=1e-12, rot_tol=1e-12
+            ).q
+
         dp = np.asarray([0.01, -0.02, 0.005])
-        _, dq = jax.jvp(solved, (jnp.asarray(T[0, :3, 3]), jnp.asarray(T[1])),
-                        (jnp.asarray(dp), jnp.zeros((4, 4))))
+        _, dq = jax.jvp(solved, (jnp.asarray(T[0, :3, 3]), jnp.asarray(T[1])), (jnp.asarray(dp), jnp.zeros((4, 4))))
         # Least squares of J dq = [dp; 0]: the same as the pseudo-inverse of the stacked Jacobian.
-        J = np.concatenate([np.asarray(dk.jacobian(robot, q_star, names[0]))[:3],
-                            np.asarray(dk.jacobian(robot, q_star, names[1]))])
+        J = np.concatenate(
+            [np.asarray(dk.jacobian(robot, q_star, names[0]))[:3], np.asarray(dk.jacobian(robot, q_star, names[1]))]
+        )
         expected = np.linalg.lstsq(J, np.concatenate([dp, np.zeros(6)]), rcond=None)[0]
         assert np.abs(np.asarray(dq) - expected).max() < 1e-8
 
@@ -281,7 +296,8 @@ def test_panda_tree_with_mimic_finger_and_position_target():
     names = [f for f in ("panda_leftfinger", "panda_rightfinger") if f in panda.frame_names]
     T = np.asarray(dk.fk(panda, q_true, names), np.float32)
     res = jax.jit(lambda a, b: dk.ik.solve(panda, {names[0]: a, names[1]: b}, key=jax.random.key(0)))(
-        T[:, 0], T[:, 1, :3, 3])
+        T[:, 0], T[:, 1, :3, 3]
+    )
     assert _rate(res.success) >= 0.99 and res.pos_err.shape == (16, 2)
     assert np.all(np.asarray(res.rot_err)[:, 1] == 0.0)
     got = _pin_poses(PANDA, panda, res.q, names)

@@ -55,11 +55,11 @@ def mujoco_reference(robot, model, q: np.ndarray, base: np.ndarray | None, frame
     for j in range(model.njnt):
         a, name = model.jnt_qposadr[j], _name(model, "joint", j)
         if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
-            qpos[a:a + 3] = base[:3, 3]
-            mujoco.mju_mat2Quat(qpos[a + 3:a + 7], base[:3, :3].flatten())
+            qpos[a : a + 3] = base[:3, 3]
+            mujoco.mju_mat2Quat(qpos[a + 3 : a + 7], base[:3, :3].flatten())
             v = model.jnt_dofadr[j]
-            M[v:v + 3, 0:3] = base[:3, :3]  # MuJoCo: linear velocity in world axes
-            M[v + 3:v + 6, 3:6] = np.eye(3)  # angular velocity in the body frame
+            M[v : v + 3, 0:3] = base[:3, :3]  # MuJoCo: linear velocity in world axes
+            M[v + 3 : v + 6, 3:6] = np.eye(3)  # angular velocity in the body frame
         elif name in robot.joint_names:
             i = robot.joint_names.index(name) + (6 if robot.floating else 0)
             qpos[a], dq[a, i] = q[i - (6 if robot.floating else 0)], 1.0
@@ -161,9 +161,11 @@ def check(xml: str, **kw) -> tuple[float, float]:
 
 # --------------------------------------------------------------------------------------------- snippets
 
-ARM = ('<geom size=".01"/><joint name="a" axis="1 2 3" pos=".1 0 .2" range="-90 45"/>'
-       '<body name="b" pos="0 .3 0" {o}><joint name="b" axis="0 1 0" range="-1 1"/><site name="s" pos=".1 .2 .3" {o}/>'
-       "</body>")
+ARM = (
+    '<geom size=".01"/><joint name="a" axis="1 2 3" pos=".1 0 .2" range="-90 45"/>'
+    '<body name="b" pos="0 .3 0" {o}><joint name="b" axis="0 1 0" range="-1 1"/><site name="s" pos=".1 .2 .3" {o}/>'
+    "</body>"
+)
 
 ORIENTATIONS = {
     "identity": ("", ""),
@@ -192,8 +194,9 @@ def test_orientation_forms(form):
 
 def test_degrees_vs_radians_give_the_same_robot():
     deg = dk.load_robot(mjcf(f'<body name="a" euler="90 0 0">{ARM.format(o="")}</body>'))
-    rad = dk.load_robot(mjcf(f'<body name="a" euler="{np.pi / 2} 0 0">{ARM.format(o="")}</body>',
-                             '<compiler angle="radian"/>'))
+    rad = dk.load_robot(
+        mjcf(f'<body name="a" euler="{np.pi / 2} 0 0">{ARM.format(o="")}</body>', '<compiler angle="radian"/>')
+    )
     q = np.array([0.3, -0.2])
     np.testing.assert_allclose(dk.link_poses(deg, q), dk.link_poses(rad, q), atol=1e-15)
     np.testing.assert_allclose(deg.lower[0], -np.pi / 2, rtol=1e-15)  # the hinge range in degrees
@@ -242,8 +245,10 @@ def test_several_joints_in_one_body_slides_and_ref():
 
 
 def test_sites_frames_and_names():
-    head = ('<default><site type="box" size=".1 .1 .1" quat="0 1 0 0"/>'
-            '<default class="m"><site pos="0 1 0"/></default></default>')
+    head = (
+        '<default><site type="box" size=".1 .1 .1" quat="0 1 0 0"/>'
+        '<default class="m"><site pos="0 1 0"/></default></default>'
+    )
     body = """<site name="in_world" pos="1 2 3" axisangle="0 0 1 30"/>
     <body pos="0 0 .1"><joint/>
       <site name="a" class="m"/><site name="b" euler="0 90 0" class="m"/><site pos="9 9 9"/>
@@ -277,11 +282,14 @@ def test_include_files_relative_to_the_main_file(tmp_path):
     (tmp_path / "parts" / "arm.xml").write_text(
         '<mujoco><include file="parts/defaults.xml"/>'
         '<worldbody><body name="arm" pos="0 0 1"><joint name="shoulder"/>'
-        '<include file="parts/hand.xml"/></body></worldbody></mujoco>')
-    (tmp_path / "parts" / "defaults.xml").write_text('<mujoco><default><joint axis="0 1 0" range="-10 10"/>'
-                                                     "</default></mujoco>")
-    (tmp_path / "parts" / "hand.xml").write_text('<mujoco><body name="hand" pos=".3 0 0" euler="0 0 20">'
-                                                 '<joint name="wrist"/><site name="grip"/></body></mujoco>')
+        '<include file="parts/hand.xml"/></body></worldbody></mujoco>'
+    )
+    (tmp_path / "parts" / "defaults.xml").write_text(
+        '<mujoco><default><joint axis="0 1 0" range="-10 10"/></default></mujoco>'
+    )
+    (tmp_path / "parts" / "hand.xml").write_text(
+        '<mujoco><body name="hand" pos=".3 0 0" euler="0 0 20"><joint name="wrist"/><site name="grip"/></body></mujoco>'
+    )
     main = tmp_path / "robot.xml"
     main.write_text(f'<mujoco model="m">{HEAD}<include file="parts/arm.xml"/></mujoco>')
     robot = dk.load_robot(str(main))
@@ -307,8 +315,12 @@ def test_free_joint_fk_and_jacobian_against_mujoco():
 
 
 def test_free_joint_base_columns_match_finite_differences():
-    robot = dk.load_robot(mjcf('<body name="t"><freejoint/><body name="a" pos="0 .2 0"><joint axis="0 1 0"/>'
-                               '<site name="tip" pos=".3 .1 0"/></body></body>'))
+    robot = dk.load_robot(
+        mjcf(
+            '<body name="t"><freejoint/><body name="a" pos="0 .2 0"><joint axis="0 1 0"/>'
+            '<site name="tip" pos=".3 .1 0"/></body></body>'
+        )
+    )
     rng = np.random.default_rng(3)
     B, q, eps = random_base(rng), np.array([0.4]), 1e-6
     J = np.asarray(dk.jacobian(robot, q, "tip", frame="world", base=B, include_base=True))
@@ -359,20 +371,27 @@ def test_joint_equalities_are_mimic_couplings():
     _apply_equalities(model, qpos, dq)
     data.qpos[:] = qpos
     mujoco.mj_forward(model, data)
-    rows = data.efc_type[:data.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY
-    assert rows.sum() == 3 and np.abs(data.efc_pos[:data.nefc][rows]).max() < 1e-14
+    rows = data.efc_type[: data.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY
+    assert rows.sum() == 3 and np.abs(data.efc_pos[: data.nefc][rows]).max() < 1e-14
 
 
 def test_limits_follow_mujoco():
-    joints = ['name="auto_range" range="-10 20"', 'name="auto_none"', 'name="auto_empty" range="1 1"',
-              'name="off" limited="false" range="-1 1"', 'name="on" limited="true" range="-1 1"',
-              'name="slide" type="slide" range="-.1 .2"']
+    joints = [
+        'name="auto_range" range="-10 20"',
+        'name="auto_none"',
+        'name="auto_empty" range="1 1"',
+        'name="off" limited="false" range="-1 1"',
+        'name="on" limited="true" range="-1 1"',
+        'name="slide" type="slide" range="-.1 .2"',
+    ]
     body = "".join(f'<body pos=".1 0 0"><joint {j}/>' for j in joints) + "</body>" * len(joints)
     robot, model = dk.load_robot(mjcf(body)), mujoco.MjModel.from_xml_string(mjcf(body))
     check_limits(robot, model)
     assert np.isfinite(robot.lower).tolist() == [True, False, False, False, True, True]
-    strict = mjcf('<body><joint name="j" limited="true" range="-10 20"/><joint name="k" axis="1 0 0"/></body>',
-                  '<compiler autolimits="false"/>')
+    strict = mjcf(
+        '<body><joint name="j" limited="true" range="-10 20"/><joint name="k" axis="1 0 0"/></body>',
+        '<compiler autolimits="false"/>',
+    )
     check_limits(dk.load_robot(strict), mujoco.MjModel.from_xml_string(strict))
 
 
@@ -417,11 +436,15 @@ def test_published_models_against_mujoco(name):
 @pytest.mark.parametrize(
     ("path", "message"),
     [
-        ("suite/manipulator.xml",  # its fingers are coupled through a tendon
-         r"MJCF <equality><tendon name='coupling' tendon1='coupling'>: <equality><tendon> constraints are not "
-         r"supported"),
-        ("suite/quadruped.xml",  # a free ball beside the free torso: two trees
-         r"MJCF <freejoint name='ball_root'>: several bodies have free joints \(\['torso', 'ball'\]\)"),
+        (
+            "suite/manipulator.xml",  # its fingers are coupled through a tendon
+            r"MJCF <equality><tendon name='coupling' tendon1='coupling'>: <equality><tendon> constraints are not "
+            r"supported",
+        ),
+        (
+            "suite/quadruped.xml",  # a free ball beside the free torso: two trees
+            r"MJCF <freejoint name='ball_root'>: several bodies have free joints \(\['torso', 'ball'\]\)",
+        ),
     ],
     ids=["manipulator", "quadruped"],
 )
@@ -438,46 +461,94 @@ BODY = '<body name="a"><joint name="j"/><body name="b"><joint name="k"/></body><
 @pytest.mark.parametrize(
     ("xml", "message"),
     [
-        (mjcf('<body><joint name="ball" type="ball"/></body>'),
-         r"MJCF <joint name='ball' type='ball'>: joint type 'ball' is not supported"),
-        (mjcf(BODY, tail='<equality><joint joint1="k" joint2="j" polycoef="0 1 .5 0 0"/></equality>'),
-         r"MJCF <equality><joint joint1='k' joint2='j'>: polycoef \[0.0, 1.0, 0.5, 0.0, 0.0\] is not linear"),
-        (mjcf(BODY, tail='<equality><weld body1="a" body2="b"/></equality>'),
-         r"MJCF <equality><weld body1='a'>: <equality><weld> constraints are not supported"),
-        (mjcf(BODY, tail='<equality><connect body1="b" anchor="0 0 0"/></equality>'),
-         r"MJCF <equality><connect body1='b'>: <equality><connect> constraints are not supported"),
-        (mjcf(BODY, tail='<equality><joint joint1="k" joint2="nope"/></equality>'),
-         r"MJCF <equality><joint joint1='k' joint2='nope'>: 'nope' is not a hinge or slide joint"),
-        (mjcf('<body><joint name="j" class="nope"/></body>'), r"MJCF <joint name='j' class='nope'>: unknown default "
-                                                              r"class 'nope'"),
+        (
+            mjcf('<body><joint name="ball" type="ball"/></body>'),
+            r"MJCF <joint name='ball' type='ball'>: joint type 'ball' is not supported",
+        ),
+        (
+            mjcf(BODY, tail='<equality><joint joint1="k" joint2="j" polycoef="0 1 .5 0 0"/></equality>'),
+            r"MJCF <equality><joint joint1='k' joint2='j'>: polycoef \[0.0, 1.0, 0.5, 0.0, 0.0\] is not linear",
+        ),
+        (
+            mjcf(BODY, tail='<equality><weld body1="a" body2="b"/></equality>'),
+            r"MJCF <equality><weld body1='a'>: <equality><weld> constraints are not supported",
+        ),
+        (
+            mjcf(BODY, tail='<equality><connect body1="b" anchor="0 0 0"/></equality>'),
+            r"MJCF <equality><connect body1='b'>: <equality><connect> constraints are not supported",
+        ),
+        (
+            mjcf(BODY, tail='<equality><joint joint1="k" joint2="nope"/></equality>'),
+            r"MJCF <equality><joint joint1='k' joint2='nope'>: 'nope' is not a hinge or slide joint",
+        ),
+        (
+            mjcf('<body><joint name="j" class="nope"/></body>'),
+            r"MJCF <joint name='j' class='nope'>: unknown default "
+            r"class 'nope'",
+        ),
         (mjcf('<body name="b" childclass="nope"/>'), r"MJCF <body name='b'>: unknown default class 'nope'"),
-        (mjcf("", '<include file="/nonexistent/part.xml"/>'),
-         r"MJCF <include file='/nonexistent/part.xml'>: file not found: '/nonexistent/part.xml'"),
+        (
+            mjcf("", '<include file="/nonexistent/part.xml"/>'),
+            r"MJCF <include file='/nonexistent/part.xml'>: file not found: '/nonexistent/part.xml'",
+        ),
         (mjcf('<body><replicate count="2"/></body>'), r"MJCF <replicate>: <replicate> is not supported"),
         (mjcf('<body><attach model="m"/></body>'), r"MJCF <attach>: <attach> is not supported"),
-        (mjcf('<body name="a"><freejoint name="f1"/></body><body name="b"><freejoint name="f2"/></body>'),
-         r"MJCF <freejoint name='f2'>: several bodies have free joints \(\['a', 'b'\]\)"),
-        (mjcf('<body name="a"><body><freejoint name="f"/></body></body>'),
-         r"MJCF <freejoint name='f'>: a free joint must be the only joint of a top-level body"),
-        (mjcf('<body name="a"><freejoint name="f"/><joint name="j"/></body>'),
-         r"MJCF <freejoint name='f'>: a free joint must be the only joint of a top-level body"),
-        (mjcf('<body name="a"><freejoint/></body><body name="door"><joint name="hinge"/></body>'),
-         r"MJCF <body name='door'>: its joints \['hinge'\] move a second tree beside the floating root 'a'"),
-        (mjcf('<body><joint name="j" range="0 1"/></body>', '<compiler autolimits="false"/>'),
-         r"MJCF <joint name='j'>: 'range' without 'limited' needs"),
+        (
+            mjcf('<body name="a"><freejoint name="f1"/></body><body name="b"><freejoint name="f2"/></body>'),
+            r"MJCF <freejoint name='f2'>: several bodies have free joints \(\['a', 'b'\]\)",
+        ),
+        (
+            mjcf('<body name="a"><body><freejoint name="f"/></body></body>'),
+            r"MJCF <freejoint name='f'>: a free joint must be the only joint of a top-level body",
+        ),
+        (
+            mjcf('<body name="a"><freejoint name="f"/><joint name="j"/></body>'),
+            r"MJCF <freejoint name='f'>: a free joint must be the only joint of a top-level body",
+        ),
+        (
+            mjcf('<body name="a"><freejoint/></body><body name="door"><joint name="hinge"/></body>'),
+            r"MJCF <body name='door'>: its joints \['hinge'\] move a second tree beside the floating root 'a'",
+        ),
+        (
+            mjcf('<body><joint name="j" range="0 1"/></body>', '<compiler autolimits="false"/>'),
+            r"MJCF <joint name='j'>: 'range' without 'limited' needs",
+        ),
         (mjcf('<body name="b" euler="0 0 0" quat="1 0 0 0"/>'), r"MJCF <body name='b'>: several orientations"),
         (mjcf('<body name="b" quat="0 0 0 0"/>'), r"MJCF <body name='b'> quat: expected a nonzero vector"),
-        (mjcf('<body><site name="s" fromto="0 0 0 1 0 0"/></body>'),
-         r"MJCF <site name='s'>: fromto needs a site of type"),
-        (mjcf('<body><site name="s" type="box" pos="1 0 0" fromto="0 0 0 1 0 0"/></body>'),
-         r"MJCF <site name='s' type='box'>: both pos and fromto given"),
+        (
+            mjcf('<body><site name="s" fromto="0 0 0 1 0 0"/></body>'),
+            r"MJCF <site name='s'>: fromto needs a site of type",
+        ),
+        (
+            mjcf('<body><site name="s" type="box" pos="1 0 0" fromto="0 0 0 1 0 0"/></body>'),
+            r"MJCF <site name='s' type='box'>: both pos and fromto given",
+        ),
         (mjcf("", '<compiler angle="grad"/>'), r"MJCF <compiler>: angle must be 'degree' or 'radian'"),
         ("<sdf/>", r"expected a <robot> \(URDF\) or <mujoco> \(MJCF\) root element, got <sdf>"),
     ],
-    ids=["ball", "nonlinear", "weld", "connect", "unknown_joint", "unknown_class", "unknown_childclass",
-         "missing_include", "replicate", "attach", "two_free", "nested_free", "free_and_hinge", "second_tree",
-         "autolimits", "two_orientations", "zero_quat", "fromto_sphere", "pos_and_fromto", "compiler_angle",
-         "root_element"],
+    ids=[
+        "ball",
+        "nonlinear",
+        "weld",
+        "connect",
+        "unknown_joint",
+        "unknown_class",
+        "unknown_childclass",
+        "missing_include",
+        "replicate",
+        "attach",
+        "two_free",
+        "nested_free",
+        "free_and_hinge",
+        "second_tree",
+        "autolimits",
+        "two_orientations",
+        "zero_quat",
+        "fromto_sphere",
+        "pos_and_fromto",
+        "compiler_angle",
+        "root_element",
+    ],
 )
 def test_bad_input_names_the_element(xml, message):
     with pytest.raises(ValueError, match=message):

@@ -210,26 +210,33 @@ def test_planar_rejects_bad_lengths():
 _SCALED = np.diag([2.0, 2.0, 2.0, 1.0])
 
 
-@pytest.mark.parametrize("changes, error, match", [
-    ({"a": np.full(7, np.nan)}, ValueError, r"^a: expected finite numbers"),
-    ({"d": np.array([0.3, 0.0, 0.4, 0.0, 0.4, 0.0, np.inf])}, ValueError, r"^d: expected finite"),
-    ({"lower": np.full(7, 1.0), "upper": np.zeros(7)}, ValueError, r"lower\[0\] = 1.0 > upper\[0\]"),
-    ({"lower": np.full(7, np.nan)}, ValueError, r"^lower: expected numbers, got NaN"),
-    ({"alpha": np.zeros(6)}, ValueError, r"^alpha: expected shape \(7,\), got \(6,\)"),
-    ({"joint_types": "RRR"}, ValueError, r"^(joint_names: expected 3 strings|a: expected shape \(3,\), got \(7,\))"),
-    ({"joint_types": "RRRRRRX"}, ValueError, r"joint_types\[6\]: expected 'R' or 'P'"),
-    ({"joint_types": ""}, ValueError, r"^joint_types: expected at least one joint"),
-    ({"base": _SCALED}, ValueError, r"^base: expected a rotation"),
-    ({"tool": np.eye(4) * 1.001}, ValueError, r"^tool: expected"),
-    ({"base": np.eye(3)}, ValueError, r"^base: expected shape \(4, 4\)"),
-    ({"modified": "False"}, TypeError, r"^modified: expected True or False"),
-    ({"joint_names": "abcdefg"}, TypeError, r"^joint_names: expected a tuple or list"),
-    ({"name": 3}, TypeError, r"^name: expected a string"),
-    ({"a": np.zeros(7, bool)}, TypeError, r"^a: expected a real floating-point array, got dtype bool"),
-    ({"d": np.zeros(7, complex)}, TypeError, r"^d: expected a real floating-point array, got dtype complex"),
-    ({"a": [0.0] * 7}, TypeError, r"^a: expected an array, got list"),
-    ({"theta_offset": None}, TypeError, r"^theta_offset: expected an array"),
-])
+@pytest.mark.parametrize(
+    "changes, error, match",
+    [
+        ({"a": np.full(7, np.nan)}, ValueError, r"^a: expected finite numbers"),
+        ({"d": np.array([0.3, 0.0, 0.4, 0.0, 0.4, 0.0, np.inf])}, ValueError, r"^d: expected finite"),
+        ({"lower": np.full(7, 1.0), "upper": np.zeros(7)}, ValueError, r"lower\[0\] = 1.0 > upper\[0\]"),
+        ({"lower": np.full(7, np.nan)}, ValueError, r"^lower: expected numbers, got NaN"),
+        ({"alpha": np.zeros(6)}, ValueError, r"^alpha: expected shape \(7,\), got \(6,\)"),
+        (
+            {"joint_types": "RRR"},
+            ValueError,
+            r"^(joint_names: expected 3 strings|a: expected shape \(3,\), got \(7,\))",
+        ),
+        ({"joint_types": "RRRRRRX"}, ValueError, r"joint_types\[6\]: expected 'R' or 'P'"),
+        ({"joint_types": ""}, ValueError, r"^joint_types: expected at least one joint"),
+        ({"base": _SCALED}, ValueError, r"^base: expected a rotation"),
+        ({"tool": np.eye(4) * 1.001}, ValueError, r"^tool: expected"),
+        ({"base": np.eye(3)}, ValueError, r"^base: expected shape \(4, 4\)"),
+        ({"modified": "False"}, TypeError, r"^modified: expected True or False"),
+        ({"joint_names": "abcdefg"}, TypeError, r"^joint_names: expected a tuple or list"),
+        ({"name": 3}, TypeError, r"^name: expected a string"),
+        ({"a": np.zeros(7, bool)}, TypeError, r"^a: expected a real floating-point array, got dtype bool"),
+        ({"d": np.zeros(7, complex)}, TypeError, r"^d: expected a real floating-point array, got dtype complex"),
+        ({"a": [0.0] * 7}, TypeError, r"^a: expected an array, got list"),
+        ({"theta_offset": None}, TypeError, r"^theta_offset: expected an array"),
+    ],
+)
 def test_replace_and_direct_construction_validate_like_the_builder(changes, error, match):
     chain = dk.robots.iiwa14()
     with pytest.raises(error, match=match):
@@ -271,17 +278,20 @@ def test_jax_rebuilding_is_not_validated():
     assert paths[0] == ".a" and paths[-1] == ".tool"
 
 
-@pytest.mark.parametrize("changes, error, match", [
-    ({"screws": np.tile([0.0, 0, 0, 0, 0, 2.0], (7, 1))}, ValueError, r"^screws\[0\]: expected a unit screw"),
-    ({"screws": np.tile([0.5, 0, 0, 1.0, 0, 0], (7, 1))}, ValueError, r"^screws\[0\]: expected a revolute screw"),
-    ({"joint_types": "RRRRRRP"}, ValueError, r"^joint_types\[6\]: 'P' contradicts screws\[6\]"),
-    ({"home": _SCALED}, ValueError, r"^home: expected a rotation"),
-    ({"link_homes": np.tile(_SCALED, (7, 1, 1))}, ValueError, r"^link_homes\[0\]: expected a rotation"),
-    ({"link_homes": np.zeros((6, 4, 4))}, ValueError, r"^link_homes: expected shape \(7, 4, 4\)"),
-    ({"upper": np.full(7, -10.0)}, ValueError, r"lower\[0\] = .* > upper\[0\]"),
-    ({"joint_names": ("a",) * 7}, ValueError, r"^joint_names: expected distinct names"),
-    ({"screws": np.zeros((7, 6), complex)}, TypeError, r"^screws: expected a real floating-point array"),
-])
+@pytest.mark.parametrize(
+    "changes, error, match",
+    [
+        ({"screws": np.tile([0.0, 0, 0, 0, 0, 2.0], (7, 1))}, ValueError, r"^screws\[0\]: expected a unit screw"),
+        ({"screws": np.tile([0.5, 0, 0, 1.0, 0, 0], (7, 1))}, ValueError, r"^screws\[0\]: expected a revolute screw"),
+        ({"joint_types": "RRRRRRP"}, ValueError, r"^joint_types\[6\]: 'P' contradicts screws\[6\]"),
+        ({"home": _SCALED}, ValueError, r"^home: expected a rotation"),
+        ({"link_homes": np.tile(_SCALED, (7, 1, 1))}, ValueError, r"^link_homes\[0\]: expected a rotation"),
+        ({"link_homes": np.zeros((6, 4, 4))}, ValueError, r"^link_homes: expected shape \(7, 4, 4\)"),
+        ({"upper": np.full(7, -10.0)}, ValueError, r"lower\[0\] = .* > upper\[0\]"),
+        ({"joint_names": ("a",) * 7}, ValueError, r"^joint_names: expected distinct names"),
+        ({"screws": np.zeros((7, 6), complex)}, TypeError, r"^screws: expected a real floating-point array"),
+    ],
+)
 def test_poe_replace_validates(changes, error, match):
     chain = dk.load_urdf(IIWA_URDF)
     with pytest.raises(error, match=match):

@@ -53,7 +53,7 @@ def _pin_q(model, robot, q):
     for name, value in values.items():
         joint = model.joints[model.getJointId(name)]
         if joint.nq == 2:  # continuous joints: (cos, sin)
-            qp[joint.idx_q: joint.idx_q + 2] = np.cos(value), np.sin(value)
+            qp[joint.idx_q : joint.idx_q + 2] = np.cos(value), np.sin(value)
         else:
             qp[joint.idx_q] = value
     return qp
@@ -80,8 +80,11 @@ def test_every_frame_and_jacobian_matches_pinocchio(path):
     # Jacobians of the frames farthest down the tree (hands, feet, fingertips, flanges): at most 3.
     depth = [len(robot.ancestors(b)) for b in robot.frame_bodies]
     ends = sorted(range(len(depth)), key=lambda f: -depth[f])[:3] if robot.dof else []  # (Pinocchio: nv > 0)
-    jacobians = {(f, ref): np.asarray(dk.jacobian(robot, q, robot.frame_names[f], ref))
-                 for f in ends for ref in ("world", "space", "body")}
+    jacobians = {
+        (f, ref): np.asarray(dk.jacobian(robot, q, robot.frame_names[f], ref))
+        for f in ends
+        for ref in ("world", "space", "body")
+    }
     ref_frames = {"world": pin.LOCAL_WORLD_ALIGNED, "space": pin.WORLD, "body": pin.LOCAL}
     worst_pose = worst_jac = 0.0
     for k in range(len(q)):
@@ -93,8 +96,7 @@ def test_every_frame_and_jacobian_matches_pinocchio(path):
             M = data.oMf[model.getFrameId(name, pin.BODY)].homogeneous
             worst_pose = max(worst_pose, np.abs(M - poses[k, f]).max())
         for (f, ref), J in jacobians.items():
-            J_pin = pin.getFrameJacobian(model, data, model.getFrameId(robot.frame_names[f], pin.BODY),
-                                         ref_frames[ref])
+            J_pin = pin.getFrameJacobian(model, data, model.getFrameId(robot.frame_names[f], pin.BODY), ref_frames[ref])
             worst_jac = max(worst_jac, np.abs(_pin_columns(model, robot, J_pin) - J[k]).max())
     assert worst_pose < 1e-10 and worst_jac < 1e-10, (worst_pose, worst_jac)
 
@@ -124,8 +126,12 @@ def test_chain_of_a_tree_is_the_path(panda):
     q = _random_q(panda, 16, seed=3)
     names = panda.frame_names
     poses = np.asarray(dk.link_poses(panda, q))
-    for end, base in (("panda_hand_tcp", None), ("panda_link8", "panda_link2"), ("panda_leftfinger", "panda_hand"),
-                      ("panda_rightfinger", None)):
+    for end, base in (
+        ("panda_hand_tcp", None),
+        ("panda_link8", "panda_link2"),
+        ("panda_leftfinger", "panda_hand"),
+        ("panda_rightfinger", None),
+    ):
         chain = panda.chain(end, base)
         cols = [panda.joint_names.index(n) for n in chain.joint_names]
         T_base = poses[:, names.index(base or names[0])]
@@ -195,8 +201,9 @@ def test_floating_base_columns(panda, method, ref):
     assert J.shape == (6, 6 + robot.dof)
     np.testing.assert_allclose(J[:, :6], fd, atol=1e-8)
     np.testing.assert_allclose(J[:, 6:], dk.jacobian(robot, q, "panda_hand_tcp", ref, base=T_wr), atol=1e-12)
-    np.testing.assert_allclose(dk.fk(robot, q, "panda_hand_tcp", base=T_wr),
-                               T_wr @ np.asarray(dk.fk(robot, q, "panda_hand_tcp")), atol=1e-14)
+    np.testing.assert_allclose(
+        dk.fk(robot, q, "panda_hand_tcp", base=T_wr), T_wr @ np.asarray(dk.fk(robot, q, "panda_hand_tcp")), atol=1e-14
+    )
 
 
 def test_jit_argument_or_closure_and_parameter_gradients(panda):
@@ -235,23 +242,44 @@ REV, FIX = "revolute", "fixed"
 @pytest.mark.parametrize(
     "xml, match",
     [
-        (_urdf(_joint("j1", REV, "a", "b") + _joint("j2", REV, "b", "c") + _joint("j3", FIX, "c", "b")),
-         r"link 'b' is the child of two joints \('j1', 'j3'\)"),
-        (_urdf(_joint("j1", REV, "a", "b") + _joint("j2", REV, "b", "c") + _joint("j3", FIX, "c", "a")),
-         r"no root link"),
-        (_urdf(_joint("j1", REV, "a", "b") + _joint("j2", REV, "c", "d") + _joint("j3", FIX, "d", "c"),
-               ["a", "b", "c", "d"]), r"link 'c' is the child of two joints|not connected to the root"),
+        (
+            _urdf(_joint("j1", REV, "a", "b") + _joint("j2", REV, "b", "c") + _joint("j3", FIX, "c", "b")),
+            r"link 'b' is the child of two joints \('j1', 'j3'\)",
+        ),
+        (
+            _urdf(_joint("j1", REV, "a", "b") + _joint("j2", REV, "b", "c") + _joint("j3", FIX, "c", "a")),
+            r"no root link",
+        ),
+        (
+            _urdf(
+                _joint("j1", REV, "a", "b") + _joint("j2", REV, "c", "d") + _joint("j3", FIX, "d", "c"),
+                ["a", "b", "c", "d"],
+            ),
+            r"link 'c' is the child of two joints|not connected to the root",
+        ),
         (_urdf(_joint("j1", REV, "a", "a")), r"joint 'j1' connects link 'a' to itself"),
-        (_urdf(_joint("j1", REV, "a", "b") + _joint("j2", REV, "c", "d")),
-         r"expected one root link, found 2: \['a', 'c'\]"),
+        (
+            _urdf(_joint("j1", REV, "a", "b") + _joint("j2", REV, "c", "d")),
+            r"expected one root link, found 2: \['a', 'c'\]",
+        ),
         (_urdf(_joint("j1", REV, "a", "b"), ["a", "b", "a"]), r"duplicate link name 'a'"),
         (_urdf(_joint("j1", REV, "a", "b") + _joint("j1", REV, "b", "c")), r"duplicate joint name 'j1'"),
-        (_urdf(_joint("j1", REV, "a", "b") + _joint("j2", REV, "b", "c", '<mimic joint="nope"/>')),
-         r"joint 'j2' mimics 'nope', which is not a joint of the robot"),
-        (_urdf(_joint("j0", REV, "a", "b") + _joint("j1", REV, "b", "c", '<mimic joint="j2"/>')
-               + _joint("j2", REV, "c", "d", '<mimic joint="j1"/>')), r"mimic joints form a cycle: j1 -> j2 -> j1"),
-        (_urdf(_joint("j1", FIX, "a", "b") + _joint("j2", REV, "b", "c", '<mimic joint="j1"/>')),
-         r"joint 'j2' mimics 'j1', a fixed joint"),
+        (
+            _urdf(_joint("j1", REV, "a", "b") + _joint("j2", REV, "b", "c", '<mimic joint="nope"/>')),
+            r"joint 'j2' mimics 'nope', which is not a joint of the robot",
+        ),
+        (
+            _urdf(
+                _joint("j0", REV, "a", "b")
+                + _joint("j1", REV, "b", "c", '<mimic joint="j2"/>')
+                + _joint("j2", REV, "c", "d", '<mimic joint="j1"/>')
+            ),
+            r"mimic joints form a cycle: j1 -> j2 -> j1",
+        ),
+        (
+            _urdf(_joint("j1", FIX, "a", "b") + _joint("j2", REV, "b", "c", '<mimic joint="j1"/>')),
+            r"joint 'j2' mimics 'j1', a fixed joint",
+        ),
     ],
 )
 def test_bad_trees_are_rejected(xml, match):

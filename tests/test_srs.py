@@ -20,22 +20,27 @@ _ik = jax.jit(srs.ik)
 _arm_angle = jax.jit(srs.arm_angle)
 _feasible = jax.jit(srs.feasible_arm_angles)
 _fk = jax.jit(lambda arm, q: (dk.fk(arm.chain(), q),))
-_ik_jacobians = jax.jit(lambda arm, T, psi, gc: jax.vmap(jax.jacfwd(lambda T, psi, gc: srs.ik(arm, T, psi, gc)[0],
-                                                                     argnums=(0, 1)))(T, psi, gc))
+_ik_jacobians = jax.jit(
+    lambda arm, T, psi, gc: jax.vmap(jax.jacfwd(lambda T, psi, gc: srs.ik(arm, T, psi, gc)[0], argnums=(0, 1)))(
+        T, psi, gc
+    )
+)
 sample = jax.jit(srs.sample_self_motion, static_argnums=2)
 
 
 def batched(fn, arm, *args, core):
     """``fn(arm, *args)`` over the broadcast batch of ``args``; ``core[i]`` trailing dims of ``args[i]`` per problem."""
     args = [np.asarray(a, np.float64) for a in args]
-    tails = [a.shape[a.ndim - c:] for a, c in zip(args, core, strict=True)]
-    batch = np.broadcast_shapes(*(a.shape[:a.ndim - c] for a, c in zip(args, core, strict=True)))
+    tails = [a.shape[a.ndim - c :] for a, c in zip(args, core, strict=True)]
+    batch = np.broadcast_shapes(*(a.shape[: a.ndim - c] for a, c in zip(args, core, strict=True)))
     flat = [np.broadcast_to(a, batch + t).reshape((-1,) + t) for a, t in zip(args, tails, strict=True)]
     n = flat[0].shape[0]
     flat = [np.concatenate([f, np.repeat(f[:1], -n % CHUNK, 0)]) for f in flat]
-    outs = [fn(arm, *(f[i:i + CHUNK] for f in flat)) for i in range(0, len(flat[0]), CHUNK)]
-    return tuple(np.concatenate([np.asarray(o[k]) for o in outs])[:n].reshape(batch + outs[0][k].shape[1:])
-                 for k in range(len(outs[0])))
+    outs = [fn(arm, *(f[i : i + CHUNK] for f in flat)) for i in range(0, len(flat[0]), CHUNK)]
+    return tuple(
+        np.concatenate([np.asarray(o[k]) for o in outs])[:n].reshape(batch + outs[0][k].shape[1:])
+        for k in range(len(outs[0]))
+    )
 
 
 def ik(arm, T, psi, gc):
@@ -101,8 +106,10 @@ def test_chain_is_differentiable_in_the_lengths():
 
 def test_iiwa_published_vectors():
     q = np.full(7, 0.5)
-    for name, p, psi_ref in (("iiwa14", (0.264615, 0.065211, 1.234181), 0.863513),
-                             ("iiwa7", (0.256201, 0.060614, 1.196629), 0.878637)):
+    for name, p, psi_ref in (
+        ("iiwa14", (0.264615, 0.065211, 1.234181), 0.863513),
+        ("iiwa7", (0.256201, 0.060614, 1.196629), 0.878637),
+    ):
         arm = ARMS[name]
         T = np.asarray(fk(arm, q))
         np.testing.assert_allclose(T[:3, 3], p, atol=6e-7)
@@ -125,8 +132,10 @@ def test_shimizu_pa10_inverse_kinematics():
     arm = srs.SRSArm.from_lengths(*PA10)
     T = pose([[0, -1, 0], [-1, 0, 0], [0, 0, -1]], [0.65, 0.0, 0.5])
     flip4 = np.array([1, 1, 1, -1, 1, 1, 1])
-    for psi_deg, q_deg in ((0.0, [0, 25.666, 0, 82.872, 0, 71.463, -90]),
-                           (25.017, [-32.325, 32.687, 46.864, 82.872, -24.101, 74.814, -73.709])):
+    for psi_deg, q_deg in (
+        (0.0, [0, 25.666, 0, 82.872, 0, 71.463, -90]),
+        (25.017, [-32.325, 32.687, 46.864, 82.872, -24.101, 74.814, -73.709]),
+    ):
         q, ok = ik(arm, T, np.deg2rad(psi_deg), [1, -1, 1])
         assert ok
         # Published to 3 decimals (and psi to 3 decimals, which moves theta1 by up to 1e-3 deg).
@@ -165,7 +174,8 @@ def test_arm_angle_matches_elbow_definition():
     unit = lambda v: v / np.linalg.norm(v, axis=1, keepdims=True)  # noqa: E731
     n_ref, n = unit(np.cross(e_ref, u)), unit(np.cross(x_e - x_s, u))
     psi_ref = np.sign(np.einsum("ij,ij->i", np.cross(n_ref, n), x_sw)) * np.arccos(
-        np.clip(np.einsum("ij,ij->i", n_ref, n), -1, 1))
+        np.clip(np.einsum("ij,ij->i", n_ref, n), -1, 1)
+    )
     psi, _ = arm_angle(arm, q)
     diff = np.angle(np.exp(1j * (np.asarray(psi) - psi_ref)))
     np.testing.assert_allclose(diff, 0, atol=1e-7)  # acos of the reference formula: ~sqrt(eps) near psi = 0, pi
@@ -468,27 +478,33 @@ def test_sample_self_motion_one_configuration_and_unreachable():
 # ----- bad input -------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("call, error, words", [
-    (lambda a: srs.ik(a, np.eye(3), 0.0, [1, 1, 1]), ValueError, "target"),
-    (lambda a: srs.ik(a, np.eye(4), 0.0, [1, 1]), ValueError, "gc"),
-    (lambda a: srs.ik(a, np.eye(4), 0.0, [1, 0, 1]), ValueError, "+1 or -1"),
-    (lambda a: srs.ik(a, np.eye(4), np.zeros(3), np.ones((2, 3))), ValueError, "broadcast"),
-    (lambda a: srs.ik(a.chain(), np.eye(4), 0.0, [1, 1, 1]), TypeError, "arm"),
-    (lambda a: srs.ik(a, np.eye(4), "x", [1, 1, 1]), TypeError, "psi"),
-    (lambda a: srs.arm_angle(a, np.zeros(6)), ValueError, "q"),
-    (lambda a: srs.feasible_arm_angles(a, np.eye(4), [2, 1, 1]), ValueError, "gc"),
-    (lambda a: srs.sample_self_motion(a, np.eye(4), 0), ValueError, "n"),
-    (lambda a: srs.sample_self_motion(a, np.eye(4), 2.5), TypeError, "n"),
-    (lambda a: srs.sample_self_motion(a, np.stack([np.eye(4)] * 2), 5), ValueError, "target"),
-    (lambda a: srs.sample_self_motion(a, np.eye(4), 5, gc=np.ones((2, 3))), ValueError, "gc"),
-    (lambda a: srs.SRSArm.from_lengths(0.36, -0.42, 0.4, 0.126), ValueError, "d_se"),
-    (lambda a: srs.SRSArm.from_lengths(0.36, 0.42, 0.4, 0.126, lower=np.ones(7), upper=np.zeros(7)),
-     ValueError, "lower"),
-    (lambda a: srs.SRSArm.from_lengths(0.36, 0.42, 0.4, 0.126, lower=np.ones(6)), ValueError, "lower"),
-    (lambda a: srs.SRSArm.from_chain(dk.robots.panda()), ValueError, "chain"),
-    (lambda a: srs.SRSArm.from_chain(dk.robots.ur5()), ValueError, "chain"),
-    (lambda a: srs.SRSArm.from_chain(a), TypeError, "chain"),
-])
+@pytest.mark.parametrize(
+    "call, error, words",
+    [
+        (lambda a: srs.ik(a, np.eye(3), 0.0, [1, 1, 1]), ValueError, "target"),
+        (lambda a: srs.ik(a, np.eye(4), 0.0, [1, 1]), ValueError, "gc"),
+        (lambda a: srs.ik(a, np.eye(4), 0.0, [1, 0, 1]), ValueError, "+1 or -1"),
+        (lambda a: srs.ik(a, np.eye(4), np.zeros(3), np.ones((2, 3))), ValueError, "broadcast"),
+        (lambda a: srs.ik(a.chain(), np.eye(4), 0.0, [1, 1, 1]), TypeError, "arm"),
+        (lambda a: srs.ik(a, np.eye(4), "x", [1, 1, 1]), TypeError, "psi"),
+        (lambda a: srs.arm_angle(a, np.zeros(6)), ValueError, "q"),
+        (lambda a: srs.feasible_arm_angles(a, np.eye(4), [2, 1, 1]), ValueError, "gc"),
+        (lambda a: srs.sample_self_motion(a, np.eye(4), 0), ValueError, "n"),
+        (lambda a: srs.sample_self_motion(a, np.eye(4), 2.5), TypeError, "n"),
+        (lambda a: srs.sample_self_motion(a, np.stack([np.eye(4)] * 2), 5), ValueError, "target"),
+        (lambda a: srs.sample_self_motion(a, np.eye(4), 5, gc=np.ones((2, 3))), ValueError, "gc"),
+        (lambda a: srs.SRSArm.from_lengths(0.36, -0.42, 0.4, 0.126), ValueError, "d_se"),
+        (
+            lambda a: srs.SRSArm.from_lengths(0.36, 0.42, 0.4, 0.126, lower=np.ones(7), upper=np.zeros(7)),
+            ValueError,
+            "lower",
+        ),
+        (lambda a: srs.SRSArm.from_lengths(0.36, 0.42, 0.4, 0.126, lower=np.ones(6)), ValueError, "lower"),
+        (lambda a: srs.SRSArm.from_chain(dk.robots.panda()), ValueError, "chain"),
+        (lambda a: srs.SRSArm.from_chain(dk.robots.ur5()), ValueError, "chain"),
+        (lambda a: srs.SRSArm.from_chain(a), TypeError, "chain"),
+    ],
+)
 def test_bad_input_is_rejected_on_the_host(call, error, words):
     with pytest.raises(error, match=words.replace("+", r"\+")):
         call(ARMS["iiwa14"])
@@ -507,11 +523,18 @@ def test_valid_means_valid(dtype):
     nan_T = np.full((4, 4), np.nan)
     cases = [  # (target, psi, gc, expected valid or None: valid only if reached)
         (T, psi, gc, True),
-        (T, psi, gc * [0, 1, 1], False), (T, psi, gc * [1, 0.5, 1], False), (T, psi, gc * [1, 1, 2], False),
-        (scaled, psi, gc, False), (skew, psi, gc, False), (nan_T, psi, gc, False),
+        (T, psi, gc * [0, 1, 1], False),
+        (T, psi, gc * [1, 0.5, 1], False),
+        (T, psi, gc * [1, 1, 2], False),
+        (scaled, psi, gc, False),
+        (skew, psi, gc, False),
+        (nan_T, psi, gc, False),
         (np.where(np.eye(4) > 0, np.inf, T), psi, gc, False),
-        (T, np.nan, gc, False), (T, np.inf, gc, False), (T, psi, gc * [np.nan, 1, 1], False),
-        (T, 1e17, gc, None), (T, psi + 2e6 * np.pi, gc, None),
+        (T, np.nan, gc, False),
+        (T, np.inf, gc, False),
+        (T, psi, gc * [np.nan, 1, 1], False),
+        (T, 1e17, gc, None),
+        (T, psi + 2e6 * np.pi, gc, None),
     ]
     targets = np.stack([c[0] for c in cases]).astype(dtype)
     psis = np.array([c[1] for c in cases], dtype)

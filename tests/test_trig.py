@@ -10,8 +10,14 @@ from diffkin._trig import atan2, sincos
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_sincos_matches_numpy(dtype):
     rng = np.random.default_rng(15)
-    x = np.concatenate([rng.uniform(-4, 4, 100_000), rng.uniform(-1e4, 1e4, 100_000),
-                        np.pi / 4 * np.arange(-16, 17), [0.0, -0.0, 1e-30]]).astype(dtype)
+    x = np.concatenate(
+        [
+            rng.uniform(-4, 4, 100_000),
+            rng.uniform(-1e4, 1e4, 100_000),
+            np.pi / 4 * np.arange(-16, 17),
+            [0.0, -0.0, 1e-30],
+        ]
+    ).astype(dtype)
     s, c = jax.jit(sincos)(x)
     assert s.dtype == c.dtype == dtype
     exact = x.astype(np.longdouble)
@@ -65,9 +71,30 @@ def test_sincos_over_the_whole_finite_range(dtype):
     """The sine and cosine of the float value itself, as numpy gives them, up to the largest float."""
     rng = np.random.default_rng(18)
     info = np.finfo(dtype)
-    x = np.concatenate([_log_uniform(rng, dtype, 50_000), np.array(
-        [1e6, -1e6, 1e10, 1e20, 1e30, -1e30, info.max, -info.max, 2.0**13 * 1.5703125, 2.0**30 * 1.5703125,
-         12868.0, 12869.0, 1.7e9, 1.6e9], dtype)])
+    x = np.concatenate(
+        [
+            _log_uniform(rng, dtype, 50_000),
+            np.array(
+                [
+                    1e6,
+                    -1e6,
+                    1e10,
+                    1e20,
+                    1e30,
+                    -1e30,
+                    info.max,
+                    -info.max,
+                    2.0**13 * 1.5703125,
+                    2.0**30 * 1.5703125,
+                    12868.0,
+                    12869.0,
+                    1.7e9,
+                    1.6e9,
+                ],
+                dtype,
+            ),
+        ]
+    )
     x = x[np.isfinite(x)]
     s, c = jax.jit(sincos)(x)
     assert np.all(np.isfinite(s)) and np.all(np.isfinite(c))
@@ -76,8 +103,19 @@ def test_sincos_over_the_whole_finite_range(dtype):
     np.testing.assert_allclose(np.asarray(s, np.longdouble), np.sin(exact), rtol=0, atol=tol)
     np.testing.assert_allclose(np.asarray(c, np.longdouble), np.cos(exact), rtol=0, atol=tol)
     # Subnormals and signed zeros: sin x = x bit for bit (XLA's CPU arithmetic flushes subnormals).
-    tiny = np.array([info.smallest_subnormal, -info.smallest_subnormal, 3 * info.smallest_subnormal,
-                     info.tiny / 2, -info.tiny / 3, 0.0, -0.0, 1e-30], dtype)
+    tiny = np.array(
+        [
+            info.smallest_subnormal,
+            -info.smallest_subnormal,
+            3 * info.smallest_subnormal,
+            info.tiny / 2,
+            -info.tiny / 3,
+            0.0,
+            -0.0,
+            1e-30,
+        ],
+        dtype,
+    )
     s, c = jax.jit(sincos)(tiny)
     np.testing.assert_array_equal(np.asarray(s), np.sin(tiny))
     np.testing.assert_array_equal(np.signbit(np.asarray(s)), np.signbit(tiny))
@@ -94,17 +132,72 @@ def test_sincos_over_the_whole_finite_range(dtype):
 def test_atan2_special_and_subnormal_inputs_as_numpy(dtype):
     info = np.finfo(dtype)
     inf, d = np.inf, info.smallest_subnormal
-    y = np.array([inf, inf, -inf, -inf, inf, -inf, 1, -1, 0, -0.0, 1, inf, d, -d, d, d, -d, 3 * d, d, d, 1,
-                  info.tiny / 4, info.max, -info.max], dtype)
-    x = np.array([inf, -inf, inf, -inf, 1, -1, inf, -inf, inf, -inf, 0, 0, 1, -1, d, -d, -d, 2 * d, 2.0, 1e20, d,
-                  info.max, info.tiny, -d], dtype)
+    y = np.array(
+        [
+            inf,
+            inf,
+            -inf,
+            -inf,
+            inf,
+            -inf,
+            1,
+            -1,
+            0,
+            -0.0,
+            1,
+            inf,
+            d,
+            -d,
+            d,
+            d,
+            -d,
+            3 * d,
+            d,
+            d,
+            1,
+            info.tiny / 4,
+            info.max,
+            -info.max,
+        ],
+        dtype,
+    )
+    x = np.array(
+        [
+            inf,
+            -inf,
+            inf,
+            -inf,
+            1,
+            -1,
+            inf,
+            -inf,
+            inf,
+            -inf,
+            0,
+            0,
+            1,
+            -1,
+            d,
+            -d,
+            -d,
+            2 * d,
+            2.0,
+            1e20,
+            d,
+            info.max,
+            info.tiny,
+            -d,
+        ],
+        dtype,
+    )
     out = np.asarray(jax.jit(atan2)(y, x))
     ref = np.arctan2(y, x)
     np.testing.assert_allclose(out, ref, rtol=3e-7 if dtype == np.float32 else 5e-16, atol=0)
     np.testing.assert_array_equal(np.signbit(out), np.signbit(ref))
     # NaN in, NaN out.
-    assert np.all(np.isnan(np.asarray(atan2(np.array([np.nan, 1.0, np.nan], dtype), np.array([1.0, np.nan, np.nan],
-                                                                                                dtype)))))
+    assert np.all(
+        np.isnan(np.asarray(atan2(np.array([np.nan, 1.0, np.nan], dtype), np.array([1.0, np.nan, np.nan], dtype))))
+    )
     # Random magnitudes over the whole range (subnormal included): within tolerance, and a
     # subnormal result within one unit of its last place (not flushed to 0).
     rng = np.random.default_rng(19)

@@ -199,8 +199,16 @@ def test_map_overlay_and_batch_results(viewer_of, tmp_path):
     counts = np.zeros((4, 3, 2), np.int64)
     counts[0, 0, 0], counts[3, 2, 1], counts[1, 2, 0] = 5, 1, 2
     wmap = dk.workspace.ReachabilityMap(
-        counts=counts, manipulability=counts * 0.01, dexterity=counts.astype(np.int32), origin=np.array([-0.2, 0, 0.1]),
-        voxel_size=0.1, n_samples=8, n_outside=0, orientation_bins=8, chain_name="iiwa14")
+        counts=counts,
+        manipulability=counts * 0.01,
+        dexterity=counts.astype(np.int32),
+        origin=np.array([-0.2, 0, 0.1]),
+        voxel_size=0.1,
+        n_samples=8,
+        n_outside=0,
+        orientation_bins=8,
+        chain_name="iiwa14",
+    )
     wmap.save(tmp_path / "map.npz")
     q = np.random.default_rng(0).uniform(-1, 1, (5, 7))
     np.savez(tmp_path / "res.npz", q=q, success=np.array([1, 0, 1, 1, 1], bool), pos_err=np.arange(5.0))
@@ -293,8 +301,13 @@ def test_cli_view_serves_the_page():
 
     port = _free_port()
     env = dict(os.environ, PYTHONPATH=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    proc = subprocess.Popen([sys.executable, "-m", "diffkin", "view", "iiwa14", "--port", str(port)],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "diffkin", "view", "iiwa14", "--port", str(port)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
     try:
         line = ""
         while "diffkin viewer:" not in line:
@@ -319,10 +332,25 @@ def _chromium() -> str | None:
 def _screenshot(url: str, path) -> np.ndarray:
     from PIL import Image
 
-    subprocess.run([_chromium(), "--headless=new", "--no-sandbox", "--disable-gpu", "--use-gl=angle",
-                    "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--hide-scrollbars",
-                    "--window-size=1024,768", "--virtual-time-budget=15000", f"--screenshot={path}", url],
-                   check=True, timeout=180, capture_output=True)
+    subprocess.run(
+        [
+            _chromium(),
+            "--headless=new",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--use-gl=angle",
+            "--use-angle=swiftshader",
+            "--enable-unsafe-swiftshader",
+            "--hide-scrollbars",
+            "--window-size=1024,768",
+            "--virtual-time-budget=15000",
+            f"--screenshot={path}",
+            url,
+        ],
+        check=True,
+        timeout=180,
+        capture_output=True,
+    )
     return np.asarray(Image.open(path).convert("RGB"), dtype=np.int16)
 
 

@@ -63,9 +63,11 @@ def test_orientation_bins_partition_so3_evenly():
     n = 96_000
     quat = np.random.default_rng(0).normal(size=(n, 4))  # Haar-uniform rotations
     w, x, y, z = (quat / np.linalg.norm(quat, axis=1, keepdims=True)).T
-    R = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
+    R = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ]
     bins = np.asarray(ws._orientation_bin([[jnp.asarray(e) for e in row] for row in R], 8))
     counts = np.bincount(bins, minlength=48)
     assert counts.size == 48  # every bin in [0, 48)
@@ -93,8 +95,10 @@ def test_map_matches_numpy_on_the_same_samples():
 def _radii(m):
     """Nearest and farthest distance from the base z axis of each voxel column of a map, (nx, ny)."""
     edges = [m.origin[i] + m.voxel_size * np.arange(m.counts.shape[i] + 1) for i in range(2)]
-    lo, hi = np.meshgrid(edges[0][:-1], edges[1][:-1], indexing="ij"), np.meshgrid(edges[0][1:], edges[1][1:],
-                                                                                  indexing="ij")
+    lo, hi = (
+        np.meshgrid(edges[0][:-1], edges[1][:-1], indexing="ij"),
+        np.meshgrid(edges[0][1:], edges[1][1:], indexing="ij"),
+    )
     near = [np.where(a > 0, a, np.where(b < 0, -b, 0.0)) for a, b in zip(lo, hi, strict=True)]
     far = [np.maximum(np.abs(a), np.abs(b)) for a, b in zip(lo, hi, strict=True)]
     return np.hypot(*near), np.hypot(*far)
@@ -102,8 +106,14 @@ def _radii(m):
 
 def test_planar_2r_fills_the_textbook_annulus():
     a1, a2, h = 1.0, 0.4, 0.1
-    m = ws.reachability(dk.robots.planar([a1, a2]), 200_000, key=KEY, voxel_size=h,
-                        bounds=[[-1.5, -1.5, -h / 2], [1.5, 1.5, h / 2]], chunk=1 << 14)
+    m = ws.reachability(
+        dk.robots.planar([a1, a2]),
+        200_000,
+        key=KEY,
+        voxel_size=h,
+        bounds=[[-1.5, -1.5, -h / 2], [1.5, 1.5, h / 2]],
+        chunk=1 << 14,
+    )
     occupied = m.counts[:, :, 0] > 0
     near, far = _radii(m)
     eps = 1e-9  # rounding of the FK only
@@ -140,8 +150,9 @@ def test_compiled_once_per_chain_grid_and_chunk():
     ws.reachability(dk.robots.planar([1.0, 0.5]), 5000, key=jax.random.key(1), **kwargs)  # equal chain, new n
     assert (ws._compiled.cache_info().hits, ws._compiled.cache_info().misses) == (1, 1)
     mesh = jax.sharding.Mesh(np.array(jax.devices()), ("devices",))
-    _, step, _ = ws._compiled(ws._ChainKey(dk.robots.planar([1.0, 0.5])), (13, 13, 13), 48, 512,
-                              jnp.dtype(jnp.float64), mesh)
+    _, step, _ = ws._compiled(
+        ws._ChainKey(dk.robots.planar([1.0, 0.5])), (13, 13, 13), 48, 512, jnp.dtype(jnp.float64), mesh
+    )
     assert step._cache_size() == 1  # 2 + 10 steps, one compilation
 
 
@@ -152,7 +163,12 @@ def test_save_load_and_plot_slice(tmp_path):
     for name in ("counts", "manipulability", "dexterity", "origin"):
         np.testing.assert_array_equal(getattr(back, name), getattr(m, name))
     assert (back.voxel_size, back.n_samples, back.n_outside, back.orientation_bins, back.chain_name) == (
-        m.voxel_size, m.n_samples, m.n_outside, m.orientation_bins, "planar2R")
+        m.voxel_size,
+        m.n_samples,
+        m.n_outside,
+        m.orientation_bins,
+        "planar2R",
+    )
     labels = {"count": "samples per voxel", "manipulability": "Yoshikawa", "dexterity": "(of 48)"}
     for quantity in ("count", "manipulability", "dexterity"):
         path = tmp_path / f"{quantity}.png"
@@ -175,19 +191,22 @@ def test_save_load_and_plot_slice(tmp_path):
         ws.plot_slice(m, axis="z", value=5.0)
 
 
-@pytest.mark.parametrize("kwargs, error, match", [
-    (dict(n_samples=0), ValueError, "n_samples"),
-    (dict(n_samples=1.5), TypeError, "n_samples"),
-    (dict(voxel_size=0.0), ValueError, "voxel_size"),
-    (dict(voxel_size=float("nan")), ValueError, "voxel_size"),
-    (dict(voxel_size="1"), TypeError, "voxel_size"),
-    (dict(bounds=[[0, 0, 0], [1, 1]]), ValueError, "bounds"),
-    (dict(bounds=[[0, 0, 0], [1, -1, 1]]), ValueError, "bounds"),
-    (dict(chunk=0), ValueError, "chunk"),
-    (dict(orientation_bins=50), ValueError, "orientation_bins"),
-    (dict(devices=[]), TypeError, "devices"),
-    (dict(voxel_size=1e-4), ValueError, "voxel_size"),
-])
+@pytest.mark.parametrize(
+    "kwargs, error, match",
+    [
+        (dict(n_samples=0), ValueError, "n_samples"),
+        (dict(n_samples=1.5), TypeError, "n_samples"),
+        (dict(voxel_size=0.0), ValueError, "voxel_size"),
+        (dict(voxel_size=float("nan")), ValueError, "voxel_size"),
+        (dict(voxel_size="1"), TypeError, "voxel_size"),
+        (dict(bounds=[[0, 0, 0], [1, 1]]), ValueError, "bounds"),
+        (dict(bounds=[[0, 0, 0], [1, -1, 1]]), ValueError, "bounds"),
+        (dict(chunk=0), ValueError, "chunk"),
+        (dict(orientation_bins=50), ValueError, "orientation_bins"),
+        (dict(devices=[]), TypeError, "devices"),
+        (dict(voxel_size=1e-4), ValueError, "voxel_size"),
+    ],
+)
 def test_bad_arguments_raise(kwargs, error, match):
     args = dict(n_samples=100, key=KEY, voxel_size=0.1) | kwargs
     with pytest.raises(error, match=match):
@@ -203,8 +222,14 @@ def test_bad_chain_and_unbounded_prismatic_joint():
 
 
 def _run(script: str, env: dict) -> dict:
-    out = subprocess.run([sys.executable, "-c", textwrap.dedent(script)], capture_output=True, text=True,
-                         env={**os.environ, **env}, timeout=240, check=False)
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(script)],
+        capture_output=True,
+        text=True,
+        env={**os.environ, **env},
+        timeout=240,
+        check=False,
+    )
     assert out.returncode == 0, out.stderr[-3000:]
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -279,8 +304,12 @@ def test_load_errors_name_the_file_and_the_problem(tmp_path):
     (tmp_path / "cut.npz").write_bytes(whole[: len(whole) // 2])
     np.savez(tmp_path / "partial.npz", counts=m.counts, origin=m.origin)
     np.save(tmp_path / "array.npy", m.counts)
-    cases = [("empty.npz", "could not read it"), ("cut.npz", "could not read it"),
-             ("partial.npz", "missing field.*manipulability"), ("array.npy", "got a single array")]
+    cases = [
+        ("empty.npz", "could not read it"),
+        ("cut.npz", "could not read it"),
+        ("partial.npz", "missing field.*manipulability"),
+        ("array.npy", "got a single array"),
+    ]
     for name, what in cases:
         with pytest.raises(ValueError, match=rf"{name}: .*{what}"):
             ws.ReachabilityMap.load(tmp_path / name)
@@ -296,8 +325,15 @@ def test_voxel_and_sector_indices_do_not_depend_on_the_compilation():
     dtype = np.float32
     origin, inv, shape = np.array([-1.75, -1.75, -1.75], dtype), dtype(1 / 0.1), (35, 35, 35)
     faces = (origin[0] + np.arange(36) * 0.1).astype(dtype)
-    x = np.concatenate([faces, np.nextafter(faces, np.inf), np.nextafter(faces, -np.inf), [0.85, 0.85000004],
-                        [np.nan, np.inf, -np.inf]]).astype(dtype)
+    x = np.concatenate(
+        [
+            faces,
+            np.nextafter(faces, np.inf),
+            np.nextafter(faces, -np.inf),
+            [0.85, 0.85000004],
+            [np.nan, np.inf, -np.inf],
+        ]
+    ).astype(dtype)
     P = [jnp.asarray(x), jnp.zeros_like(x), jnp.zeros_like(x)]
     alone = jax.jit(lambda P: ws._flat_index(P, origin, inv, shape))
     fused = jax.jit(lambda P, s: ws._flat_index([P[0] * s + 0.0 * P[1], P[1], P[2]], origin, inv, shape))
@@ -318,17 +354,30 @@ def test_voxel_and_sector_indices_do_not_depend_on_the_compilation():
     z, one = np.zeros_like(c), np.ones_like(c)
     R = tuple(tuple(jnp.asarray(v) for v in row) for row in ((c, -s, z), (s, c, z), (z, z, one)))
     bins_a = np.asarray(jax.jit(lambda R: ws._orientation_bin(R, n_roll))(R))
-    bins_f = np.asarray(jax.jit(lambda R, k: ws._orientation_bin(tuple(tuple(v * k for v in row) for row in R),
-                                                                 n_roll))(R, jnp.ones_like(R[0][0])))
+    bins_f = np.asarray(
+        jax.jit(lambda R, k: ws._orientation_bin(tuple(tuple(v * k for v in row) for row in R), n_roll))(
+            R, jnp.ones_like(R[0][0])
+        )
+    )
     np.testing.assert_array_equal(bins_a, bins_f)
     far = np.abs(phi[:, None] - edges[None, :]).min(axis=1) > 1e-3
     expected = np.floor((np.arctan2(s, c).astype(np.float64) + np.pi) / (2 * np.pi / n_roll)).astype(int)
     np.testing.assert_array_equal(bins_a[far] - 4 * n_roll, expected[far])
 
 
-UR10_URDF = os.path.join(sys.prefix, "lib", f"python{sys.version_info[0]}.{sys.version_info[1]}", "site-packages",
-                         "cmeel.prefix", "share", "example-robot-data", "robots", "ur_description", "urdf",
-                         "ur10_robot.urdf")
+UR10_URDF = os.path.join(
+    sys.prefix,
+    "lib",
+    f"python{sys.version_info[0]}.{sys.version_info[1]}",
+    "site-packages",
+    "cmeel.prefix",
+    "share",
+    "example-robot-data",
+    "robots",
+    "ur_description",
+    "urdf",
+    "ur10_robot.urdf",
+)
 
 
 @pytest.mark.slow

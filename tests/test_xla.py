@@ -82,8 +82,9 @@ def test_reachability_against_the_traced_path():
     """The map's samples (chunk 0 is ``sample_configs(chain, chunk, fold_in(key, 0))``) through a traced chain."""
     chain = dk.robots.iiwa14()
     n, key = 512, jax.random.key(4)
-    wmap = dk.workspace.reachability(chain, n, key=key, voxel_size=0.2, chunk=n, devices=jax.devices()[:1],
-                                     progress=False)
+    wmap = dk.workspace.reachability(
+        chain, n, key=key, voxel_size=0.2, chunk=n, devices=jax.devices()[:1], progress=False
+    )
     q = dk.workspace.sample_configs(chain, n, jax.random.fold_in(key, 0))
     T, m = jax.jit(lambda chain, q: (dk.fk(chain, q), dk.manipulability(chain, q)))(chain, q)
     cells = np.floor((np.asarray(T)[:, :3, 3] - wmap.origin) / wmap.voxel_size).astype(int)

@@ -47,8 +47,10 @@ def main(argv: list[str] | None = None) -> int:
     """
     try:
         args = build_parser().parse_args(argv)
-        use_cache(cache_dir(args.cache_dir, args.no_cache),
-                   chosen=args.cache_dir is not None or bool(os.environ.get("DIFFKIN_CACHE_DIR")))
+        use_cache(
+            cache_dir(args.cache_dir, args.no_cache),
+            chosen=args.cache_dir is not None or bool(os.environ.get("DIFFKIN_CACHE_DIR")),
+        )
         return args.func(args)
     except SystemExit as e:  # --help, --version
         return e.code if isinstance(e.code, int) else 0
@@ -57,8 +59,11 @@ def main(argv: list[str] | None = None) -> int:
         return 141
     except ModuleNotFoundError as e:  # an optional dependency this command needs
         name = (e.name or "a package").split(".")[0]
-        print(f"diffkin: error: this command needs {name}, which is not installed: "
-              f"pip install 'diffkin[{EXTRAS.get(name, 'demo')}]' (or pip install {name})", file=sys.stderr)
+        print(
+            f"diffkin: error: this command needs {name}, which is not installed: "
+            f"pip install 'diffkin[{EXTRAS.get(name, 'demo')}]' (or pip install {name})",
+            file=sys.stderr,
+        )
         return 2
     except (CLIError, ImportError, ValueError, TypeError, OSError, OverflowError) as e:
         message = " ".join(str(e).split()) or type(e).__name__

@@ -22,8 +22,11 @@ def _ik_fn(key: tuple, num_seeds: int):
     import diffkin as dk
 
     chain = chain_for(key)
-    return jax.jit(lambda T, k, q0, pos_tol, rot_tol: dk.ik.solve(chain, T, key=k, q0=q0, num_seeds=num_seeds,
-                                                                   pos_tol=pos_tol, rot_tol=rot_tol))
+    return jax.jit(
+        lambda T, k, q0, pos_tol, rot_tol: dk.ik.solve(
+            chain, T, key=k, q0=q0, num_seeds=num_seeds, pos_tol=pos_tol, rot_tol=rot_tol
+        )
+    )
 
 
 def progress_bar(total: int, show: bool | None, **kwargs):
@@ -37,8 +40,17 @@ def progress_bar(total: int, show: bool | None, **kwargs):
     return tqdm(total=total, file=sys.stderr, **kwargs)
 
 
-def solve_ik(key: tuple, targets: np.ndarray, *, num_seeds: int = 32, q0=None, seed: int = 1,
-             pos_tol: float = 1e-5, rot_tol: float = 1e-4, progress: bool | None = False):
+def solve_ik(
+    key: tuple,
+    targets: np.ndarray,
+    *,
+    num_seeds: int = 32,
+    q0=None,
+    seed: int = 1,
+    pos_tol: float = 1e-5,
+    rot_tol: float = 1e-4,
+    progress: bool | None = False,
+):
     """Batched IK of ``(n, 4, 4)`` or ``(n, 3)`` targets in fixed-size jitted chunks.
 
     Args:
@@ -58,13 +70,14 @@ def solve_ik(key: tuple, targets: np.ndarray, *, num_seeds: int = 32, q0=None, s
     bar = progress_bar(n, progress, desc="IK", unit="target") if n > IK_CHUNK else None
     parts = []
     for c, start in enumerate(range(0, n, IK_CHUNK)):
-        chunk = targets[start:start + IK_CHUNK]
+        chunk = targets[start : start + IK_CHUNK]
         pad = IK_CHUNK - chunk.shape[0]
         chunk = np.concatenate([chunk, np.repeat(chunk[-1:], pad, axis=0)]) if pad else chunk
         k = jax.random.fold_in(jax.random.key(seed), c)
         res = fn(chunk, k, q0, *tolerances)
-        parts.append({f: np.asarray(getattr(res, f))[:IK_CHUNK - pad] for f in ("q", "success", "pos_err",
-                                                                              "rot_err", "iters")})
+        parts.append(
+            {f: np.asarray(getattr(res, f))[: IK_CHUNK - pad] for f in ("q", "success", "pos_err", "rot_err", "iters")}
+        )
         if bar is not None:
             bar.update(IK_CHUNK - pad)
     if bar is not None:
@@ -86,5 +99,9 @@ def srs_fns(name: str):
             return jax.jit(lambda T, gc: dk.srs.sample_self_motion(arm, T, n, gc=gc))
         return jax.jit(lambda T: dk.srs.sample_self_motion(arm, T, n))
 
-    return (arm, sampler, jax.jit(lambda T, psi, gc: dk.srs.ik(arm, T, psi, gc)),
-            jax.jit(lambda q: dk.srs.arm_angle(arm, q)))
+    return (
+        arm,
+        sampler,
+        jax.jit(lambda T, psi, gc: dk.srs.ik(arm, T, psi, gc)),
+        jax.jit(lambda q: dk.srs.arm_angle(arm, q)),
+    )

@@ -67,11 +67,16 @@ def cmd_demo(args) -> int:
     def fk_urdf(q):
         return dk.fk(urdf, q)
 
-    _say(f"diffkin {dk.__version__} demo{' (quick)' if quick else ''}: {chain.name}, standard DH, "
-         f"{chain.dof} joints, float64, jax {jax.__version__} on {jax.devices()[0].platform}")
+    _say(
+        f"diffkin {dk.__version__} demo{' (quick)' if quick else ''}: {chain.name}, standard DH, "
+        f"{chain.dof} joints, float64, jax {jax.__version__} on {jax.devices()[0].platform}"
+    )
     folder = jax.config.jax_compilation_cache_dir
-    _say(f"        compiled programs cached in {folder} (a second run compiles less)" if folder else
-         "        persistent compilation cache off: every run compiles afresh")
+    _say(
+        f"        compiled programs cached in {folder} (a second run compiles less)"
+        if folder
+        else "        persistent compilation cache off: every run compiles afresh"
+    )
 
     # FK
     _say(f"FK      {n_fk:,} random configurations, jitted dk.fk ...")
@@ -82,12 +87,16 @@ def cmd_demo(args) -> int:
     pos_e, rot_e = _pose_errors(T_base_ee, fk_urdf(q))
     fk_ok = pos_e < 1e-9 and rot_e < 1e-9
     _say(f"        {t_fk * 1e3:.2f} ms warm ({n_fk / t_fk / 1e6:.2f} M/s); compile and first call {t_first:.2f} s")
-    _say(f"        FK check vs the shipped URDF's product of exponentials: max position error "
-         f"{pos_e:.1e} m, max rotation error {rot_e:.1e} rad: {'OK' if fk_ok else 'FAILED'}")
+    _say(
+        f"        FK check vs the shipped URDF's product of exponentials: max position error "
+        f"{pos_e:.1e} m, max rotation error {rot_e:.1e} rad: {'OK' if fk_ok else 'FAILED'}"
+    )
 
     # IK
-    _say(f"IK      {n_ik:,} random reachable targets, LM, 32 seeds, in jitted chunks of {IK_CHUNK}: compiling "
-         f"(the longest wait{'; cached for later runs' if folder else ''}) ...")
+    _say(
+        f"IK      {n_ik:,} random reachable targets, LM, 32 seeds, in jitted chunks of {IK_CHUNK}: compiling "
+        f"(the longest wait{'; cached for later runs' if folder else ''}) ..."
+    )
     q_t = jax.random.uniform(jax.random.key(1), (n_ik, chain.dof), jnp.float64, chain.lower, chain.upper)
     targets = np.asarray(fk(q_t))
     start = time.perf_counter()
@@ -99,11 +108,15 @@ def cmd_demo(args) -> int:
     t_ik = time.perf_counter() - start
     ok = res["success"]
     check_pos, check_rot = _pose_errors(fk_urdf(res["q"][ok]), targets[ok]) if ok.any() else (0.0, 0.0)
-    _say(f"IK      success {ok.mean():.1%} ({ok.sum():,}/{n_ik:,}) at 1e-5 m / 1e-4 rad in {t_ik:.2f} s "
-         f"({n_ik / t_ik:,.0f} targets/s; compile {t_compile:.1f} s)")
+    _say(
+        f"IK      success {ok.mean():.1%} ({ok.sum():,}/{n_ik:,}) at 1e-5 m / 1e-4 rad in {t_ik:.2f} s "
+        f"({n_ik / t_ik:,.0f} targets/s; compile {t_compile:.1f} s)"
+    )
     med_pos, med_rot = np.median(res["pos_err"]), np.median(res["rot_err"])
-    _say(f"        median pos_err {med_pos:.1e} m, rot_err {med_rot:.1e} rad;"
-         f" successes re-checked with the URDF's FK: max {check_pos:.1e} m, {check_rot:.1e} rad")
+    _say(
+        f"        median pos_err {med_pos:.1e} m, rot_err {med_rot:.1e} rad;"
+        f" successes re-checked with the URDF's FK: max {check_pos:.1e} m, {check_rot:.1e} rad"
+    )
 
     # self-motion of one pose
     _say(f"SRS     self-motion of target 0 (dk.srs.sample_self_motion, {n_sm} samples) ...")
@@ -117,9 +130,11 @@ def cmd_demo(args) -> int:
     sm_pos, sm_rot = _pose_errors(fk_urdf(qs_v), T_base_target) if valid.any() else (0.0, 0.0)
     n_gc = len({tuple(g) for g in gc_v.astype(int)})
     psi_range = f"psi in [{psi_v.min():+.3f}, {psi_v.max():+.3f}] rad" if valid.any() else "no feasible arm angle"
-    _say(f"        {int(valid.sum())}/{n_sm} valid samples over {n_gc} global configurations, {psi_range}, max FK "
-         f"error {sm_pos:.1e} m / {sm_rot:.1e} rad ({t_sm * 1e3:.2f} ms warm; compile and first call "
-         f"{t_sm_first:.2f} s)")
+    _say(
+        f"        {int(valid.sum())}/{n_sm} valid samples over {n_gc} global configurations, {psi_range}, max FK "
+        f"error {sm_pos:.1e} m / {sm_rot:.1e} rad ({t_sm * 1e3:.2f} ms warm; compile and first call "
+        f"{t_sm_first:.2f} s)"
+    )
 
     # reachability
     _say(f"Reach   reachability map, {n_ws:,} samples uniform in joint space, voxel {voxel:g} m: compiling ...")
@@ -131,10 +146,14 @@ def cmd_demo(args) -> int:
     t_ws = time.perf_counter() - start
     half = dk.workspace.reachability(chain, n_ws // 2, key=jax.random.key(2), voxel_size=voxel, progress=False)
     reached, reached_half = int((wmap.counts > 0).sum()), int((half.counts > 0).sum())
-    _say(f"        grid {'x'.join(map(str, wmap.counts.shape))}: {reached:,} voxels reached in {t_ws:.2f} s "
-         f"(compile {t_ws_compile:.1f} s)")
-    _say(f"        reached volume {reached * voxel**3:.2f} m^3 ({n_ws // 2:,} samples: {reached_half * voxel**3:.2f} "
-         f"m^3): a lower bound on the workspace volume that grows with the samples")
+    _say(
+        f"        grid {'x'.join(map(str, wmap.counts.shape))}: {reached:,} voxels reached in {t_ws:.2f} s "
+        f"(compile {t_ws_compile:.1f} s)"
+    )
+    _say(
+        f"        reached volume {reached * voxel**3:.2f} m^3 ({n_ws // 2:,} samples: {reached_half * voxel**3:.2f} "
+        f"m^3): a lower bound on the workspace volume that grows with the samples"
+    )
 
     # plots
     _say("Plots   drawing ...")

@@ -6,11 +6,25 @@ import importlib
 import re
 
 # Python parameter names in messages of diffkin's functions, and the flags that set them
-_FLAGS = {"end_link": "--end-link", "base_link": "--base-link", "voxel_size": "--voxel", "n_samples": "--samples",
-          "num_seeds": "--seeds", "pos_tol": "--pos-tol", "rot_tol": "--rot-tol", "q0": "--q0"}
+_FLAGS = {
+    "end_link": "--end-link",
+    "base_link": "--base-link",
+    "voxel_size": "--voxel",
+    "n_samples": "--samples",
+    "num_seeds": "--seeds",
+    "pos_tol": "--pos-tol",
+    "rot_tol": "--rot-tol",
+    "q0": "--q0",
+}
 # the extra that provides each optional module
-EXTRAS = {"optax": "ik", "matplotlib": "plot", "tqdm": "progress", "torch": "validate",
-          "pytorch_kinematics": "validate", "pinocchio": "validate"}
+EXTRAS = {
+    "optax": "ik",
+    "matplotlib": "plot",
+    "tqdm": "progress",
+    "torch": "validate",
+    "pytorch_kinematics": "validate",
+    "pinocchio": "validate",
+}
 
 
 class CLIError(Exception):
@@ -22,8 +36,9 @@ def need(module: str, what: str, extra: str = "demo"):
     try:
         return importlib.import_module(module)
     except ImportError:
-        raise CLIError(f"{what} needs {module}, which is not installed: pip install 'diffkin[{extra}]' "
-                       f"(or pip install {module})") from None
+        raise CLIError(
+            f"{what} needs {module}, which is not installed: pip install 'diffkin[{extra}]' (or pip install {module})"
+        ) from None
 
 
 def with_flags(message: str) -> str:

@@ -56,8 +56,10 @@ def cmd_fk(args) -> int:
         raise CLIError("fk: give the joint values either on the command line or with --q-file (one of the two)")
     q = np.asarray(args.q, dtype=np.float64) if args.q else _read_configs(args.q_file)
     if q.ndim not in (1, 2) or q.shape[-1] != model.dof:
-        raise CLIError(f"{model.name or args.robot} has {model.dof} joints: expected {model.dof} joint values "
-                       f"(or an (N, {model.dof}) array), got shape {q.shape}")
+        raise CLIError(
+            f"{model.name or args.robot} has {model.dof} joints: expected {model.dof} joint values "
+            f"(or an (N, {model.dof}) array), got shape {q.shape}"
+        )
     if not np.all(np.isfinite(q)):
         raise CLIError("joint values must be finite")
     if args.format == "npy" and args.output is None:
@@ -78,15 +80,21 @@ def cmd_fk(args) -> int:
     qs, Ts = q.reshape(-1, model.dof), Ts.reshape(-1, 4, 4)
     quats = quaternions(Ts)
     if args.format == "json":
-        doc = {"robot": model.name or args.robot, "poses": [
-            {"q": qi.tolist(), "position": Ti[:3, 3].tolist(), "quaternion_wxyz": quat.tolist(), "T": Ti.tolist()}
-            for qi, Ti, quat in zip(qs, Ts, quats, strict=True)]}
+        doc = {
+            "robot": model.name or args.robot,
+            "poses": [
+                {"q": qi.tolist(), "position": Ti[:3, 3].tolist(), "quaternion_wxyz": quat.tolist(), "T": Ti.tolist()}
+                for qi, Ti, quat in zip(qs, Ts, quats, strict=True)
+            ],
+        }
         text = json.dumps(doc, indent=2)
     else:
         blocks = []
         for i, (qi, Ti, quat) in enumerate(zip(qs, Ts, quats, strict=True)):
-            blocks.append(f"config {i}: q = {fmt(qi)}\n  position {fmt(Ti[:3, 3])} m, quaternion (w x y z) "
-                          f"{fmt(quat)}\n" + indent(np.array2string(clean(Ti), precision=6, suppress_small=True)))
+            blocks.append(
+                f"config {i}: q = {fmt(qi)}\n  position {fmt(Ti[:3, 3])} m, quaternion (w x y z) "
+                f"{fmt(quat)}\n" + indent(np.array2string(clean(Ti), precision=6, suppress_small=True))
+            )
         text = "\n".join(blocks)
     if args.output:
         output.write_text(text + "\n")

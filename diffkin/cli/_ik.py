@@ -32,8 +32,9 @@ def target_pose(pose) -> np.ndarray:
 def _ik_all(args, T_base_target: np.ndarray) -> int:
     """The exact iiwa solutions of one pose along its self-motion (``dk.srs``)."""
     if args.robot not in SRS_ROBOTS:
-        raise CLIError(f"--all: the closed-form arm-angle IK needs a built-in {' or '.join(SRS_ROBOTS)}, "
-                       f"got {args.robot!r}")
+        raise CLIError(
+            f"--all: the closed-form arm-angle IK needs a built-in {' or '.join(SRS_ROBOTS)}, got {args.robot!r}"
+        )
     if T_base_target.shape != (4, 4):
         raise CLIError("--all needs a full --pose (position and orientation)")
     from diffkin.srs import ALL_GC
@@ -47,8 +48,14 @@ def _ik_all(args, T_base_target: np.ndarray) -> int:
         which = "all global configurations" if gc is None else "gc " + fmt(gc)
         title = f"arm angle psi = {args.psi:+.4f} rad, {which}"
     else:
-        q, valid = (np.asarray(x) for x in (sampler(args.samples, False)(T_base_target) if gc is None
-                                             else sampler(args.samples, True)(T_base_target, gc)))
+        q, valid = (
+            np.asarray(x)
+            for x in (
+                sampler(args.samples, False)(T_base_target)
+                if gc is None
+                else sampler(args.samples, True)(T_base_target, gc)
+            )
+        )
         psi, gcs = (np.asarray(x) for x in arm_angle(q))
         title = f"{args.samples} samples of the self-motion (dk.srs.sample_self_motion)"
     print(f"{args.robot}: {title}; {int(valid.sum())} of {len(valid)} valid (within limits)")
@@ -64,8 +71,11 @@ def cmd_ik(args) -> int:
     chain = load_robot(args.robot, args.end_link, args.base_link)
     target = target_pose(args.pose) if args.pose else np.asarray(args.position)
     if args.pose and abs(np.linalg.norm(args.pose[3:]) - 1) > 1e-6:
-        print(f"diffkin: note: the quaternion's norm is {np.linalg.norm(args.pose[3:]):.7g}, not 1: normalised",
-              file=sys.stderr, flush=True)
+        print(
+            f"diffkin: note: the quaternion's norm is {np.linalg.norm(args.pose[3:]):.7g}, not 1: normalised",
+            file=sys.stderr,
+            flush=True,
+        )
     if not args.all and (args.psi is not None or args.gc is not None or args.samples is not None):
         raise CLIError("--psi, --gc and --samples go with --all")
     if args.all:
@@ -77,12 +87,15 @@ def cmd_ik(args) -> int:
         return _ik_all(args, target)
     if args.q0 is not None and len(args.q0) != chain.dof:
         raise CLIError(f"--q0: {chain.name or args.robot} has {chain.dof} joints, got {len(args.q0)} values")
-    res = solve_ik(key, target[None], num_seeds=args.seeds, q0=args.q0, seed=args.seed, pos_tol=args.pos_tol,
-                   rot_tol=args.rot_tol)
+    res = solve_ik(
+        key, target[None], num_seeds=args.seeds, q0=args.q0, seed=args.seed, pos_tol=args.pos_tol, rot_tol=args.rot_tol
+    )
     ok = bool(res["success"][0])
     what = "pose" if target.shape == (4, 4) else "position (orientation free)"
-    print(f"{chain.name or args.robot}: IK of a {what}, LM, {args.seeds} seeds{' + q0' if args.q0 else ''}, "
-          f"tolerances {args.pos_tol:g} m / {args.rot_tol:g} rad")
+    print(
+        f"{chain.name or args.robot}: IK of a {what}, LM, {args.seeds} seeds{' + q0' if args.q0 else ''}, "
+        f"tolerances {args.pos_tol:g} m / {args.rot_tol:g} rad"
+    )
     print(f"q        {fmt(res['q'][0], 10)} rad")
     print(f"success  {ok}")
     print(f"pos_err  {res['pos_err'][0]:.3e} m")

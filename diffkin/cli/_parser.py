@@ -130,107 +130,175 @@ def _sign(text: str) -> float:
 
 
 def _add_robot(p: argparse.ArgumentParser) -> None:
-    p.add_argument("robot", metavar="ROBOT_OR_FILE",
-                   help=f"built-in robot ({', '.join(ROBOTS)}) or the path of a URDF or MJCF file")
+    p.add_argument(
+        "robot",
+        metavar="ROBOT_OR_FILE",
+        help=f"built-in robot ({', '.join(ROBOTS)}) or the path of a URDF or MJCF file",
+    )
     p.add_argument("--end-link", metavar="L", help="end frame of the chain in a file's tree (default: the single leaf)")
     p.add_argument("--base-link", metavar="B", help="base frame of the chain (default: the root)")
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``diffkin`` argument parser with its subcommands."""
-    parser = _Parser(prog="diffkin", description="Differentiable robot kinematics in JAX: demo, robot info, "
-                     "forward and inverse kinematics, workspace maps. Numbers in float64, angles in radians.")
+    parser = _Parser(
+        prog="diffkin",
+        description="Differentiable robot kinematics in JAX: demo, robot info, "
+        "forward and inverse kinematics, workspace maps. Numbers in float64, angles in radians.",
+    )
     from diffkin import __version__
 
     parser.add_argument("--version", action="version", version=f"diffkin {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_IntermixedParser)
     common = _IntermixedParser(add_help=False)  # the options every command shares (a parent parser)
     cache = common.add_argument_group("compilation cache")
-    cache.add_argument("--cache-dir", metavar="DIR", help="JAX's persistent compilation cache (default "
-                       "$DIFFKIN_CACHE_DIR, else $XDG_CACHE_HOME/diffkin/jax or ~/.cache/diffkin/jax; "
-                       "DIFFKIN_CACHE_DIR=off disables it)")
+    cache.add_argument(
+        "--cache-dir",
+        metavar="DIR",
+        help="JAX's persistent compilation cache (default "
+        "$DIFFKIN_CACHE_DIR, else $XDG_CACHE_HOME/diffkin/jax or ~/.cache/diffkin/jax; "
+        "DIFFKIN_CACHE_DIR=off disables it)",
+    )
     cache.add_argument("--no-cache", action="store_true", help="compile without the persistent cache")
     add_parser = functools.partial(sub.add_parser, parents=[common])
 
-    p = add_parser("demo", help="FK check, batched IK, iiwa self-motion and a reachability map with plots",
-                       description="The main job on the built-in iiwa14: random batched FK (jitted) checked against "
-                       "the shipped URDF, batched IK of 1,000 targets, the arm-angle self-motion of one pose, a "
-                       "reachability map; prints a report and writes PNG plots.")
+    p = add_parser(
+        "demo",
+        help="FK check, batched IK, iiwa self-motion and a reachability map with plots",
+        description="The main job on the built-in iiwa14: random batched FK (jitted) checked against "
+        "the shipped URDF, batched IK of 1,000 targets, the arm-angle self-motion of one pose, a "
+        "reachability map; prints a report and writes PNG plots.",
+    )
     p.add_argument("--out", default="diffkin-demo", metavar="DIR", help="folder for the PNGs (default ./diffkin-demo)")
     p.add_argument("--quick", action="store_true", help="small sizes (50 IK targets, tiny map)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_demo)
 
-    p = add_parser("info", help="joints, limits, DH or screw table, home pose",
-                       description="Joints, types, limits, the DH table (DHChain) or the space-frame screw table "
-                       "(PoEChain, URDFs) and the home pose (FK at q = 0) of a robot.")
+    p = add_parser(
+        "info",
+        help="joints, limits, DH or screw table, home pose",
+        description="Joints, types, limits, the DH table (DHChain) or the space-frame screw table "
+        "(PoEChain, URDFs) and the home pose (FK at q = 0) of a robot.",
+    )
     _add_robot(p)
     p.set_defaults(func=cmd_info)
 
-    p = add_parser("fk", help="end-effector poses of configurations",
-                       description="End-effector poses (base frame) of joint configurations (radians / metres).")
+    p = add_parser(
+        "fk",
+        help="end-effector poses of configurations",
+        description="End-effector poses (base frame) of joint configurations (radians / metres).",
+    )
     _add_robot(p)
     p.add_argument("q", nargs="*", type=_finite, metavar="q", help="joint values q1 ... qn")
     p.add_argument("--q-file", metavar="FILE", help=".npy (or .txt/.csv) file of (n,) or (N, n) joint values")
-    p.add_argument("--frame", metavar="NAME", help="a frame of a file's whole robot (q: its actuated joints, "
-                   "`diffkin info FILE` lists them), instead of a chain's end effector")
+    p.add_argument(
+        "--frame",
+        metavar="NAME",
+        help="a frame of a file's whole robot (q: its actuated joints, "
+        "`diffkin info FILE` lists them), instead of a chain's end effector",
+    )
     p.add_argument("--format", choices=("text", "json", "npy"), default="text", help="output format (default text)")
     p.add_argument("--output", metavar="FILE", help="write to FILE (required for npy: an (..., 4, 4) array)")
     p.set_defaults(func=cmd_fk)
 
-    p = add_parser("ik", help="inverse kinematics of one pose or position",
-                       description="Inverse kinematics of one target: batched Levenberg-Marquardt from random seeds "
-                       "(dk.ik.solve), or with --all every exact iiwa solution along the arm angle (dk.srs). "
-                       "Exit status 1 if no solution was found.")
+    p = add_parser(
+        "ik",
+        help="inverse kinematics of one pose or position",
+        description="Inverse kinematics of one target: batched Levenberg-Marquardt from random seeds "
+        "(dk.ik.solve), or with --all every exact iiwa solution along the arm angle (dk.srs). "
+        "Exit status 1 if no solution was found.",
+    )
     _add_robot(p)
     target = p.add_mutually_exclusive_group(required=True)
-    target.add_argument("--pose", nargs=7, type=_finite, metavar=("X", "Y", "Z", "QW", "QX", "QY", "QZ"),
-                        help="target position (m) and orientation quaternion (w x y z)")
-    target.add_argument("--position", nargs=3, type=_finite, metavar=("X", "Y", "Z"),
-                        help="target position (m), orientation free")
-    p.add_argument("--seeds", type=functools.partial(_positive_int, most=4096), default=32, metavar="N",
-                   help="random seeds (default 32)")
+    target.add_argument(
+        "--pose",
+        nargs=7,
+        type=_finite,
+        metavar=("X", "Y", "Z", "QW", "QX", "QY", "QZ"),
+        help="target position (m) and orientation quaternion (w x y z)",
+    )
+    target.add_argument(
+        "--position", nargs=3, type=_finite, metavar=("X", "Y", "Z"), help="target position (m), orientation free"
+    )
+    p.add_argument(
+        "--seeds",
+        type=functools.partial(_positive_int, most=4096),
+        default=32,
+        metavar="N",
+        help="random seeds (default 32)",
+    )
     p.add_argument("--q0", nargs="+", type=_finite, metavar="Q", help="warm start: one value per joint")
-    p.add_argument("--pos-tol", type=_tolerance, default=1e-5, metavar="M",
-                   help="success tolerance on the position error, m (default 1e-5)")
-    p.add_argument("--rot-tol", type=_tolerance, default=1e-4, metavar="RAD",
-                   help="success tolerance on the rotation error, rad (default 1e-4)")
+    p.add_argument(
+        "--pos-tol",
+        type=_tolerance,
+        default=1e-5,
+        metavar="M",
+        help="success tolerance on the position error, m (default 1e-5)",
+    )
+    p.add_argument(
+        "--rot-tol",
+        type=_tolerance,
+        default=1e-4,
+        metavar="RAD",
+        help="success tolerance on the rotation error, rad (default 1e-4)",
+    )
     p.add_argument("--seed", type=_seed, default=1, help="PRNG seed of the random seeds (default 1)")
     p.add_argument("--all", action="store_true", help="iiwa7/iiwa14: exact solutions along the self-motion (dk.srs)")
     p.add_argument("--psi", type=_finite, metavar="PSI", help="with --all: one arm angle (rad), via dk.srs.ik")
-    p.add_argument("--gc", nargs=3, type=_sign, metavar=("G2", "G4", "G6"),
-                   help="with --all: one global configuration (signs of joints 2, 4, 6; default all eight)")
-    p.add_argument("--samples", type=functools.partial(_positive_int, most=10**6), metavar="N",
-                   help="with --all: number of samples (default 16)")
+    p.add_argument(
+        "--gc",
+        nargs=3,
+        type=_sign,
+        metavar=("G2", "G4", "G6"),
+        help="with --all: one global configuration (signs of joints 2, 4, 6; default all eight)",
+    )
+    p.add_argument(
+        "--samples",
+        type=functools.partial(_positive_int, most=10**6),
+        metavar="N",
+        help="with --all: number of samples (default 16)",
+    )
     p.set_defaults(func=cmd_ik)
 
-    p = add_parser("workspace", help="reachability map (.npz) and optional slice plot",
-                       description="Reachability, manipulability and dexterity map of uniformly sampled "
-                       "configurations (dk.workspace.reachability), saved with ReachabilityMap.save.")
+    p = add_parser(
+        "workspace",
+        help="reachability map (.npz) and optional slice plot",
+        description="Reachability, manipulability and dexterity map of uniformly sampled "
+        "configurations (dk.workspace.reachability), saved with ReachabilityMap.save.",
+    )
     _add_robot(p)
-    p.add_argument("--samples", type=_samples, default=1_000_000, metavar="N",
-                   help="configurations to sample (default 1,000,000)")
+    p.add_argument(
+        "--samples", type=_samples, default=1_000_000, metavar="N", help="configurations to sample (default 1,000,000)"
+    )
     p.add_argument("--voxel", type=_positive_float, default=0.05, metavar="V", help="voxel edge, m (default 0.05)")
     p.add_argument("--out", required=True, metavar="MAP.npz", help="where to save the map")
     p.add_argument("--plot", metavar="SLICE.png", help="also plot one slice of the map")
     p.add_argument("--axis", choices=("x", "y", "z"), default="y", help="slice normal (default y)")
     p.add_argument("--value", type=_finite, default=0.0, help="slice position along --axis, m (default 0)")
-    p.add_argument("--quantity", choices=("count", "manipulability", "dexterity"), default="count",
-                   help="plotted quantity (default count)")
+    p.add_argument(
+        "--quantity",
+        choices=("count", "manipulability", "dexterity"),
+        default="count",
+        help="plotted quantity (default count)",
+    )
     p.add_argument("--seed", type=_seed, default=0, help="PRNG seed (default 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_workspace)
 
-    p = add_parser("view", help="interactive 3D viewer in the browser (viser; pip install 'diffkin[viewer]')",
-                       description="Serve an interactive 3D view of a robot (viser): meshes or link cylinders, joint "
-                       "sliders, draggable IK targets, the iiwa arm angle, a reachability map, batched results. "
-                       "Prints the URL; runs until Ctrl-C.")
+    p = add_parser(
+        "view",
+        help="interactive 3D viewer in the browser (viser; pip install 'diffkin[viewer]')",
+        description="Serve an interactive 3D view of a robot (viser): meshes or link cylinders, joint "
+        "sliders, draggable IK targets, the iiwa arm angle, a reachability map, batched results. "
+        "Prints the URL; runs until Ctrl-C.",
+    )
     p.add_argument("robot", metavar="ROBOT_OR_FILE", help=f"built-in robot ({', '.join(ROBOTS)}) or a URDF/MJCF file")
     p.add_argument("--port", type=_positive_int, default=8080, help="port (default 8080; the next free one if taken)")
     p.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")
     p.add_argument("--map", metavar="MAP.npz", help="reachability map from 'diffkin workspace', drawn as points")
-    p.add_argument("--ik-results", metavar="FILE.npz",
-                   help=".npz: q (N, dof), optional success, pos_err, rot_err (N,), to browse")
+    p.add_argument(
+        "--ik-results", metavar="FILE.npz", help=".npz: q (N, dof), optional success, pos_err, rot_err (N,), to browse"
+    )
     p.add_argument("--end", nargs="+", metavar="FRAME", help="frames with an IK target (default: the leaf frames)")
     p.set_defaults(func=cmd_view)
     return parser

@@ -43,12 +43,18 @@ def plot_self_motion(name: str, q: np.ndarray, path: Path) -> None:
         ax.axhline(limit, color="k", ls="--", lw=1)
     ax.axvline(float(psi0), color="k", ls=":", lw=1, label=f"arm angle of q ({float(psi0):+.2f} rad)")
     signs = " ".join(f"{int(g):+d}" for g in gc)
-    ax.set(xlim=(-np.pi, np.pi), ylim=(-1.6, 1.6), xlabel="arm angle psi (rad)",
-           ylabel="joint angle / its limit (rad / rad; -1 lower, +1 upper limit)")
-    ax.set_title(f"{name} self-motion: every configuration with the flange pose of q, along the arm angle psi\n"
-                 f"q = {' '.join(f'{v:+.2f}' for v in q)} rad (a random in-limit configuration: IK target 0 "
-                 f"of the demo)\nshown: q's own global configuration (signs of joints 2, 4, 6 = {signs});\neach of "
-                 f"the other 7 has a self-motion of its own; {valid.mean():.0%} of arm angles within all limits",
-                 fontsize="medium")
+    ax.set(
+        xlim=(-np.pi, np.pi),
+        ylim=(-1.6, 1.6),
+        xlabel="arm angle psi (rad)",
+        ylabel="joint angle / its limit (rad / rad; -1 lower, +1 upper limit)",
+    )
+    ax.set_title(
+        f"{name} self-motion: every configuration with the flange pose of q, along the arm angle psi\n"
+        f"q = {' '.join(f'{v:+.2f}' for v in q)} rad (a random in-limit configuration: IK target 0 "
+        f"of the demo)\nshown: q's own global configuration (signs of joints 2, 4, 6 = {signs});\neach of "
+        f"the other 7 has a self-motion of its own; {valid.mean():.0%} of arm angles within all limits",
+        fontsize="medium",
+    )
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, fontsize="small")
     fig.savefig(path, dpi=120)

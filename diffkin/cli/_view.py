@@ -20,6 +20,13 @@ def cmd_view(args) -> int:
     for flag, path in (("--map", args.map), ("--ik-results", args.ik_results)):
         if path is not None and not Path(path).is_file():
             raise CLIError(f"{flag}: no such file {path!r}")
-    viewer.show(args.robot, ends=args.end, host=args.host, port=args.port, workspace_map=args.map,
-                results=args.ik_results, block=True)
+    viewer.show(
+        args.robot,
+        ends=args.end,
+        host=args.host,
+        port=args.port,
+        workspace_map=args.map,
+        results=args.ik_results,
+        block=True,
+    )
     return 0

@@ -22,8 +22,10 @@ def cmd_workspace(args) -> int:
     saved = out if out.suffix == ".npz" else out.with_name(out.name + ".npz")  # where np.savez writes
     for flag, path in (("--out", saved), ("--plot", args.plot and Path(args.plot))):
         if path and path.is_dir():
-            raise CLIError(f"{flag}: {str(path)!r} is a directory; expected a file name such as "
-                           f"{str(path / ('map.npz' if flag == '--out' else 'slice.png'))!r}")
+            raise CLIError(
+                f"{flag}: {str(path)!r} is a directory; expected a file name such as "
+                f"{str(path / ('map.npz' if flag == '--out' else 'slice.png'))!r}"
+            )
         if path and not path.parent.is_dir():
             raise CLIError(f"{flag}: no such directory {str(path.parent)!r}")
     if args.plot:
@@ -32,20 +34,27 @@ def cmd_workspace(args) -> int:
         a = "xyz".index(args.axis)
         lo, hi = origin[a], origin[a] + voxel * shape[a]
         if not lo <= args.value < hi:
-            raise CLIError(f"--value: the slice {args.axis} = {args.value:g} m is outside the grid: expected "
-                           f"{args.axis} in [{lo:.4g}, {hi:.4g}) m")
+            raise CLIError(
+                f"--value: the slice {args.axis} = {args.value:g} m is outside the grid: expected "
+                f"{args.axis} in [{lo:.4g}, {hi:.4g}) m"
+            )
     start = time.perf_counter()
-    wmap = dk.workspace.reachability(chain, args.samples, key=jax.random.key(args.seed), voxel_size=args.voxel,
-                                     progress=not args.no_progress)
+    wmap = dk.workspace.reachability(
+        chain, args.samples, key=jax.random.key(args.seed), voxel_size=args.voxel, progress=not args.no_progress
+    )
     seconds = time.perf_counter() - start
     wmap.save(saved)
     reached = int((wmap.counts > 0).sum())
-    print(f"{chain.name or args.robot}: {args.samples:,} samples in {seconds:.2f} s "
-          f"({args.samples / seconds / 1e6:.2f} M/s incl. compile), voxel {wmap.voxel_size:g} m, "
-          f"grid {'x'.join(map(str, wmap.counts.shape))}, origin {fmt(wmap.origin, 4)} m")
-    print(f"reached {reached:,} voxels ({reached * wmap.voxel_size**3:.3f} m^3 of voxels reached: a lower bound of "
-          f"the workspace volume that grows with --samples), {wmap.n_outside:,} samples outside; "
-          f"max manipulability {wmap.manipulability.max():.4g}; saved {saved}")
+    print(
+        f"{chain.name or args.robot}: {args.samples:,} samples in {seconds:.2f} s "
+        f"({args.samples / seconds / 1e6:.2f} M/s incl. compile), voxel {wmap.voxel_size:g} m, "
+        f"grid {'x'.join(map(str, wmap.counts.shape))}, origin {fmt(wmap.origin, 4)} m"
+    )
+    print(
+        f"reached {reached:,} voxels ({reached * wmap.voxel_size**3:.3f} m^3 of voxels reached: a lower bound of "
+        f"the workspace volume that grows with --samples), {wmap.n_outside:,} samples outside; "
+        f"max manipulability {wmap.manipulability.max():.4g}; saved {saved}"
+    )
     if args.plot:
         dk.workspace.plot_slice(wmap, args.axis, args.value, args.quantity, path=args.plot)
         print(f"plot: {args.quantity} on the slice {args.axis} = {args.value:g} m -> {args.plot}")

@@ -59,16 +59,18 @@ def check_target(target, name: str = "target") -> tuple[jax.Array, bool, tuple[i
         bad = ~np.asarray(rigid_poses(target)) & np.all(np.isfinite(np.asarray(target)), axis=(-2, -1))
         if np.any(bad):
             i = tuple(int(k) for k in np.argwhere(bad)[0])
-            raise ValueError(f"{name}[{', '.join(map(str, i))}]: expected a rigid transform (R^T R = I, det R = +1, "
-                             f"last row [0, 0, 0, 1], within {rigid_tol(target.dtype):g}), "
-                             f"got {np.asarray(target)[i].tolist()}")
+            raise ValueError(
+                f"{name}[{', '.join(map(str, i))}]: expected a rigid transform (R^T R = I, det R = +1, "
+                f"last row [0, 0, 0, 1], within {rigid_tol(target.dtype):g}), "
+                f"got {np.asarray(target)[i].tolist()}"
+            )
     return target, position_only, tuple(batch)
 
 
 def check_batched(value, name: str, tail: tuple[int, ...], batch: tuple[int, ...], what: str) -> None:
     """``value`` has shape ``(..., *tail)`` with a batch shape that broadcasts to ``batch``."""
     shape = np.shape(value)
-    if len(shape) < len(tail) or shape[len(shape) - len(tail):] != tail:
+    if len(shape) < len(tail) or shape[len(shape) - len(tail) :] != tail:
         raise ValueError(f"{name}: expected shape (..., {', '.join(map(str, tail))}) {what}, got {shape}")
     head = shape[: len(shape) - len(tail)]
     try:
@@ -89,9 +91,20 @@ class KnownLeaves:
 
     def __init__(self, treedef, leaves: tuple):
         self.treedef, self.leaves = treedef, leaves
-        self._key = (treedef, tuple(None if x is None else (np.asarray(x).dtype.str, np.shape(x),
-                                                           bool(getattr(x, "weak_type", False)),
-                                                           np.asarray(x).tobytes()) for x in leaves))
+        self._key = (
+            treedef,
+            tuple(
+                None
+                if x is None
+                else (
+                    np.asarray(x).dtype.str,
+                    np.shape(x),
+                    bool(getattr(x, "weak_type", False)),
+                    np.asarray(x).tobytes(),
+                )
+                for x in leaves
+            ),
+        )
         self._hash = hash(self._key)
 
     def __hash__(self):
@@ -111,5 +124,6 @@ def split_model(model) -> tuple[KnownLeaves, tuple]:
 
 def join(known: KnownLeaves, traced: tuple):
     """The model again, inside the trace: concrete leaves from ``known``, the others from ``traced``."""
-    return jax.tree_util.tree_unflatten(known.treedef, [t if k is None else k for k, t in
-                                                        zip(known.leaves, traced, strict=True)])
+    return jax.tree_util.tree_unflatten(
+        known.treedef, [t if k is None else k for k, t in zip(known.leaves, traced, strict=True)]
+    )

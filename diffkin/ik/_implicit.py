@@ -84,12 +84,12 @@ def _implicit_tree_jvp(spec, primals, tangents):
     B = base if T_world_root is None else T_world_root
     B_dot = base_dot if T_world_root is None else jnp.zeros_like(base_dot)
     rows, rhs = [], []
-    for f, pos_only, weights, T_t, T_t_dot in zip(spec.frames, spec.position_only, spec.weights, targets,
-                                                  targets_dot, strict=True):
+    for f, pos_only, weights, T_t, T_t_dot in zip(
+        spec.frames, spec.position_only, spec.weights, targets, targets_dot, strict=True
+    ):
         name = robot.frame_names[f]
         T, dT = jax.jvp(lambda r, b, name=name: kinematics.fk(r, q, name, base=b), (robot, B), (robot_dot, B_dot))
-        J = kinematics.jacobian(robot, q, name, frame="world", method="analytic", base=B,
-                                include_base=spec.solve_base)
+        J = kinematics.jacobian(robot, q, name, frame="world", method="analytic", base=B, include_base=spec.solve_base)
         J = J * jnp.asarray([True] * (6 if spec.solve_base else 0) + [not lock for lock in spec.locked])
         v = (T_t_dot if pos_only else _twist(T_t_dot, T_t, False)) - _twist(dT, T, pos_only)
         if pos_only:
@@ -97,8 +97,10 @@ def _implicit_tree_jvp(spec, primals, tangents):
         elif weights != (1.0,) * 6:  # into the target frame
             Rt = jnp.swapaxes(T_t[..., :3, :3], -1, -2)
             J = jnp.concatenate([Rt @ J[..., :3, :], Rt @ J[..., 3:, :]], axis=-2)
-            v = jnp.concatenate([jnp.einsum("...ij,...j->...i", Rt, v[..., :3]),
-                                 jnp.einsum("...ij,...j->...i", Rt, v[..., 3:])], axis=-1)
+            v = jnp.concatenate(
+                [jnp.einsum("...ij,...j->...i", Rt, v[..., :3]), jnp.einsum("...ij,...j->...i", Rt, v[..., 3:])],
+                axis=-1,
+            )
         keep = [a for a in range(J.shape[-2]) if weights[a] != 0.0]
         w = jnp.asarray([weights[a] for a in keep], J.dtype)
         rows.append(J[..., keep, :] * w[:, None])

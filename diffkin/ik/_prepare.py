@@ -56,6 +56,5 @@ def valid_targets(flat: jax.Array, position_only: bool) -> tuple[jax.Array, jax.
     valid = jnp.all(jnp.isfinite(flat.reshape(n, -1)), axis=-1)
     valid = valid if position_only else valid & rigid_poses(flat)  # a non-rigid traced target fails
     identity = jnp.eye(4, dtype=flat.dtype)
-    safe = jnp.where(valid.reshape((n,) + (1,) * (flat.ndim - 1)), flat,
-                     identity[:3, 3] if position_only else identity)
+    safe = jnp.where(valid.reshape((n,) + (1,) * (flat.ndim - 1)), flat, identity[:3, 3] if position_only else identity)
     return valid, safe

@@ -81,8 +81,9 @@ def _start(problem, x: jax.Array, aux, settings: Settings) -> Seeds:
     """Seeds at ``x`` ``(n, P)``, evaluated (one forward pass)."""
     ev = problem.evaluate(x)
     zeros = jnp.zeros(x.shape[1:], bool)
-    return Seeds(x, ev, aux, succeeded(ev, settings.pos_tol, settings.rot_tol), zeros,
-                 jnp.zeros(x.shape[1:], jnp.int32))
+    return Seeds(
+        x, ev, aux, succeeded(ev, settings.pos_tol, settings.rot_tol), zeros, jnp.zeros(x.shape[1:], jnp.int32)
+    )
 
 
 def _iterate(problem, seeds: Seeds, step_fn, num_targets: int, has_first: bool, settings: Settings) -> Seeds:
@@ -93,6 +94,7 @@ def _iterate(problem, seeds: Seeds, step_fn, num_targets: int, has_first: bool, 
     successful seeds no longer move, so each target's result does not depend on the others in
     the batch; the loop exits as soon as every target is done.
     """
+
     def active(s: Seeds):
         success = s.success.reshape(-1, num_targets)
         finished = success | s.stalled.reshape(-1, num_targets)
@@ -128,6 +130,7 @@ def _best(s: Seeds, num_targets: int, rank) -> Seeds:
     A successful seed wins, the one of least ``rank`` (``(seeds, targets)``, e.g. the distance to
     a warm start) when given, else of least residual; without a success, the seed of least residual.
     """
+
     def per_target(x):  # (..., P) -> (..., seeds, targets)
         return x.reshape(x.shape[:-1] + (-1, num_targets))
 
@@ -142,8 +145,20 @@ def _best(s: Seeds, num_targets: int, rank) -> Seeds:
     return jax.tree.map(take, s)
 
 
-def search(build: Callable, lift: Callable, rank: Callable, key, n: int, lower, upper, first, init, step_fn,
-           settings: Settings, moves=None) -> Seeds:
+def search(
+    build: Callable,
+    lift: Callable,
+    rank: Callable,
+    key,
+    n: int,
+    lower,
+    upper,
+    first,
+    init,
+    step_fn,
+    settings: Settings,
+    moves=None,
+) -> Seeds:
     """Solve ``n`` targets from seeds in rounds; the best seed of each (leaves end with ``(n,)``).
 
     Args:
@@ -192,8 +207,13 @@ def search(build: Callable, lift: Callable, rank: Callable, key, n: int, lower, 
             near = best.x[:, idx].T  # (m, n_state)
             reached = (best.ev.pos_err[:, idx] <= settings.pos_tol) & (best.ev.rot_err[:, idx] <= settings.rot_tol)
             only_reached = ~jnp.any(moves[:, :, None] & ~reached[None], axis=1)  # (dof, m)
-            keep = jnp.concatenate([only_reached.T, jnp.broadcast_to(jnp.any(reached, axis=0)[:, None],
-                                                                     (idx.shape[0], x.shape[-1] - dof))], axis=-1)
+            keep = jnp.concatenate(
+                [
+                    only_reached.T,
+                    jnp.broadcast_to(jnp.any(reached, axis=0)[:, None], (idx.shape[0], x.shape[-1] - dof)),
+                ],
+                axis=-1,
+            )
             x = jnp.where(keep, near, x)
         problem = build(idx, _SCREEN * group)
         cost = problem.screen_cost(problem.project(x.reshape(-1, x.shape[-1]).T)).reshape(_SCREEN, group, -1)
@@ -242,8 +262,9 @@ def _retry_unsolved(attempt, best: Seeds, rounds: int, chunk: int) -> Seeds:
         safe_idx = jnp.where(live, idx, 0)
         new = attempt(safe_idx, done[safe_idx], live, best)
         better = live & (new.success | (new.ev.cost < best.ev.cost[safe_idx]))
-        best = jax.tree.map(lambda old, x: old.at[..., idx].set(jnp.where(better, x, old[..., safe_idx]), mode="drop"),
-                            best, new)
+        best = jax.tree.map(
+            lambda old, x: old.at[..., idx].set(jnp.where(better, x, old[..., safe_idx]), mode="drop"), best, new
+        )
         return best, done.at[idx].add(1, mode="drop")
 
     return jax.lax.while_loop(lambda state: jnp.any(pending(*state)), body, (best, jnp.ones(n, jnp.int32)))[0]

@@ -26,9 +26,26 @@ _DEFAULT_ITERS = {"lm": 10, "optax": 1000}
 _TREE_ITERS = {"lm": 30, "optax": 1000}
 
 
-def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str = "lm", max_iters: int | None = None,
-          pos_tol: float = 1e-5, rot_tol: float = 1e-4, respect_limits: bool = True, optimizer=None, weights=None,
-          locked=None, rest=None, secondary=None, solve_base: bool = False, base=None) -> IKResult:
+def solve(
+    chain,
+    target,
+    *,
+    key=None,
+    q0=None,
+    num_seeds: int = 32,
+    method: str = "lm",
+    max_iters: int | None = None,
+    pos_tol: float = 1e-5,
+    rot_tol: float = 1e-4,
+    respect_limits: bool = True,
+    optimizer=None,
+    weights=None,
+    locked=None,
+    rest=None,
+    secondary=None,
+    solve_base: bool = False,
+    base=None,
+) -> IKResult:
     """Inverse kinematics for a batch of targets, from random seeds (and an optional warm start).
 
     Every target gets up to ``num_seeds`` seeds, each the best (least pose error) of 8
@@ -111,15 +128,35 @@ def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str 
     """
     if isinstance(chain, Robot):
         max_iters = _TREE_ITERS.get(method, 0) if max_iters is None else max_iters
-        return _tree.solve(chain, target, weights=weights, locked=locked, q0=q0, rest=rest, secondary=secondary,
-                           solve_base=solve_base, base=base, key=key, num_seeds=num_seeds, method=method,
-                           max_iters=max_iters, pos_tol=pos_tol, rot_tol=rot_tol, respect_limits=respect_limits,
-                           optimizer=optimizer)
+        return _tree.solve(
+            chain,
+            target,
+            weights=weights,
+            locked=locked,
+            q0=q0,
+            rest=rest,
+            secondary=secondary,
+            solve_base=solve_base,
+            base=base,
+            key=key,
+            num_seeds=num_seeds,
+            method=method,
+            max_iters=max_iters,
+            pos_tol=pos_tol,
+            rot_tol=rot_tol,
+            respect_limits=respect_limits,
+            optimizer=optimizer,
+        )
     max_iters = _DEFAULT_ITERS.get(method, 0) if max_iters is None else max_iters  # (an unknown method raises)
     if not isinstance(chain, (DHChain, PoEChain)):
         raise TypeError(f"chain: expected a DHChain, PoEChain or Robot, got {type(chain).__name__}")
-    for name, value in (("weights", weights), ("locked", locked), ("rest", rest), ("secondary", secondary),
-                        ("base", base)):
+    for name, value in (
+        ("weights", weights),
+        ("locked", locked),
+        ("rest", rest),
+        ("secondary", secondary),
+        ("base", base),
+    ):
         if value is not None:
             raise ValueError(f"{name}: only for a Robot (solve dk.load_robot(...) with a mapping of targets)")
     if solve_base:
@@ -132,17 +169,54 @@ def solve(chain, target, *, key=None, q0=None, num_seeds: int = 32, method: str 
         empty = lambda *shape, dtype=target.dtype: jnp.zeros(batch + shape, dtype)  # noqa: E731
         return IKResult(empty(chain.dof), empty(dtype=bool), empty(), empty(), empty(dtype=jnp.int32))
     known, traced = _args.split_model(chain)
-    return _solve(known, traced, target, jax.random.key(0) if key is None else key,
-                  None if q0 is None else jnp.asarray(q0), jnp.asarray(pos_tol, target.dtype),
-                  jnp.asarray(rot_tol, target.dtype), num_seeds=int(num_seeds), method=method,
-                  max_iters=int(max_iters), respect_limits=bool(respect_limits), optimizer=optimizer,
-                  position_only=position_only, batch=batch)
+    return _solve(
+        known,
+        traced,
+        target,
+        jax.random.key(0) if key is None else key,
+        None if q0 is None else jnp.asarray(q0),
+        jnp.asarray(pos_tol, target.dtype),
+        jnp.asarray(rot_tol, target.dtype),
+        num_seeds=int(num_seeds),
+        method=method,
+        max_iters=int(max_iters),
+        respect_limits=bool(respect_limits),
+        optimizer=optimizer,
+        position_only=position_only,
+        batch=batch,
+    )
 
 
-@functools.partial(jax.jit, static_argnames=("known", "num_seeds", "method", "max_iters", "respect_limits",
-                                             "optimizer", "position_only", "batch"))
-def _solve(known: _args.KnownLeaves, traced: tuple, target, key, q0, pos_tol, rot_tol, *, num_seeds, method, max_iters,
-           respect_limits, optimizer, position_only, batch) -> IKResult:
+@functools.partial(
+    jax.jit,
+    static_argnames=(
+        "known",
+        "num_seeds",
+        "method",
+        "max_iters",
+        "respect_limits",
+        "optimizer",
+        "position_only",
+        "batch",
+    ),
+)
+def _solve(
+    known: _args.KnownLeaves,
+    traced: tuple,
+    target,
+    key,
+    q0,
+    pos_tol,
+    rot_tol,
+    *,
+    num_seeds,
+    method,
+    max_iters,
+    respect_limits,
+    optimizer,
+    position_only,
+    batch,
+) -> IKResult:
     """The solver, compiled once per chain (by value), shapes and static settings.
 
     Every closure (problems, ranks) is built here, inside the trace, so that repeated eager
@@ -152,7 +226,7 @@ def _solve(known: _args.KnownLeaves, traced: tuple, target, key, q0, pos_tol, ro
     dtype = target.dtype
     dof = chain.dof
     n = int(np.prod(batch, dtype=np.int64))
-    valid, safe = valid_targets(target.reshape((n,) + target.shape[len(batch):]), position_only)
+    valid, safe = valid_targets(target.reshape((n,) + target.shape[len(batch) :]), position_only)
     model = cast(detach(chain), dtype)
     lower, upper = inward(detach(chain.lower), dtype, -1), inward(detach(chain.upper), dtype, 1)
     wrap = jnp.asarray([t == "R" for t in chain.joint_types]) & ~jnp.isfinite(lower) & ~jnp.isfinite(upper)
@@ -163,8 +237,9 @@ def _solve(known: _args.KnownLeaves, traced: tuple, target, key, q0, pos_tol, ro
         q0_flat = jnp.where(jnp.isfinite(q0_flat), detach(q0_flat), 0.0)
 
     def build(idx, copies: int) -> Problem:
-        T = jnp.broadcast_to(fixed[idx], (copies,) + fixed[idx].shape).reshape((copies * idx.shape[0],)
-                                                                                + fixed.shape[1:])
+        T = jnp.broadcast_to(fixed[idx], (copies,) + fixed[idx].shape).reshape(
+            (copies * idx.shape[0],) + fixed.shape[1:]
+        )
         p = tuple(T[:, i] if position_only else T[:, i, 3] for i in range(3))
         R = None if position_only else tuple(tuple(T[:, i, j] for j in range(3)) for i in range(3))
         return Problem(model, p, R, lower, upper, wrap, respect_limits)

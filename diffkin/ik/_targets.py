@@ -74,8 +74,10 @@ class TreeProblem(NamedTuple):
         """``q + dq``, and the root pose moved by ``exp`` of the body twist ``dx[dof:]``, projected."""
         q = x[: self.dof] + dx[: self.dof]
         if self.solve_base:
-            T = rg.compose(self.root(x), rg.screw_exp(tuple(dx[self.dof : self.dof + 3]),
-                                                      tuple(dx[self.dof + 3 :]), jnp.ones((), x.dtype)))
+            T = rg.compose(
+                self.root(x),
+                rg.screw_exp(tuple(dx[self.dof : self.dof + 3]), tuple(dx[self.dof + 3 :]), jnp.ones((), x.dtype)),
+            )
             q = jnp.concatenate([q, jnp.stack(list(T.p) + [e for row in T.R for e in row])])
         return self.project(q)
 
@@ -103,8 +105,9 @@ class TreeProblem(NamedTuple):
                 e += [rg.mul(ROT_WEIGHT, c) for c in w]
             columns = []
             if jacobian:
-                joint_columns = [zero if lock else c for lock, c in zip(self.locked, self.robot._columns(screws, f),
-                                                                        strict=True)]
+                joint_columns = [
+                    zero if lock else c for lock, c in zip(self.locked, self.robot._columns(screws, f), strict=True)
+                ]
                 columns = kinematics._world_from_space(joint_columns + base_screws, T.p)
             weights = self.weights[k]
             if weights != _ONES and angle is not None:  # into the target frame: R_t^T e, R_t^T J

@@ -45,8 +45,10 @@ def _weights(robot: Robot, names: list[str], position_only: list[bool], weights)
     for name, pos_only in zip(names, position_only, strict=True):
         w = np.asarray(weights.get(name, (1.0, 1.0)), dtype=float) if np.ndim(weights.get(name, 0.0)) else None
         if w is None or w.shape not in ((2,), (6,)) or not np.all(np.isfinite(w)) or np.any(w < 0):
-            raise ValueError(f"weights[{name!r}]: expected 6 non-negative weights of [v; w] or a pair "
-                             f"(w_pos, w_rot), got {weights[name]!r}")
+            raise ValueError(
+                f"weights[{name!r}]: expected 6 non-negative weights of [v; w] or a pair "
+                f"(w_pos, w_rot), got {weights[name]!r}"
+            )
         w = np.repeat(w, 3) if w.shape == (2,) else w
         if not np.any(w[: 3 if pos_only else 6]):
             raise ValueError(f"weights[{name!r}]: every weight is zero (the target would constrain nothing)")
@@ -98,8 +100,26 @@ def _locked(robot: Robot, locked, q0, batch) -> tuple[tuple[bool, ...], jax.Arra
     return mask, jnp.broadcast_to(jnp.asarray(q0), batch + (robot.dof,))
 
 
-def solve(robot: Robot, targets, *, weights, locked, q0, rest, secondary, solve_base, base, key, num_seeds, method,
-          max_iters, pos_tol, rot_tol, respect_limits, optimizer) -> IKResult:
+def solve(
+    robot: Robot,
+    targets,
+    *,
+    weights,
+    locked,
+    q0,
+    rest,
+    secondary,
+    solve_base,
+    base,
+    key,
+    num_seeds,
+    method,
+    max_iters,
+    pos_tol,
+    rot_tol,
+    respect_limits,
+    optimizer,
+) -> IKResult:
     """Host-side checks of a robot's IK, then the compiled solver (see :func:`diffkin.ik.solve`)."""
     _args.check_settings(num_seeds, method, max_iters, pos_tol, rot_tol, optimizer)
     if not isinstance(targets, Mapping) or not targets:
@@ -130,19 +150,45 @@ def solve(robot: Robot, targets, *, weights, locked, q0, rest, secondary, solve_
     mask, locked_q = _locked(robot, locked, q0, batch)
     if robot.dof == 0 and not solve_base:
         raise ValueError(f"robot: {robot.name!r} has no joints to solve")
-    spec = Spec(frames, tuple(kinds), _weights(robot, names, kinds, weights), mask, _secondary_spec(secondary, rest),
-                bool(solve_base))
+    spec = Spec(
+        frames,
+        tuple(kinds),
+        _weights(robot, names, kinds, weights),
+        mask,
+        _secondary_spec(secondary, rest),
+        bool(solve_base),
+    )
     if 0 in batch:
         empty = lambda *shape, dt=dtype: jnp.zeros(batch + shape, dt)  # noqa: E731
-        return IKResult(empty(robot.dof), empty(dt=bool), empty(len(names)), empty(len(names)), empty(dt=jnp.int32),
-                        empty(4, 4) if solve_base else None)
+        return IKResult(
+            empty(robot.dof),
+            empty(dt=bool),
+            empty(len(names)),
+            empty(len(names)),
+            empty(dt=jnp.int32),
+            empty(4, 4) if solve_base else None,
+        )
     known, traced = _args.split_model(robot)
     as_dtype = lambda x: None if x is None else jnp.asarray(x, dtype)  # noqa: E731
-    return _solve_tree(known, traced, tuple(jnp.asarray(a, dtype) for a in arrays),
-                       jax.random.key(0) if key is None else key, as_dtype(q0), as_dtype(rest), as_dtype(base),
-                       as_dtype(locked_q), jnp.asarray(pos_tol, dtype), jnp.asarray(rot_tol, dtype), spec=spec,
-                       num_seeds=int(num_seeds), method=method, max_iters=int(max_iters),
-                       respect_limits=bool(respect_limits), optimizer=optimizer, batch=batch)
+    return _solve_tree(
+        known,
+        traced,
+        tuple(jnp.asarray(a, dtype) for a in arrays),
+        jax.random.key(0) if key is None else key,
+        as_dtype(q0),
+        as_dtype(rest),
+        as_dtype(base),
+        as_dtype(locked_q),
+        jnp.asarray(pos_tol, dtype),
+        jnp.asarray(rot_tol, dtype),
+        spec=spec,
+        num_seeds=int(num_seeds),
+        method=method,
+        max_iters=int(max_iters),
+        respect_limits=bool(respect_limits),
+        optimizer=optimizer,
+        batch=batch,
+    )
 
 
 def _moves(robot: Robot, frames: tuple[int, ...]) -> np.ndarray:
@@ -162,16 +208,38 @@ def _flat(x, batch, tail, n, dtype, default=None):
     return detach(jnp.where(jnp.isfinite(x), x, 0.0 if default is None else default))
 
 
-@functools.partial(jax.jit, static_argnames=("known", "spec", "num_seeds", "method", "max_iters", "respect_limits",
-                                             "optimizer", "batch"))
-def _solve_tree(known: _args.KnownLeaves, traced: tuple, targets: tuple, key, q0, rest, base, locked_q, pos_tol,
-                rot_tol, *, spec: Spec, num_seeds, method, max_iters, respect_limits, optimizer, batch) -> IKResult:
+@functools.partial(
+    jax.jit,
+    static_argnames=("known", "spec", "num_seeds", "method", "max_iters", "respect_limits", "optimizer", "batch"),
+)
+def _solve_tree(
+    known: _args.KnownLeaves,
+    traced: tuple,
+    targets: tuple,
+    key,
+    q0,
+    rest,
+    base,
+    locked_q,
+    pos_tol,
+    rot_tol,
+    *,
+    spec: Spec,
+    num_seeds,
+    method,
+    max_iters,
+    respect_limits,
+    optimizer,
+    batch,
+) -> IKResult:
     """The compiled solver of a robot's targets (once per robot by value, spec, shapes and settings)."""
     robot = _args.join(known, traced)
     dtype, dof, k = targets[0].dtype, robot.dof, len(spec.frames)
     n = int(np.prod(batch, dtype=np.int64))
-    checked = [valid_targets(t.reshape((n,) + t.shape[len(batch):]), pos) for t, pos in
-               zip(targets, spec.position_only, strict=True)]
+    checked = [
+        valid_targets(t.reshape((n,) + t.shape[len(batch) :]), pos)
+        for t, pos in zip(targets, spec.position_only, strict=True)
+    ]
     valid = jnp.all(jnp.stack([v for v, _ in checked]), axis=0)
     safe = tuple(s for _, s in checked)
     fixed = [detach(s) for s in safe]
@@ -201,8 +269,21 @@ def _solve_tree(known: _args.KnownLeaves, traced: tuple, targets: tuple, key, q0
             R.append(None if pos else tuple(tuple(T[:, i, j] for j in range(3)) for i in range(3)))
         root = rg.IDENTITY if base is None and not spec.solve_base else rg.from_matrix(tile(base_flat))
         locked_values = tile(locked_flat).T if locked_flat is not None else jnp.zeros((dof, 1), dtype)
-        return TreeProblem(model, spec.frames, spec.weights, tuple(p), tuple(R), lower, upper, wrap, respect_limits,
-                           spec.locked, locked_values, root, spec.solve_base)
+        return TreeProblem(
+            model,
+            spec.frames,
+            spec.weights,
+            tuple(p),
+            tuple(R),
+            lower,
+            upper,
+            wrap,
+            respect_limits,
+            spec.locked,
+            locked_values,
+            root,
+            spec.solve_base,
+        )
 
     moves = _moves(robot, spec.frames)
     still = jnp.asarray(~np.any(moves, axis=1))  # joints that move no target
@@ -218,6 +299,7 @@ def _solve_tree(known: _args.KnownLeaves, traced: tuple, targets: tuple, key, q0
         def h(x):  # x (n_state, ...) -> (h, Newton step)
             r = None if rest_flat is None else rest_flat[idx].T.reshape((dof,) + (1,) * (x.ndim - 2) + (-1,))
             return _secondary.cost_and_step(spec.secondary, x[:dof], r, lower, upper, free)
+
         return h
 
     def rank(idx, x):  # among successes: least secondary cost, else nearest the warm start
@@ -230,8 +312,20 @@ def _solve_tree(known: _args.KnownLeaves, traced: tuple, targets: tuple, key, q0
         first = q0_flat if not spec.solve_base else jnp.concatenate([q0_flat, base_rows], axis=-1)
     init, step_fn = method_steps(method, optimizer)
     settings = _rounds.Settings(num_seeds, max_iters, _rounds.POLISH if method == "lm" else 0, pos_tol, rot_tol)
-    best = _rounds.search(build, lift, rank, key, n, lower, upper, first, init, step_fn, settings,
-                          moves=jnp.asarray(moves) if k > 1 else None)
+    best = _rounds.search(
+        build,
+        lift,
+        rank,
+        key,
+        n,
+        lower,
+        upper,
+        first,
+        init,
+        step_fn,
+        settings,
+        moves=jnp.asarray(moves) if k > 1 else None,
+    )
     x, ev = best.x, best.ev
     if spec.secondary:
         everything = jnp.arange(n)
@@ -241,8 +335,15 @@ def _solve_tree(known: _args.KnownLeaves, traced: tuple, targets: tuple, key, q0
     T_world_root = None
     if spec.solve_base:
         b = x[dof:].T
-        T_world_root = jnp.zeros((n, 4, 4), dtype).at[:, :3, :3].set(b[:, 3:].reshape(n, 3, 3)).at[:, :3, 3].set(
-            b[:, :3]).at[:, 3, 3].set(1.0)
+        T_world_root = (
+            jnp.zeros((n, 4, 4), dtype)
+            .at[:, :3, :3]
+            .set(b[:, 3:].reshape(n, 3, 3))
+            .at[:, :3, 3]
+            .set(b[:, :3])
+            .at[:, 3, 3]
+            .set(1.0)
+        )
     q, T_world_root = implicit_tree(robot, spec, safe, q, T_world_root, base_in)
     return IKResult(
         q=q.reshape(batch + (dof,)),

@@ -148,5 +148,7 @@ def chain_statics(chain) -> int:
 
 def limit_leaves(chain, dof: int, concrete: bool) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The ``lower`` and ``upper`` leaves of a model with ``dof`` joints: their values when ``concrete``."""
-    return (leaf(chain.lower, "lower", (dof,), concrete, finite=False),
-            leaf(chain.upper, "upper", (dof,), concrete, finite=False))
+    return (
+        leaf(chain.lower, "lower", (dof,), concrete, finite=False),
+        leaf(chain.upper, "upper", (dof,), concrete, finite=False),
+    )

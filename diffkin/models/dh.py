@@ -114,10 +114,18 @@ class DHChain:
         tool_T = np.eye(4) if tool is None else check.rigid_transform(tool, "tool")
         f = jnp.asarray
         return cls(
-            a=f(arr[:, 0]), alpha=f(arr[:, 1]), d=f(arr[:, 2]), theta_offset=f(arr[:, 3]),
-            lower=f(lo), upper=f(hi), base=f(base_T), tool=f(tool_T),
-            joint_types=types, modified=check.flag(modified, "modified"),
-            joint_names=check.joint_names(joint_names, dof), name=name,
+            a=f(arr[:, 0]),
+            alpha=f(arr[:, 1]),
+            d=f(arr[:, 2]),
+            theta_offset=f(arr[:, 3]),
+            lower=f(lo),
+            upper=f(hi),
+            base=f(base_T),
+            tool=f(tool_T),
+            joint_types=types,
+            modified=check.flag(modified, "modified"),
+            joint_names=check.joint_names(joint_names, dof),
+            name=name,
         )
 
     def _frames(self, q: list[jax.Array]) -> rg.Frames:
@@ -133,9 +141,7 @@ class DHChain:
             sa, ca = rg.sincos(alpha[i])
             if self.modified:
                 A = rg.Rigid(
-                    ((ct, -st, 0.0),
-                     (rg.mul(st, ca), rg.mul(ct, ca), -sa),
-                     (rg.mul(st, sa), rg.mul(ct, sa), ca)),
+                    ((ct, -st, 0.0), (rg.mul(st, ca), rg.mul(ct, ca), -sa), (rg.mul(st, sa), rg.mul(ct, sa), ca)),
                     (a[i], -rg.mul(sa, d_i), rg.mul(ca, d_i)),
                 )
                 T = rg.compose(T, A)
@@ -143,9 +149,7 @@ class DHChain:
             else:
                 axis_frame = T  # joint i moves about z_{i-1}
                 A = rg.Rigid(
-                    ((ct, -rg.mul(st, ca), rg.mul(st, sa)),
-                     (st, rg.mul(ct, ca), -rg.mul(ct, sa)),
-                     (0.0, sa, ca)),
+                    ((ct, -rg.mul(st, ca), rg.mul(st, sa)), (st, rg.mul(ct, ca), -rg.mul(ct, sa)), (0.0, sa, ca)),
                     (rg.mul(a[i], ct), rg.mul(a[i], st), d_i),
                 )
                 T = rg.compose(T, A)

@@ -48,14 +48,17 @@ def joint_values(model: Model, q) -> jax.Array:
         kind = "robot" if isinstance(model, Robot) else "chain"
         raise ValueError(f"q: expected shape (..., {model.dof}) for a {model.dof}-joint {kind}, got {q.shape}")
     if q.dtype == jnp.float64 and any(is_concrete(x) and x.dtype == jnp.float32 for x in jax.tree.leaves(model)):
-        warnings.warn("the model's numbers are float32 (it was built before jax_enable_x64 was switched on): "
-                      "float64 results are only accurate to ~1e-7; build the model after enabling x64",
-                      stacklevel=3)
+        warnings.warn(
+            "the model's numbers are float32 (it was built before jax_enable_x64 was switched on): "
+            "float64 results are only accurate to ~1e-7; build the model after enabling x64",
+            stacklevel=3,
+        )
     return q
 
 
-def frames(model: Model, q: list, frame: int | None = None, base: rg.Rigid = rg.IDENTITY,
-           *, every: bool = False) -> rg.Frames:
+def frames(
+    model: Model, q: list, frame: int | None = None, base: rg.Rigid = rg.IDENTITY, *, every: bool = False
+) -> rg.Frames:
     """The forward pass of ``model`` (see the module docstring); ``frame``/``base``/``every`` are for robots."""
     if isinstance(model, Robot):
         return model._frames(q, 0 if frame is None else frame, base, every=every)

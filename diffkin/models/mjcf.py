@@ -71,11 +71,13 @@ def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
 def _quat(q: np.ndarray, where: str) -> np.ndarray:
     """Rotation of the quaternion ``w x y z`` (normalised, as MuJoCo does)."""
     w, x, y, z = _unit(q, where)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _zaxis(z: np.ndarray, where: str) -> np.ndarray:
@@ -165,8 +167,9 @@ class _Reader:
             yield tags.get(tag, {})
             cls = parent
 
-    def _get(self, el: ET.Element, attribute: str, cls: str | None, default: str | None = None,
-             tag: str | None = None) -> str | None:
+    def _get(
+        self, el: ET.Element, attribute: str, cls: str | None, default: str | None = None, tag: str | None = None
+    ) -> str | None:
         """An attribute from the element, else its class chain, else ``default``."""
         if el.get(attribute) is not None:
             return el.get(attribute)
@@ -195,8 +198,9 @@ class _Reader:
         if not given:
             return np.eye(3)
         kind = given[0]
-        values = _xml.numbers(None, kind, {"quat": 4, "axisangle": 4, "euler": 3, "xyaxes": 6, "zaxis": 3}[kind],
-                              attrs[kind], where)
+        values = _xml.numbers(
+            None, kind, {"quat": 4, "axisangle": 4, "euler": 3, "xyaxes": 6, "zaxis": 3}[kind], attrs[kind], where
+        )
         if kind == "quat":
             return _quat(values, f"{where} quat")
         if kind == "axisangle":
@@ -254,16 +258,26 @@ class _Reader:
         where = _describe(el)
         if kind not in ("hinge", "slide"):
             raise ValueError(f"{where}: joint type {kind!r} is not supported (hinge, slide, free on a top-level body)")
-        axis = T[:3, :3] @ _unit(_xml.numbers(None, "axis", 3, self._get(el, "axis", cls, "0 0 1"), where),
-                                 f"{where} axis")
+        axis = T[:3, :3] @ _unit(
+            _xml.numbers(None, "axis", 3, self._get(el, "axis", cls, "0 0 1"), where), f"{where} axis"
+        )
         anchor = T[:3, :3] @ _xml.numbers(None, "pos", 3, self._get(el, "pos", cls, "0 0 0"), where) + T[:3, 3]
         hinge = kind == "hinge"
         screw = np.concatenate([np.cross(anchor, axis), axis] if hinge else [axis, np.zeros(3)])
         ref = float(_xml.numbers(None, "ref", 1, self._get(el, "ref", cls, "0"), where)[0])
         lower, upper = self._limits(el, cls, hinge)
         name = el.get("name") or f"joint{jid}"
-        return JointSpec(name, "R" if hinge else "P", "", body, np.eye(4), screw, lower, upper,
-                         offset=-(self._angle(ref) if hinge else ref)), False
+        return JointSpec(
+            name,
+            "R" if hinge else "P",
+            "",
+            body,
+            np.eye(4),
+            screw,
+            lower,
+            upper,
+            offset=-(self._angle(ref) if hinge else ref),
+        ), False
 
     def _limits(self, el: ET.Element, cls: str, hinge: bool) -> tuple[float, float]:
         """``(lower, upper)`` in radians or metres; ``+-inf`` if unlimited (MuJoCo's ``limited`` rules)."""
@@ -359,8 +373,10 @@ def _equalities(reader: _Reader, root: ET.Element, joints: list[JointSpec]) -> l
                 continue
             where = _describe(el).replace("MJCF <", "MJCF <equality><", 1)
             if el.tag != "joint":
-                raise ValueError(f"{where}: <equality><{el.tag}> constraints are not supported (they close "
-                                 "kinematic loops or couple tendons); only linear <joint> equalities are")
+                raise ValueError(
+                    f"{where}: <equality><{el.tag}> constraints are not supported (they close "
+                    "kinematic loops or couple tendons); only linear <joint> equalities are"
+                )
             c = _xml.numbers(None, "polycoef", 5, reader._get(el, "polycoef", cls, "0 1 0 0 0", "equality"), where)
             if np.any(c[2:] != 0):
                 raise ValueError(f"{where}: polycoef {c.tolist()} is not linear (c2 = c3 = c4 = 0 is needed)")
@@ -421,16 +437,20 @@ def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
         reader.worldbody(el)
     free = [(name, part, part.free) for name, part in reader.parts.items() if part.free is not None]
     if len(free) > 1:
-        raise ValueError(f"{_describe(free[1][2])}: several bodies have free joints ({[n for n, _, _ in free]}); "
-                         "a robot has one floating root")
+        raise ValueError(
+            f"{_describe(free[1][2])}: several bodies have free joints ({[n for n, _, _ in free]}); "
+            "a robot has one floating root"
+        )
     parts = list(reader.parts.values())
     if free:
         name, part, _ = free[0]
         for other, p in reader.parts.items():
             moving = [j.name for j in p.joints if j.kind != "F"]
             if p is not part and moving:
-                raise ValueError(f"MJCF <body name={other!r}>: its joints {moving} move a second tree beside the "
-                                 f"floating root {name!r}; one tree is supported")
+                raise ValueError(
+                    f"MJCF <body name={other!r}>: its joints {moving} move a second tree beside the "
+                    f"floating root {name!r}; one tree is supported"
+                )
         parts = [part]
     joints = _equalities(reader, root, [j for p in parts for j in p.joints])
     links = [n for p in parts for n in p.links]

@@ -126,8 +126,14 @@ class PoEChain:
         lo, hi = check.limits(lower, upper, dof)
         f = jnp.asarray
         return cls(
-            screws=f(S), home=f(M), link_homes=f(L), lower=f(lo), upper=f(hi),
-            joint_types=types, joint_names=check.joint_names(joint_names, dof), name=name,
+            screws=f(S),
+            home=f(M),
+            link_homes=f(L),
+            lower=f(lo),
+            upper=f(hi),
+            joint_types=types,
+            joint_names=check.joint_names(joint_names, dof),
+            name=name,
         )
 
     def _frames(self, q: list[jax.Array]) -> rg.Frames:

@@ -80,8 +80,11 @@ class Robot:
     def _check(self, concrete: bool) -> None:
         """Static structure and leaf shapes always; values (unit screws, rigid poses, limits) when concrete."""
         nj, nf, dof = len(self.tree_joints), len(self.frame_names), len(self.joint_names)
-        for name, value, size in (("parents", self.parents, nj), ("sources", self.sources, nj),
-                                  ("frame_bodies", self.frame_bodies, nf)):
+        for name, value, size in (
+            ("parents", self.parents, nj),
+            ("sources", self.sources, nj),
+            ("frame_bodies", self.frame_bodies, nf),
+        ):
             if not isinstance(value, tuple) or len(value) != size or not all(isinstance(i, int) for i in value):
                 raise TypeError(f"{name}: expected a tuple of {size} ints, got {value!r}")
         if not isinstance(self.joint_types, str) or len(self.joint_types) != nj or set(self.joint_types) - set("RP"):
@@ -91,8 +94,11 @@ class Robot:
                 raise ValueError(f"parents[{j}]: expected a body in [0, {j}] (parents come first), got {parent}")
         if any(not 0 <= i < dof for i in self.sources) or any(not 0 <= b <= nj for b in self.frame_bodies):
             raise ValueError(f"sources/frame_bodies: expected indices of q (< {dof}) and of bodies (<= {nj})")
-        for name, names in (("frame_names", self.frame_names), ("joint_names", self.joint_names),
-                            ("tree_joints", self.tree_joints)):
+        for name, names in (
+            ("frame_names", self.frame_names),
+            ("joint_names", self.joint_names),
+            ("tree_joints", self.tree_joints),
+        ):
             if len(set(names)) != len(names) or not all(isinstance(n, str) for n in names):
                 raise ValueError(f"{name}: expected distinct strings, got {names!r}")
         check.flag(self.floating, "floating")
@@ -217,7 +223,7 @@ class Robot:
         below = self.ancestors(b_base)
         if path[: len(below)] != below:
             raise ValueError(f"chain: frame {end!r} is not below frame {self.frame_names[f_base]!r}")
-        path = path[len(below):]
+        path = path[len(below) :]
         if not path:
             raise ValueError(f"chain: no moving joint between {self.frame_names[f_base]!r} and {end!r}")
         sources = [self.sources[j] for j in path]
@@ -225,11 +231,14 @@ class Robot:
         for j in path:
             if sources.count(self.sources[j]) > 1:
                 driven = [self.tree_joints[k] for k in path if self.sources[k] == self.sources[j]]
-                raise ValueError(f"chain: joint {self.joint_names[self.sources[j]]!r} drives several joints on the "
-                                 f"path to {end!r} ({driven}); a serial chain has one joint per variable")
+                raise ValueError(
+                    f"chain: joint {self.joint_names[self.sources[j]]!r} drives several joints on the "
+                    f"path to {end!r} ({driven}); a serial chain has one joint per variable"
+                )
             if m_host is not None and abs(abs(m_host[j]) - 1.0) > 1e-12:
-                raise ValueError(f"chain: mimic joint {self.tree_joints[j]!r} has multiplier {m_host[j]}; a serial "
-                                 "chain needs +-1")
+                raise ValueError(
+                    f"chain: mimic joint {self.tree_joints[j]!r} has multiplier {m_host[j]}; a serial chain needs +-1"
+                )
         dtype = jnp.result_type(self.joint_poses)
         T = rg.inverse(rg.from_matrix(self.frame_poses[f_base]))
         screws, link_homes = [], []
@@ -244,10 +253,14 @@ class Robot:
             link_homes.append(rg.to_matrix(T, (), dtype))
         home = rg.to_matrix(rg.compose(T, rg.from_matrix(self.frame_poses[f_end])), (), dtype)
         return PoEChain(
-            screws=jnp.stack(screws), home=home, link_homes=jnp.stack(link_homes),
-            lower=self.lower[jnp.asarray(sources)], upper=self.upper[jnp.asarray(sources)],
+            screws=jnp.stack(screws),
+            home=home,
+            link_homes=jnp.stack(link_homes),
+            lower=self.lower[jnp.asarray(sources)],
+            upper=self.upper[jnp.asarray(sources)],
             joint_types="".join(self.joint_types[j] for j in path),
-            joint_names=tuple(self.joint_names[i] for i in sources), name=self.name,
+            joint_names=tuple(self.joint_names[i] for i in sources),
+            name=self.name,
         )
 
 
@@ -324,8 +337,10 @@ def build(
         if j.parent == j.child:
             raise ValueError(f"{where}: joint {j.name!r} connects link {j.parent!r} to itself (a kinematic loop)")
         if j.child in by_child:
-            raise ValueError(f"{where}: link {j.child!r} is the child of two joints ({by_child[j.child].name!r}, "
-                             f"{j.name!r}); a tree has one parent per link (kinematic loops are not supported)")
+            raise ValueError(
+                f"{where}: link {j.child!r} is the child of two joints ({by_child[j.child].name!r}, "
+                f"{j.name!r}); a tree has one parent per link (kinematic loops are not supported)"
+            )
         by_child[j.child] = j
         children.setdefault(j.parent, []).append(j)
     everything = list(dict.fromkeys([*links, *(x for j in joints for x in (j.parent, j.child))]))

@@ -37,8 +37,10 @@ def _parse_joint(el: ET.Element) -> JointSpec:
     if kind == "floating":
         kind_letter = "floating"
     elif kind not in _KINDS:
-        raise ValueError(f"{where}: joint type {kind!r} is not supported; expected revolute, continuous, "
-                         "prismatic, fixed (or floating from the root link)")
+        raise ValueError(
+            f"{where}: joint type {kind!r} is not supported; expected revolute, continuous, "
+            "prismatic, fixed (or floating from the root link)"
+        )
     else:
         kind_letter = _KINDS[kind]
     origin_el = el.find("origin")
@@ -66,8 +68,11 @@ def _parse_joint(el: ET.Element) -> JointSpec:
         source = mimic_el.get("joint")
         if not source:
             raise ValueError(f"{where} <mimic>: missing 'joint' attribute")
-        mimic = (source, float(_xml.numbers(mimic_el, "multiplier", 1, "1", f"{where} <mimic>")[0]),
-                 float(_xml.numbers(mimic_el, "offset", 1, "0", f"{where} <mimic>")[0]))
+        mimic = (
+            source,
+            float(_xml.numbers(mimic_el, "multiplier", 1, "1", f"{where} <mimic>")[0]),
+            float(_xml.numbers(mimic_el, "offset", 1, "0", f"{where} <mimic>")[0]),
+        )
     return JointSpec(name, kind_letter, parent.get("link", ""), child.get("link", ""), T, screw, lower, upper, mimic)
 
 
@@ -106,8 +111,10 @@ def _robot(root: ET.Element, joints: list[JointSpec], links: list[str], *, float
         children = {j.child for j in joints}
         j = free[0]
         if len(free) > 1 or j.parent in children or sum(k.parent == j.parent for k in joints) > 1:
-            raise ValueError(f"URDF joint {j.name!r}: a floating joint is supported only as the single joint "
-                             "of the root link (the floating base)")
+            raise ValueError(
+                f"URDF joint {j.name!r}: a floating joint is supported only as the single joint "
+                "of the root link (the floating base)"
+            )
         joints, links, floating = [k for k in joints if k is not j], [n for n in links if n != j.parent], True
     return build(joints, links, floating=floating, name=root.get("name", ""), where="URDF")
 
@@ -153,6 +160,7 @@ def load_urdf(source, end_link: str | None = None, *, base_link: str | None = No
                 leaves.append(link)
         if len(leaves) != 1:
             raise ValueError(
-                f"end_link: the URDF has several leaf links below {start!r}, choose one of {sorted(leaves)}")
+                f"end_link: the URDF has several leaf links below {start!r}, choose one of {sorted(leaves)}"
+            )
         end_link = leaves[0]
     return robot.chain(end_link, base_link)

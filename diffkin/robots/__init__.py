@@ -18,8 +18,9 @@ def _iiwa(d_bs: float, d_se: float, d_ew: float, d_wf: float, name: str) -> DHCh
     d = [d_bs, 0.0, d_se, 0.0, d_ew, 0.0, d_wf]
     table = np.stack([np.zeros(7), alpha, d, np.zeros(7)], axis=1)
     limits = np.deg2rad(_IIWA_LIMITS_DEG)
-    return DHChain.from_table(table, lower=-limits, upper=limits, name=name,
-                              joint_names=[f"{name}_joint_{i + 1}" for i in range(7)])
+    return DHChain.from_table(
+        table, lower=-limits, upper=limits, name=name, joint_names=[f"{name}_joint_{i + 1}" for i in range(7)]
+    )
 
 
 def iiwa7() -> DHChain:
@@ -58,7 +59,10 @@ def panda() -> DHChain:
     tool = np.eye(4)
     tool[2, 3] = 0.107
     return DHChain.from_table(
-        table, modified=True, tool=tool, name="panda",
+        table,
+        modified=True,
+        tool=tool,
+        name="panda",
         lower=[-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973],
         upper=[2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973],
         joint_names=[f"panda_joint{i + 1}" for i in range(7)],
@@ -78,8 +82,14 @@ def ur5() -> DHChain:
     alpha = [_PI2, 0.0, 0.0, _PI2, -_PI2, 0.0]
     table = np.stack([a, alpha, d, np.zeros(6)], axis=1)
     lim = np.full(6, 2 * np.pi)
-    names = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint",
-             "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]
+    names = [
+        "shoulder_pan_joint",
+        "shoulder_lift_joint",
+        "elbow_joint",
+        "wrist_1_joint",
+        "wrist_2_joint",
+        "wrist_3_joint",
+    ]
     return DHChain.from_table(table, lower=-lim, upper=lim, name="ur5", joint_names=names)
 
 

@@ -80,8 +80,11 @@ class SRSArm:
             )
         d = np.asarray(chain.d, dtype=np.float64)
         expected = {
-            "a": np.zeros(7), "theta_offset": np.zeros(7), "alpha": ALPHA,
-            "base": np.eye(4), "tool": np.eye(4),
+            "a": np.zeros(7),
+            "theta_offset": np.zeros(7),
+            "alpha": ALPHA,
+            "base": np.eye(4),
+            "tool": np.eye(4),
         }
         for field, want in expected.items():
             got = np.asarray(getattr(chain, field), dtype=np.float64)
@@ -102,12 +105,30 @@ class SRSArm:
         """
         dtype = jnp.result_type(self.d_bs, self.d_se, self.d_ew, self.d_wf)
         zero = jnp.zeros((), dtype)
-        d = jnp.stack([jnp.asarray(self.d_bs, dtype), zero, jnp.asarray(self.d_se, dtype), zero,
-                       jnp.asarray(self.d_ew, dtype), zero, jnp.asarray(self.d_wf, dtype)])
+        d = jnp.stack(
+            [
+                jnp.asarray(self.d_bs, dtype),
+                zero,
+                jnp.asarray(self.d_se, dtype),
+                zero,
+                jnp.asarray(self.d_ew, dtype),
+                zero,
+                jnp.asarray(self.d_wf, dtype),
+            ]
+        )
         return DHChain(
-            a=jnp.zeros(7, dtype), alpha=jnp.asarray(ALPHA, dtype), d=d, theta_offset=jnp.zeros(7, dtype),
-            lower=self.lower, upper=self.upper, base=jnp.eye(4, dtype=dtype), tool=jnp.eye(4, dtype=dtype),
-            joint_types="R" * 7, modified=False, joint_names=check.joint_names(None, 7), name="srs",
+            a=jnp.zeros(7, dtype),
+            alpha=jnp.asarray(ALPHA, dtype),
+            d=d,
+            theta_offset=jnp.zeros(7, dtype),
+            lower=self.lower,
+            upper=self.upper,
+            base=jnp.eye(4, dtype=dtype),
+            tool=jnp.eye(4, dtype=dtype),
+            joint_types="R" * 7,
+            modified=False,
+            joint_names=check.joint_names(None, 7),
+            name="srs",
         )
 
 

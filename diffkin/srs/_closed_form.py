@@ -221,9 +221,22 @@ class PoseGeometry(NamedTuple):
         x7, y7, z7 = (rg.column(self.R07, j) for j in range(3))
         col0 = rg.vadd(rg.scale(self.c4, a0), rg.scale(self.s4, a1))  # columns 0 and 2 of R04 = R03 R34
         col2 = rg.vadd(rg.scale(-self.s4, a0), rg.scale(self.c4, a1))
-        return AngleEntries(R03[0][0], R03[1][0], R03[2][0], R03[0][1], R03[1][1], R03[2][1], R03[2][2],
-                       rg.dot(col0, x7), -rg.dot(a2, x7), rg.dot(col2, x7),
-                       rg.dot(col0, z7), -rg.dot(a2, z7), rg.dot(col2, z7), rg.dot(col2, y7))
+        return AngleEntries(
+            R03[0][0],
+            R03[1][0],
+            R03[2][0],
+            R03[0][1],
+            R03[1][1],
+            R03[2][1],
+            R03[2][2],
+            rg.dot(col0, x7),
+            -rg.dot(a2, x7),
+            rg.dot(col2, x7),
+            rg.dot(col0, z7),
+            -rg.dot(a2, z7),
+            rg.dot(col2, z7),
+            rg.dot(col2, y7),
+        )
 
     def trig_entries(self) -> AngleEntries:
         """The joint-angle entries as functions of ``psi``."""
@@ -250,8 +263,11 @@ def pose_geometry(arm: SRSArm, target: jax.Array, gc: jax.Array) -> PoseGeometry
     d_bs, d_se, d_ew, d_wf = (jnp.asarray(v, dtype) for v in (arm.d_bs, arm.d_se, arm.d_ew, arm.d_wf))
     g2, g4, g6 = gc[..., 0], gc[..., 1], gc[..., 2]
     R07: rg.Mat3 = tuple(tuple(target[..., i, j] for j in range(3)) for i in range(3))
-    x_sw = (target[..., 0, 3] - d_wf * R07[0][2], target[..., 1, 3] - d_wf * R07[1][2],
-            target[..., 2, 3] - d_wf * R07[2][2] - d_bs)
+    x_sw = (
+        target[..., 0, 3] - d_wf * R07[0][2],
+        target[..., 1, 3] - d_wf * R07[1][2],
+        target[..., 2, 3] - d_wf * R07[2][2] - d_bs,
+    )
     # Materialised stages (see PoseGeometry.angles): the inputs, read once from their interleaved
     # layout, then the geometry.
     flat = list(materialize([e for row in R07 for e in row] + list(x_sw) + [g2, g4, g6]))
@@ -311,8 +327,11 @@ def ik(arm: SRSArm, target: ArrayLike, psi: ArrayLike, gc: ArrayLike) -> tuple[j
     if n <= CHUNK:
         q, valid = _solve(arm, target, psi, gc)
         return jnp.broadcast_to(q, shape + (7,)), jnp.broadcast_to(valid, shape)
-    inputs = (jnp.broadcast_to(target, shape + (4, 4)).reshape(n, 4, 4), jnp.broadcast_to(psi, shape).reshape(n),
-              jnp.broadcast_to(gc, shape + (3,)).reshape(n, 3))
+    inputs = (
+        jnp.broadcast_to(target, shape + (4, 4)).reshape(n, 4, 4),
+        jnp.broadcast_to(psi, shape).reshape(n),
+        jnp.broadcast_to(gc, shape + (3,)).reshape(n, 3),
+    )
     q, valid = in_steps(functools.partial(_solve, arm), inputs, CHUNK)
     return q.reshape(shape + (7,)), valid.reshape(shape)
 

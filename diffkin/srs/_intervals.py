@@ -135,8 +135,9 @@ def feasible_arm_angles(arm: SRSArm, target: ArrayLike, gc: ArrayLike) -> tuple[
     return intervals, mask
 
 
-def sample_self_motion(arm: SRSArm, target: ArrayLike, n: int, *, key: jax.Array | None = None,
-                       gc: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
+def sample_self_motion(
+    arm: SRSArm, target: ArrayLike, n: int, *, key: jax.Array | None = None, gc: jax.Array | None = None
+) -> tuple[jax.Array, jax.Array]:
     """``n`` exact IK solutions of one pose spread over its whole self-motion within the joint limits.
 
     The feasible arm angles of every global configuration (or of ``gc``) are laid end to end and

@@ -15,7 +15,7 @@ try:
     import trimesh  # noqa: F401
     import viser  # noqa: F401
 except ImportError as err:  # pragma: no cover - depends on the installed extras
-    raise ImportError(f"diffkin.viewer needs viser and trimesh: pip install \"diffkin[viewer]\" ({err})") from err
+    raise ImportError(f'diffkin.viewer needs viser and trimesh: pip install "diffkin[viewer]" ({err})') from err
 
 from diffkin.viewer._viewer import Viewer, show
 

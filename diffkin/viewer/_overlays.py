@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 # viridis at five stops (matplotlib's values), interpolated linearly
-_VIRIDIS = np.array([[0.267, 0.005, 0.329], [0.229, 0.322, 0.546], [0.128, 0.567, 0.551],
-                     [0.369, 0.789, 0.383], [0.993, 0.906, 0.144]])
+_VIRIDIS = np.array(
+    [[0.267, 0.005, 0.329], [0.229, 0.322, 0.546], [0.128, 0.567, 0.551], [0.369, 0.789, 0.383], [0.993, 0.906, 0.144]]
+)
 
 QUANTITIES = ("counts", "manipulability", "dexterity")
 

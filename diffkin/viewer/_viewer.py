@@ -62,8 +62,7 @@ def _z_to(direction: np.ndarray) -> np.ndarray:
 
 
 def _intervals_text(intervals: np.ndarray, mask: np.ndarray) -> str:
-    used = [f"[{lo:+.3f}, {hi:+.3f}]" for (lo, hi), m in zip(np.asarray(intervals), np.asarray(mask), strict=True)
-            if m]
+    used = [f"[{lo:+.3f}, {hi:+.3f}]" for (lo, hi), m in zip(np.asarray(intervals), np.asarray(mask), strict=True) if m]
     return " ∪ ".join(used) if used else "none (no arm angle keeps every joint within its limits)"
 
 
@@ -90,9 +89,21 @@ class Viewer:
         url: ``http://host:port``.
     """
 
-    def __init__(self, model, *, source=None, ends: Sequence[str] | None = None, arm=None, q0=None,
-                 workspace_map=None, results=None, host: str = "127.0.0.1", port: int = 8080,
-                 num_seeds: int = 8, warmup: bool = True):
+    def __init__(
+        self,
+        model,
+        *,
+        source=None,
+        ends: Sequence[str] | None = None,
+        arm=None,
+        q0=None,
+        workspace_map=None,
+        results=None,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        num_seeds: int = 8,
+        warmup: bool = True,
+    ):
         self.kin = kinematics(model, ends)
         self.model = model
         self.arm = arm
@@ -119,8 +130,9 @@ class Viewer:
         center = (lo + hi) / 2
         self.server.initial_camera.position = center + size * np.array([1.3, 1.1, 0.6])
         self.server.initial_camera.look_at = center
-        self.server.scene.add_grid("/grid", width=2 * size, height=2 * size, cell_size=size / 10,
-                                   position=(0.0, 0.0, float(min(lo[2], 0.0))))
+        self.server.scene.add_grid(
+            "/grid", width=2 * size, height=2 * size, cell_size=size / 10, position=(0.0, 0.0, float(min(lo[2], 0.0)))
+        )
 
         self._build_robot(source, size)
         self._build_gui(workspace_map, results)
@@ -140,8 +152,9 @@ class Viewer:
         self.frames: dict[str, viser.FrameHandle] = {}
         axes = 0.08 * size
         for name in names:
-            self.frames[name] = scene.add_frame(f"/robot/{_safe(name)}", show_axes=True, axes_length=axes,
-                                                axes_radius=axes / 25)
+            self.frames[name] = scene.add_frame(
+                f"/robot/{_safe(name)}", show_axes=True, axes_length=axes, axes_radius=axes / 25
+            )
         for k, visual in enumerate(visuals):
             if visual.frame not in self.frames:
                 continue
@@ -150,21 +163,26 @@ class Viewer:
                 self.missing.append(visual.filename or visual.kind)
                 continue
             has_meshes = True
-            handle = scene.add_mesh_trimesh(f"/robot/{_safe(visual.frame)}/visual{k}", mesh,
-                                            position=visual.T_frame_visual[:3, 3],
-                                            wxyz=_wxyz(visual.T_frame_visual[:3, :3]))
+            handle = scene.add_mesh_trimesh(
+                f"/robot/{_safe(visual.frame)}/visual{k}",
+                mesh,
+                position=visual.T_frame_visual[:3, 3],
+                wxyz=_wxyz(visual.T_frame_visual[:3, :3]),
+            )
             self.visuals[visual.frame].append(handle)
         self.has_meshes = has_meshes
         radius = 0.025 * size
         self.skeleton: dict[str, Any] = {}  # joint spheres and link cylinders, by frame
         for f, parent in enumerate(self.kin.frame_parents):
             name = names[f]
-            joint = scene.add_icosphere(f"/robot/{_safe(name)}/joint", radius=radius * 1.3, color=(240, 140, 40),
-                                        visible=not has_meshes)
+            joint = scene.add_icosphere(
+                f"/robot/{_safe(name)}/joint", radius=radius * 1.3, color=(240, 140, 40), visible=not has_meshes
+            )
             self.skeleton[f"{name}/joint"] = joint
             if parent >= 0:
-                self.skeleton[name] = scene.add_cylinder(f"/skeleton/{_safe(name)}", radius=radius, height=1.0,
-                                                         color=(120, 130, 150), visible=not has_meshes)
+                self.skeleton[name] = scene.add_cylinder(
+                    f"/skeleton/{_safe(name)}", radius=radius, height=1.0, color=(120, 130, 150), visible=not has_meshes
+                )
         self._lengths = {name: 1.0 for name in self.skeleton}
         for frame in self.frames.values():
             frame.show_axes = not has_meshes
@@ -268,8 +286,10 @@ class Viewer:
                 self.show_map = gui.add_checkbox("Show map", initial_value=True)
                 self.map_quantity = gui.add_dropdown("colour", _overlays.QUANTITIES, initial_value="counts")
                 reached = int((np.asarray(workspace_map.counts) > 0).sum())
-                gui.add_markdown(f"{reached} reached voxels of {float(workspace_map.voxel_size):g} m, "
-                                 f"{int(workspace_map.n_samples)} samples")
+                gui.add_markdown(
+                    f"{reached} reached voxels of {float(workspace_map.voxel_size):g} m, "
+                    f"{int(workspace_map.n_samples)} samples"
+                )
             self._draw_map()
             self.show_map.on_update(lambda _event: setattr(self.map_cloud, "visible", self.show_map.value))
             self.map_quantity.on_update(lambda _event: self._draw_map())
@@ -292,8 +312,9 @@ class Viewer:
         if old is not None and old.value == text:
             return
         with self._arm_folder:
-            dropdown = self.server.gui.add_dropdown("gc (signs q2 q4 q6)", GC_OPTIONS, initial_value=text,
-                                                    order=None if old is None else old.order)
+            dropdown = self.server.gui.add_dropdown(
+                "gc (signs q2 q4 q6)", GC_OPTIONS, initial_value=text, order=None if old is None else old.order
+            )
         self.gc_dropdown = dropdown
         if old is not None:
             old.remove()
@@ -306,8 +327,14 @@ class Viewer:
     def _draw_map(self) -> None:
         points, colors = _overlays.map_points(self.map, self.map_quantity.value)
         self.map_cloud = self.server.scene.add_point_cloud(
-            "/map", points, colors, point_size=0.6 * float(self.map.voxel_size), point_shape="rounded",
-            precision="float32", visible=self.show_map.value)
+            "/map",
+            points,
+            colors,
+            point_size=0.6 * float(self.map.voxel_size),
+            point_shape="rounded",
+            precision="float32",
+            visible=self.show_map.value,
+        )
 
     # ------------------------------------------------------------------------------------- state
 
@@ -373,8 +400,10 @@ class Viewer:
             self._apply(q, source=("gizmo", end))
             self.ik_results[end] = res
             mark = "✓ solved" if bool(res.success) else "✗ not reached (best shown)"
-            self.ik_status[end].content = (f"`{end}`: {mark}, pos err {float(res.pos_err):.2e} m, "
-                                           f"rot err {float(res.rot_err):.2e} rad, {int(res.iters)} iters")
+            self.ik_status[end].content = (
+                f"`{end}`: {mark}, pos err {float(res.pos_err):.2e} m, "
+                f"rot err {float(res.rot_err):.2e} rad, {int(res.iters)} iters"
+            )
         return res
 
     def move_target(self, end: str, T) -> object:
@@ -412,7 +441,8 @@ class Viewer:
         gc = jnp.asarray(np.asarray(gc, dtype=np.float64))
         intervals, mask = (np.asarray(x) for x in self._srs_feasible(self._flange, gc))
         self.srs_status.content = f"feasible psi for this flange pose and gc: {_intervals_text(intervals, mask)}" + (
-            f"  \n{note}" if note else "")
+            f"  \n{note}" if note else ""
+        )
         return intervals[mask]
 
     def set_arm_angle(self, psi: float, gc=None, *, nearest: bool = False) -> bool:
@@ -435,8 +465,11 @@ class Viewer:
             q, valid = self._srs_ik(self._flange, float(psi), jnp.asarray(gc))
             feasible = self._show_intervals(gc)
             if not bool(valid) and nearest and len(feasible):
-                psi = float(np.clip(psi, feasible[:, 0], feasible[:, 1])[
-                    np.argmin(np.abs(np.clip(psi, feasible[:, 0], feasible[:, 1]) - psi))])
+                psi = float(
+                    np.clip(psi, feasible[:, 0], feasible[:, 1])[
+                        np.argmin(np.abs(np.clip(psi, feasible[:, 0], feasible[:, 1]) - psi))
+                    ]
+                )
                 q, valid = self._srs_ik(self._flange, psi, jnp.asarray(gc))
             self._quiet = True
             try:
@@ -459,8 +492,11 @@ class Viewer:
         text = f"result {i} of {n}"
         for field in ("success", "pos_err", "rot_err"):
             if field in self.results:
-                text += f", {field} {np.asarray(self.results[field])[i]:.3g}" if field != "success" else \
-                    f", success {bool(np.asarray(self.results[field])[i])}"
+                text += (
+                    f", {field} {np.asarray(self.results[field])[i]:.3g}"
+                    if field != "success"
+                    else f", success {bool(np.asarray(self.results[field])[i])}"
+                )
         self.result_status.content = text
         self.set_q(np.asarray(self.results["q"][i], dtype=np.float64))
 
@@ -482,9 +518,22 @@ class Viewer:
         self.server.stop()
 
 
-def show(model, *, source=None, ends: Sequence[str] | None = None, arm=None, q0=None, workspace_map=None,
-         results=None, host: str = "127.0.0.1", port: int = 8080, num_seeds: int = 8, warmup: bool = True,
-         block: bool = False, verbose: bool = True) -> Viewer:
+def show(
+    model,
+    *,
+    source=None,
+    ends: Sequence[str] | None = None,
+    arm=None,
+    q0=None,
+    workspace_map=None,
+    results=None,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    num_seeds: int = 8,
+    warmup: bool = True,
+    block: bool = False,
+    verbose: bool = True,
+) -> Viewer:
     """Serve an interactive 3D view of a robot in the browser (viser).
 
     Args:
@@ -530,13 +579,27 @@ def show(model, *, source=None, ends: Sequence[str] | None = None, arm=None, q0=
         shape = np.shape(results["q"])
         if len(shape) != 2 or shape[0] == 0 or shape[1] != len(model.joint_names):
             raise ValueError(f"results q: expected shape (N, {len(model.joint_names)}) with N >= 1, got {shape}")
-    viewer = Viewer(model, source=source, ends=ends, arm=arm, q0=q0, workspace_map=workspace_map, results=results,
-                    host=host, port=port, num_seeds=num_seeds, warmup=warmup)
+    viewer = Viewer(
+        model,
+        source=source,
+        ends=ends,
+        arm=arm,
+        q0=q0,
+        workspace_map=workspace_map,
+        results=results,
+        host=host,
+        port=port,
+        num_seeds=num_seeds,
+        warmup=warmup,
+    )
     if verbose:
         print(f"diffkin viewer: {viewer.url}  (Ctrl-C to stop)", flush=True)
         if viewer.missing:
-            print(f"  {len(viewer.missing)} mesh(es) not found or unreadable, drawn as skeleton: "
-                  f"{', '.join(sorted(set(viewer.missing))[:5])}", flush=True)
+            print(
+                f"  {len(viewer.missing)} mesh(es) not found or unreadable, drawn as skeleton: "
+                f"{', '.join(sorted(set(viewer.missing))[:5])}",
+                flush=True,
+            )
     if block:  # until Ctrl-C: the KeyboardInterrupt goes on to the caller (the CLI exits with 130)
         try:
             threading.Event().wait()

@@ -53,16 +53,24 @@ def _floats(text: str | None, count: int, default: tuple[float, ...]) -> np.ndar
 def _rpy(rpy: np.ndarray) -> np.ndarray:
     """URDF fixed-axis roll-pitch-yaw: ``Rz(yaw) Ry(pitch) Rx(roll)``."""
     (cr, cp, cy), (sr, sp, sy) = np.cos(rpy), np.sin(rpy)
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
 
 
 def _quat(wxyz: np.ndarray) -> np.ndarray:
     w, x, y, z = wxyz / np.linalg.norm(wxyz)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _pose(R: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -81,9 +89,9 @@ def resolve_mesh(filename: str, base_dir: str | None) -> str | None:
             paths resolve).
     """
     if filename.startswith("file://"):
-        filename = filename[len("file://"):]
+        filename = filename[len("file://") :]
     if filename.startswith("package://"):
-        package, _, rest = filename[len("package://"):].partition("/")
+        package, _, rest = filename[len("package://") :].partition("/")
         folder = base_dir
         while folder:
             for candidate in (os.path.join(folder, package), os.path.join(folder, "share", package)):
@@ -113,8 +121,10 @@ def urdf_visuals(root: ET.Element, base_dir: str | None) -> list[Visual]:
     for link in root.findall("link"):
         for visual in link.findall("visual"):
             origin = visual.find("origin")
-            T = _pose(_rpy(_floats(origin.get("rpy") if origin is not None else None, 3, (0, 0, 0))),
-                      _floats(origin.get("xyz") if origin is not None else None, 3, (0, 0, 0)))
+            T = _pose(
+                _rpy(_floats(origin.get("rpy") if origin is not None else None, 3, (0, 0, 0))),
+                _floats(origin.get("xyz") if origin is not None else None, 3, (0, 0, 0)),
+            )
             rgba = DEFAULT_RGBA
             material = visual.find("material")
             if material is not None:
@@ -130,8 +140,17 @@ def urdf_visuals(root: ET.Element, base_dir: str | None) -> list[Visual]:
             frame = link.get("name", "")
             if shape.tag == "mesh":
                 filename = shape.get("filename", "")
-                visuals.append(Visual(frame, T, "mesh", tuple(_floats(shape.get("scale"), 3, (1, 1, 1))), filename,
-                                      resolve_mesh(filename, base_dir), rgba))
+                visuals.append(
+                    Visual(
+                        frame,
+                        T,
+                        "mesh",
+                        tuple(_floats(shape.get("scale"), 3, (1, 1, 1))),
+                        filename,
+                        resolve_mesh(filename, base_dir),
+                        rgba,
+                    )
+                )
             elif shape.tag == "box":
                 visuals.append(Visual(frame, T, "box", tuple(_floats(shape.get("size"), 3, (0, 0, 0))), rgba=rgba))
             elif shape.tag in ("cylinder", "capsule"):
