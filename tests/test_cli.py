@@ -353,13 +353,24 @@ def test_without_optional_dependencies_subprocess(tmp_path):
     assert res.returncode == 0 and (tmp_path / "m.npz").is_file(), res.stderr
 
 
+#: ``python -m diffkin`` with Ctrl-C handled as usual even when started from a shell's background
+#: job (which inherits SIGINT ignored): ``[*INTERRUPTIBLE, "demo", ...]``.
+INTERRUPTIBLE = [
+    sys.executable,
+    "-c",
+    "import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+    "sys.argv = sys.argv[1:]; runpy.run_module('diffkin', run_name='__main__', alter_sys=True)",
+    "diffkin",
+]
+
+
 @pytest.mark.slow
 def test_ctrl_c_exits_130(tmp_path):
     import signal
     import time
 
     proc = subprocess.Popen(
-        [sys.executable, "-m", "diffkin", "demo", "--quick", "--out", tmp_path / "demo"],
+        [*INTERRUPTIBLE, "demo", "--quick", "--out", tmp_path / "demo"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

@@ -303,7 +303,7 @@ def test_bad_calls_are_rejected(panda):
         dk.fk(panda, q, "panda_hand", base=np.eye(3))
     with pytest.raises(ValueError, match="include_base: only a Robot"):
         dk.jacobian(dk.robots.iiwa14(), np.zeros(7), include_base=True)
-    with pytest.raises(TypeError, match=r"for a frame of a whole robot, solve robot.chain\(frame_name\)"):
+    with pytest.raises(TypeError, match=r"target: for a Robot, expected a non-empty mapping frame name -> target"):
         dk.ik.solve(panda, np.eye(4))
     with pytest.raises(ValueError, match="source: expected a <robot> \\(URDF\\)"):
         dk.load_robot("<model/>")

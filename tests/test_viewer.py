@@ -12,6 +12,8 @@ import pytest
 pytest.importorskip("viser")
 pytest.importorskip("trimesh")
 
+from test_cli import INTERRUPTIBLE
+
 import diffkin as dk  # noqa: E402
 from diffkin.viewer import _visuals, show  # noqa: E402
 from diffkin.viewer._viewer import GC_OPTIONS  # noqa: E402
@@ -296,13 +298,12 @@ def test_cli_view_serves_the_page():
     viser's threads shut down (seen with viser 1.1.1; to investigate).
     """
     import signal
-    import sys
     import urllib.request
 
     port = _free_port()
     env = dict(os.environ, PYTHONPATH=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     proc = subprocess.Popen(
-        [sys.executable, "-m", "diffkin", "view", "iiwa14", "--port", str(port)],
+        [*INTERRUPTIBLE, "view", "iiwa14", "--port", str(port)],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
