@@ -133,12 +133,12 @@ class DHChain:
         a, alpha, d, offset = (rg.per_joint(x) for x in (self.a, self.alpha, self.d, self.theta_offset))
         T = rg.from_matrix(self.base)
         links, screws = [T], []
+        thetas = [rg.add(q[i], offset[i]) if kind == "R" else offset[i] for i, kind in enumerate(self.joint_types)]
+        trig_theta, trig_alpha = rg.sincos_each(thetas), rg.sincos_each(alpha)
         for i, kind in enumerate(self.joint_types):
             revolute = kind == "R"
-            theta = rg.add(q[i], offset[i]) if revolute else offset[i]
             d_i = d[i] if revolute else rg.add(d[i], q[i])
-            st, ct = rg.sincos(theta)
-            sa, ca = rg.sincos(alpha[i])
+            (st, ct), (sa, ca) = trig_theta[i], trig_alpha[i]
             if self.modified:
                 A = rg.Rigid(
                     ((ct, -st, 0.0), (rg.mul(st, ca), rg.mul(ct, ca), -sa), (rg.mul(st, sa), rg.mul(ct, sa), ca)),

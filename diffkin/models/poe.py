@@ -147,11 +147,12 @@ class PoEChain:
             S, L = self.screws, self.link_homes
         T = rg.IDENTITY
         links, screws = [T], []
-        for i in range(self.dof):
-            v, w = rg.vector(S[i, :3]), rg.vector(S[i, 3:])
+        axes = [(rg.vector(S[i, :3]), rg.vector(S[i, 3:])) for i in range(self.dof)]
+        exps = rg.screw_exps(axes, q)
+        for i, (v, w) in enumerate(axes):
             w_now = rg.rotate(T.R, w)
             screws.append((rg.vadd(rg.rotate(T.R, v), rg.cross(T.p, w_now)), w_now))
-            T = rg.compose(T, rg.screw_exp(v, w, q[i]))
+            T = rg.compose(T, exps[i])
             if rg.segment_end(i, self.dof):
                 T = rg.checkpoint(T)
             links.append(rg.compose(T, rg.from_matrix(L[i])))

@@ -162,14 +162,16 @@ class Robot:
         """
         P, S, m, o = (_host(x) for x in (self.joint_poses, self.screws, self.multipliers, self.offsets))
         m, o = rg.per_joint(m), rg.per_joint(o)
+        axes = [(rg.vector(S[j, :3]), rg.vector(S[j, 3:])) for j in range(len(self.parents))]
+        thetas = [rg.add(rg.mul(m[j], q[self.sources[j]]), o[j]) for j in range(len(self.parents))]
+        exps = rg.screw_exps(axes, thetas)
         bodies, screws = [base], []
         for j, parent in enumerate(self.parents):
             T = rg.compose(bodies[parent], rg.from_matrix(P[j]))
-            v, w = rg.vector(S[j, :3]), rg.vector(S[j, 3:])
+            v, w = axes[j]
             w_world = rg.rotate(T.R, w)
             screws.append((rg.vadd(rg.rotate(T.R, v), rg.cross(T.p, w_world)), w_world))
-            theta = rg.add(rg.mul(m[j], q[self.sources[j]]), o[j])
-            bodies.append(rg.compose(T, rg.screw_exp(v, w, theta)))
+            bodies.append(rg.compose(T, exps[j]))
         return bodies, screws
 
     def _frame(self, bodies: list[rg.Rigid], f: int) -> rg.Rigid:
