@@ -371,3 +371,39 @@ def test_tolerances_are_traced():
     assert np.all(tight[0].iters >= loose.iters) and np.any(tight[0].iters > loose.iters)  # the value is used
     jaxpr = jax.make_jaxpr(lambda tol: ik.solve(chain, T, num_seeds=4, pos_tol=tol, rot_tol=tol).q)(1e-3)
     assert jaxpr.out_avals[0].shape == (3, 2)
+
+
+def test_seed_draws_are_uniform_independent_and_per_target():
+    """The seeds' hash (diffkin.ik._uniform): 24-bit values in [0, 1) whose moments, histogram per
+    joint and joint-pair grid match a uniform law, uncorrelated across joints, draws and targets; a
+    target's draws depend on its own index and round only (not on the rest of the batch), and on the key."""
+    from diffkin.ik import _uniform
+
+    key = jax.random.key(3)
+    targets, rounds = jnp.arange(2000), jnp.zeros(2000, jnp.int32)
+    u = np.asarray(_uniform.uniform(key, targets, rounds, 8, 7, jnp.float64))
+    assert u.shape == (8, 2000, 7) and u.min() >= 0.0 and u.max() < 1.0
+    assert np.all(u * 2**24 == np.round(u * 2**24))  # 24 bits, exact
+    flat = u.reshape(-1, 7)  # 16,000 draws of 7 joints
+    assert abs(flat.mean() - 0.5) < 0.005 and abs(flat.var() - 1 / 12) < 0.002
+    for j in range(7):  # Kolmogorov-Smirnov distance of each joint: 1.63 / sqrt(n) is the 1 % level
+        x = np.sort(flat[:, j])
+        ks = np.max(np.abs(x - np.arange(1, x.size + 1) / x.size))
+        assert ks < 1.63 / np.sqrt(x.size)
+    # joint pairs on a 10 x 10 grid: chi-square with 99 degrees of freedom (1e-3 level: 148)
+    counts = np.histogram2d(flat[:, 0], flat[:, 1], bins=10, range=[[0, 1], [0, 1]])[0]
+    expected = flat.shape[0] / 100
+    assert np.sum((counts - expected) ** 2 / expected) < 148
+    # joints, draws 0 and 1, neighbouring targets: |r| < 0.1 (n = 2,000: 4.5 standard deviations)
+    corr = np.corrcoef(np.concatenate([u[0], u[1], np.roll(u[0], 1, axis=0)], axis=1).T)
+    assert np.max(np.abs(corr - np.eye(21))) < 0.1
+    # per target: targets 5 and 1999 alone give the same draws as inside the batch; another round or key differs
+    alone = np.asarray(_uniform.uniform(key, jnp.asarray([1999, 5]), jnp.zeros(2, jnp.int32), 8, 7, jnp.float64))
+    np.testing.assert_array_equal(alone[:, 0], u[:, 1999])
+    np.testing.assert_array_equal(alone[:, 1], u[:, 5])
+    other_round = np.asarray(_uniform.uniform(key, targets, rounds + 1, 8, 7, jnp.float64))
+    other_key = np.asarray(_uniform.uniform(jax.random.key(4), targets, rounds, 8, 7, jnp.float64))
+    raw_key = np.asarray(_uniform.uniform(jax.random.PRNGKey(3), targets, rounds, 8, 7, jnp.float64))
+    for v in (other_round, other_key):
+        assert np.mean(v == u) < 1e-3
+    np.testing.assert_array_equal(raw_key, u)  # a raw key holds the same words as the typed one

@@ -19,16 +19,18 @@ def init(q: jnp.ndarray) -> jnp.ndarray:
     return jnp.full(q.shape[1:], _MU_INIT, q.dtype)
 
 
-def step(problem, q, ev: Eval, mu):
-    """One LM trial: ``(q_new, ev_new, mu_new, accepted, stalled)``, one forward pass.
+def propose(problem, q, ev: Eval, mu):
+    """The LM trial point from ``q`` (where the residual is ``ev``): ``(q_try, mu)``.
 
-    The step solves ``(J J^T + lam I) y = r, dq = J^T y`` (or the ``dof x dof`` form),
-    is projected onto the limits, and is accepted only if it lowers ``|r|^2``; a rejected step
-    keeps ``q`` and raises the damping.
+    The step solves ``(J J^T + lam I) y = r, dq = J^T y`` (or the ``dof x dof`` form) and is
+    projected onto the limits.
     """
-    lam = mu * ev.cost + _LAM_MIN
-    q_try = problem.retract(q, damped_step(ev.J, ev.r, lam))
-    ev_try = problem.evaluate(q_try)
+    return problem.retract(q, damped_step(ev.J, ev.r, mu * ev.cost + _LAM_MIN)), mu
+
+
+def judge(ev: Eval, ev_try: Eval, mu):
+    """``(accepted, mu_new, stalled)``: a trial is accepted only if it lowers ``|r|^2``; a rejected
+    one raises the damping (the next trial is a shorter step from the same point)."""
     accept = ev_try.cost < ev.cost
     mu = jnp.where(accept, jnp.maximum(mu * _MU_DOWN, _MU_MIN), mu * _MU_UP)
-    return q_try, ev_try, mu, accept, mu >= _MU_MAX
+    return accept, mu, mu >= _MU_MAX

@@ -19,14 +19,12 @@ def init(optimizer: optax.GradientTransformation, q: jax.Array):
     return jax.vmap(optimizer.init, in_axes=-1, out_axes=-1)(q)
 
 
-def step(optimizer: optax.GradientTransformation, problem, q, ev: Eval, state):
-    """One optimizer update on ``|r|^2 / 2`` with the exact gradient ``-J^T r``, then projected.
-
-    Returns ``(q_new, ev_new, state_new, accepted, stalled)``: every step is taken (first-order
-    methods may go uphill), none stalls.
-    """
+def propose(optimizer: optax.GradientTransformation, problem, q, ev: Eval, state):
+    """One optimizer update on ``|r|^2 / 2`` with the exact gradient ``-J^T r``, projected: ``(q_try, state)``."""
     updates, state = jax.vmap(optimizer.update, in_axes=-1, out_axes=-1)(gradient(ev), state, q)
-    q_new = problem.retract(q, updates)
-    ev_new = problem.evaluate(q_new)
-    accept = jnp.ones(ev.cost.shape, bool)
-    return q_new, ev_new, state, accept, jnp.zeros(ev.cost.shape, bool)
+    return problem.retract(q, updates), state
+
+
+def judge(ev: Eval, ev_try: Eval, state):
+    """Every step is taken (first-order methods may go uphill), none stalls: ``(accepted, state, stalled)``."""
+    return jnp.ones(ev.cost.shape, bool), state, jnp.zeros(ev.cost.shape, bool)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import functools
 import importlib
+from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -32,13 +34,22 @@ def inward(limit, dtype, side: int) -> jax.Array:
     return jnp.where(outside, jnp.nextafter(rounded, jnp.asarray(-side * jnp.inf, dtype)), rounded)
 
 
-def method_steps(method: str, optimizer):
-    """``(init, step_fn)`` of the method (see :func:`diffkin.ik._rounds.search`)."""
+class Method(NamedTuple):
+    """An iterative method: ``init(x) -> aux``, ``propose(problem, x, ev, aux) -> (x_try, aux)`` and
+    ``judge(ev, ev_try, aux) -> (accepted, aux, stalled)`` (see :func:`diffkin.ik._rounds.search`)."""
+
+    init: Callable
+    propose: Callable
+    judge: Callable
+
+
+def method_steps(method: str, optimizer) -> Method:
+    """The :class:`Method` of ``method`` (``"lm"`` or ``"optax"`` with ``optimizer``)."""
     if method == "lm":
-        return _lm.init, _lm.step
+        return Method(_lm.init, _lm.propose, _lm.judge)
     _optax = optax_module()
     opt = _optax.default_optimizer() if optimizer is None else optimizer
-    return functools.partial(_optax.init, opt), functools.partial(_optax.step, opt)
+    return Method(functools.partial(_optax.init, opt), functools.partial(_optax.propose, opt), _optax.judge)
 
 
 def optax_module():

@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffkin.ik import _uniform
 from diffkin.ik._problem import Eval
 
 GROUP = 4  # seeds per target in a round
@@ -35,12 +36,22 @@ _JITTER = 0.05  # ... each a step of this fraction towards a random seed
 class Seeds(NamedTuple):
     """Iteration state of every seed (problem axis last)."""
 
-    x: jax.Array  # (n, P)
-    ev: Eval
+    x: jax.Array  # (n, P) the accepted state
+    ev: Eval  # the residual at x
     aux: object  # method state: LM damping or optax state
+    x_try: jax.Array  # (n, P) the next trial state
     success: jax.Array  # (P,) bool, sticky
     stalled: jax.Array  # (P,) bool
     iters: jax.Array  # (P,) int32
+
+
+class Best(NamedTuple):
+    """The best seed of every target (leaves end with the target axis)."""
+
+    x: jax.Array
+    ev: Eval
+    success: jax.Array
+    iters: jax.Array
 
 
 class Settings(NamedTuple):
@@ -67,32 +78,25 @@ def _where(mask, new, old):
 def _seed_configs(key, targets: jax.Array, rounds: jax.Array, lower, upper, count: int, dtype) -> jax.Array:
     """``(count, len(targets), dof)`` uniform within the limits (one turn / one metre if unlimited).
 
-    Target ``b = targets[i]`` draws its seeds of round ``r = rounds[i]`` from
-    ``fold_in(fold_in(key, b), r)``: they depend neither on the batch nor on the pass that tries them.
+    Target ``b = targets[i]`` draws its seeds of round ``r = rounds[i]`` from a hash of ``(key, b, r)``
+    (:mod:`diffkin.ik._uniform`): they depend neither on the batch nor on the pass that tries them.
     """
     lo = jnp.where(jnp.isfinite(lower), lower, -np.pi)
     hi = jnp.where(jnp.isfinite(upper), upper, np.pi)
-    keys = jax.vmap(lambda b, r: jax.random.fold_in(jax.random.fold_in(key, b), r))(targets, rounds)
-    u = jax.vmap(lambda k: jax.random.uniform(k, (count, lower.shape[0]), dtype))(keys)
-    return jnp.swapaxes(lo + u * (hi - lo), 0, 1)
+    return lo + _uniform.uniform(key, targets, rounds, count, lower.shape[0], dtype) * (hi - lo)
 
 
-def _start(problem, x: jax.Array, aux, settings: Settings) -> Seeds:
-    """Seeds at ``x`` ``(n, P)``, evaluated (one forward pass)."""
-    ev = problem.evaluate(x)
-    zeros = jnp.zeros(x.shape[1:], bool)
-    return Seeds(
-        x, ev, aux, succeeded(ev, settings.pos_tol, settings.rot_tol), zeros, jnp.zeros(x.shape[1:], jnp.int32)
-    )
-
-
-def _iterate(problem, seeds: Seeds, step_fn, num_targets: int, has_first: bool, settings: Settings) -> Seeds:
-    """Iterate every seed until its target is done or ``max_iters``; finished targets are frozen.
+def _iterate(problem, x, live, method, num_targets: int, has_first: bool, settings: Settings) -> Seeds:
+    """Iterate every seed from ``x`` ``(n, P)`` until its target is done or ``max_iters``; finished targets are frozen.
 
     A target is done once one of its seeds succeeded (with a warm start: once the warm seed,
     seed 0, also succeeded or stalled), or all its seeds stalled. Seeds of done targets and
     successful seeds no longer move, so each target's result does not depend on the others in
-    the batch; the loop exits as soon as every target is done.
+    the batch; the loop exits as soon as every target is done. ``live`` ``(P,)`` (or ``None``)
+    marks the seeds that are not padding: padding is finished before it starts.
+
+    One loop iteration evaluates the trial state (the first one the starting state, accepted
+    as it is), judges it and proposes the next trial: the residual is traced once per loop.
     """
 
     def active(s: Seeds):
@@ -104,45 +108,65 @@ def _iterate(problem, seeds: Seeds, step_fn, num_targets: int, has_first: bool, 
 
     def body(carry):
         i, s = carry
+        first = i == 0
         move = active(s)
-        x_new, ev_new, aux_new, accept, stalled = step_fn(problem, s.x, s.ev, s.aux)
-        take = move & accept
+        ev_try = problem.evaluate(s.x_try)
+        accept, aux, stalled = method.judge(s.ev, ev_try, s.aux)
+        take = move & (accept | first)
+        x = _where(take, s.x_try, s.x)
+        ev = _where(take, ev_try, s.ev)
+        aux = _where(move & ~first, aux, s.aux)
+        x_try, aux = method.propose(problem, x, ev, aux)
         new = Seeds(
-            x=_where(take, x_new, s.x),
-            ev=_where(take, ev_new, s.ev),
-            aux=_where(move, aux_new, s.aux),
-            success=s.success | (take & succeeded(ev_new, settings.pos_tol, settings.rot_tol)),
-            stalled=s.stalled | (move & stalled),
-            iters=s.iters + move.astype(jnp.int32),
+            x=x,
+            ev=ev,
+            aux=_where(move, aux, s.aux),
+            x_try=x_try,
+            success=s.success | (take & succeeded(ev_try, settings.pos_tol, settings.rot_tol)),
+            stalled=s.stalled | (move & ~first & stalled),
+            iters=s.iters + (move & ~first).astype(jnp.int32),
         )
         return i + 1, new
 
     def cond(carry):
         i, s = carry
-        return (i < settings.max_iters) & jnp.any(active(s))
+        return (i <= settings.max_iters) & jnp.any(active(s))
 
-    return jax.lax.while_loop(cond, body, (jnp.asarray(0), seeds))[1]
+    shape = x.shape[1:]
+    ev = jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), jax.eval_shape(problem.evaluate, x))
+    start = Seeds(
+        x,
+        ev,
+        method.init(x),
+        x,
+        jnp.zeros(shape, bool),
+        jnp.zeros(shape, bool) if live is None else ~live,
+        jnp.zeros(shape, jnp.int32),
+    )
+    return jax.lax.while_loop(cond, body, (jnp.asarray(0), start))[1]
 
 
-def _best(s: Seeds, num_targets: int, rank) -> Seeds:
+def _best(s: Seeds, num_targets: int, rank) -> Best:
     """The best seed of every target (leaves end with ``(num_targets,)``).
 
     A successful seed wins, the one of least ``rank`` (``(seeds, targets)``, e.g. the distance to
     a warm start) when given, else of least residual; without a success, the seed of least residual.
+    Ties go to the first seed.
     """
 
     def per_target(x):  # (..., P) -> (..., seeds, targets)
         return x.reshape(x.shape[:-1] + (-1, num_targets))
 
     success, cost = per_target(s.success), per_target(s.ev.cost)
-    order_by = cost if rank is None else jnp.where(success, rank, cost)
-    order = jnp.lexsort((order_by, ~success), axis=0)[:1]  # (1, targets)
+    order_by = cost if rank is None else rank
+    best_success = jnp.argmin(jnp.where(success, order_by, jnp.inf), axis=0)
+    order = jnp.where(jnp.any(success, axis=0), best_success, jnp.argmin(cost, axis=0))[None]  # (1, targets)
 
     def take(x):
         x = per_target(x)
         return jnp.take_along_axis(x, order.reshape((1,) * (x.ndim - 2) + order.shape), axis=-2)[..., 0, :]
 
-    return jax.tree.map(take, s)
+    return jax.tree.map(take, Best(s.x, s.ev, s.success, s.iters))
 
 
 def search(
@@ -154,11 +178,10 @@ def search(
     lower,
     upper,
     first,
-    init,
-    step_fn,
+    method,
     settings: Settings,
     moves=None,
-) -> Seeds:
+) -> Best:
     """Solve ``n`` targets from seeds in rounds; the best seed of each (leaves end with ``(n,)``).
 
     Args:
@@ -170,7 +193,7 @@ def search(
         key: PRNG key of the random seeds.
         lower, upper: ``(dof,)`` limits the seeds are drawn within.
         first: ``(n, n_state)`` warm-start states (seed 0 of the first round), or ``None``.
-        init, step_fn: the method: ``init(x) -> aux``, ``step_fn(problem, x, ev, aux)``.
+        method: the iteration (:class:`diffkin.ik._prepare.Method`).
         settings: seeds, iterations, polishing rounds and tolerances.
         moves: ``(dof, k)`` bool, which joints move which of ``k`` targets (several targets), or
             ``None``. Then the random seeds of later rounds keep the best state's joints that
@@ -179,7 +202,7 @@ def search(
     """
     dtype, dof = lower.dtype, lower.shape[0]
 
-    def run_from(idx, x, live=None, x_first=None) -> Seeds:
+    def run_from(idx, x, live=None, x_first=None) -> Best:
         """Iterate the states ``x`` ``(copies, m, n_state)`` of the targets ``idx``; the best of each.
 
         ``live`` marks the targets that are not padding of a chunk; ``x_first`` is a warm start.
@@ -189,10 +212,8 @@ def search(
         copies, m = x.shape[0], idx.shape[0]
         problem = build(idx, copies)
         x = problem.project(x.reshape(copies * m, -1).T)
-        start = _start(problem, x, init(x), settings)
-        if live is not None:  # padding: finished before it starts
-            start = start._replace(stalled=~jnp.tile(live, copies))
-        seeds = _iterate(problem, start, step_fn, m, x_first is not None, settings)
+        live = None if live is None else jnp.tile(live, copies)
+        seeds = _iterate(problem, x, live, method, m, x_first is not None, settings)
         per_target = seeds.x.reshape(seeds.x.shape[0], copies, m)
         return _best(seeds, m, rank(idx, per_target))
 
@@ -242,7 +263,7 @@ def search(
     return best
 
 
-def _retry_unsolved(attempt, best: Seeds, rounds: int, chunk: int) -> Seeds:
+def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int) -> Best:
     """Rounds ``1 .. rounds - 1`` for every unsolved target, ``chunk`` targets at a time.
 
     Each pass takes the first unsolved targets with rounds left, runs

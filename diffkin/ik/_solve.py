@@ -85,7 +85,8 @@ def solve(
             base frame (metres; orientation free). The solver runs in this dtype (float32 default).
             For a robot: a mapping from frame names to such targets (world frame), one batch shape.
         key: PRNG key for the seeds; default ``jax.random.key(0)``. Target ``b`` of the flattened
-            batch draws round ``r``'s seeds from ``fold_in(fold_in(key, b), r)``.
+            batch draws round ``r``'s seeds from a hash of ``(key, b, r)`` (not ``jax.random``: see
+            :mod:`diffkin.ik._uniform`), so its result does not depend on the rest of the batch.
         q0: optional ``(..., dof)`` warm start broadcastable to the targets' batch; it is an extra
             seed and, among successful seeds, the solution nearest to ``q0`` is returned.
         num_seeds: most random seeds per target (static, >= 1), in rounds of 4; only unsolved
@@ -247,9 +248,10 @@ def _solve(
     def rank(idx, q):  # among successes: nearest the warm start
         return None if q0_flat is None else jnp.sum((q - q0_flat[idx].T[:, None, :]) ** 2, axis=0)
 
-    init, step_fn = method_steps(method, optimizer)
     settings = _rounds.Settings(num_seeds, max_iters, _rounds.POLISH if method == "lm" else 0, pos_tol, rot_tol)
-    best = _rounds.search(build, lambda idx, q: q, rank, key, n, lower, upper, q0_flat, init, step_fn, settings)
+    best = _rounds.search(
+        build, lambda idx, q: q, rank, key, n, lower, upper, q0_flat, method_steps(method, optimizer), settings
+    )
     big = jnp.finfo(dtype).max
     q_best = implicit_q(chain, safe, best.x.T)
     return IKResult(

@@ -310,7 +310,6 @@ def _solve_tree(
     first = None
     if q0_flat is not None:
         first = q0_flat if not spec.solve_base else jnp.concatenate([q0_flat, base_rows], axis=-1)
-    init, step_fn = method_steps(method, optimizer)
     settings = _rounds.Settings(num_seeds, max_iters, _rounds.POLISH if method == "lm" else 0, pos_tol, rot_tol)
     best = _rounds.search(
         build,
@@ -321,8 +320,7 @@ def _solve_tree(
         lower,
         upper,
         first,
-        init,
-        step_fn,
+        method_steps(method, optimizer),
         settings,
         moves=jnp.asarray(moves) if k > 1 else None,
     )
