@@ -19,6 +19,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_derivatives import SymbolicZero
 
 from diffkin import _trig
 from diffkin._trig import atan2
@@ -395,9 +396,30 @@ def sincos_each(xs: Sequence[Entry]) -> list[tuple[Entry, Entry]]:
     arrays = [x for x in xs if not isinstance(x, float)]
     if not arrays:
         return [sincos(x) for x in xs]
-    s, c = _trig.sincos(jnp.stack(jnp.broadcast_arrays(*arrays)))
+    s, c = _sincos_stacked(tuple(jnp.broadcast_arrays(*arrays)))
     computed = zip(s, c, strict=True)
     return [sincos(x) if isinstance(x, float) else next(computed) for x in xs]
+
+
+@jax.custom_jvp
+def _sincos_stacked(xs: tuple) -> tuple[tuple, tuple]:
+    """``(sin x, cos x)`` of each array of ``xs`` (one shape), by one :func:`diffkin._trig.sincos`."""
+    s, c = _trig.sincos(jnp.stack(xs))
+    return tuple(s), tuple(c)
+
+
+def _sincos_stacked_jvp(primals, tangents):
+    """Per entry, so that an entry without a tangent keeps a symbolic zero: a forward-mode
+    Jacobian moves one joint at a time, and instantiated zeros for the others would carry tangent
+    arithmetic through the whole pass (the autodiff Jacobian of 20 joints then compiled in 32 s, not 19 s)."""
+    (xs,), (dxs,) = primals, tangents
+    s, c = _sincos_stacked(xs)
+    ds = tuple(dx if isinstance(dx, SymbolicZero) else ck * dx for ck, dx in zip(c, dxs, strict=True))
+    dc = tuple(dx if isinstance(dx, SymbolicZero) else -sk * dx for sk, dx in zip(s, dxs, strict=True))
+    return (s, c), (ds, dc)
+
+
+_sincos_stacked.defjvp(_sincos_stacked_jvp, symbolic_zeros=True)
 
 
 def per_joint(x) -> list[Entry]:

@@ -85,6 +85,28 @@ def test_analytic_equals_autodiff_and_frames_are_consistent(name):
     np.testing.assert_allclose(J["world"][:, 3:], w, atol=0)
 
 
+
+@pytest.mark.parametrize("name", ["iiwa14", "rpr_poe"])
+def test_second_derivatives_of_fk_against_finite_differences(name):
+    """Hessians through the forward pass (every joint's sine and cosine come from one stacked call
+    with its own derivative rule) equal central differences of the gradient, float64."""
+    chain = MODELS[name]
+
+    def height(q):  # the end effector's z plus a rotation entry: both depend on every joint
+        T = dk.fk(chain, q)
+        return T[2, 3] + 0.3 * T[0, 2]
+
+    for q in random_q(chain, 5, seed=31):
+        H = np.asarray(jax.hessian(height)(jnp.asarray(q)))
+        grad = jax.grad(height)
+        h = 1e-6
+        for i in range(chain.dof):
+            dq = np.zeros(chain.dof)
+            dq[i] = h
+            fd = (np.asarray(grad(jnp.asarray(q + dq))) - np.asarray(grad(jnp.asarray(q - dq)))) / (2 * h)
+            np.testing.assert_allclose(H[:, i], fd, atol=1e-8)
+        np.testing.assert_allclose(H, H.T, atol=1e-12)
+
 @pytest.mark.parametrize("name", ["iiwa14", "panda", "rpr_poe"])
 def test_world_jacobian_columns_against_finite_differences(name):
     chain = MODELS[name]
