@@ -85,7 +85,6 @@ def test_analytic_equals_autodiff_and_frames_are_consistent(name):
     np.testing.assert_allclose(J["world"][:, 3:], w, atol=0)
 
 
-
 @pytest.mark.parametrize("name", ["iiwa14", "rpr_poe"])
 def test_second_derivatives_of_fk_against_finite_differences(name):
     """Hessians through the forward pass (every joint's sine and cosine come from one stacked call
@@ -106,6 +105,7 @@ def test_second_derivatives_of_fk_against_finite_differences(name):
             fd = (np.asarray(grad(jnp.asarray(q + dq))) - np.asarray(grad(jnp.asarray(q - dq)))) / (2 * h)
             np.testing.assert_allclose(H[:, i], fd, atol=1e-8)
         np.testing.assert_allclose(H, H.T, atol=1e-12)
+
 
 @pytest.mark.parametrize("name", ["iiwa14", "panda", "rpr_poe"])
 def test_world_jacobian_columns_against_finite_differences(name):
