@@ -355,6 +355,13 @@ def _screenshot(url: str, path) -> np.ndarray:
     return np.asarray(Image.open(path).convert("RGB"), dtype=np.int16)
 
 
+# Pixels that must change when the robot is shown. The iiwa14 at the test's pose covers about 1 % of the
+# 1024 x 768 screenshot: a CI run on 2026-11-24 counted 7,424, under the former bound of 1 % (7,864), and the
+# commit before these changes failed the same way run alone; about half of that still tells a drawn robot
+# from an empty scene.
+_ROBOT_PIXELS = 4000
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(_chromium() is None, reason="no chromium binary")
 def test_browser_draws_the_robot(viewer_of, tmp_path):
@@ -362,7 +369,7 @@ def test_browser_draws_the_robot(viewer_of, tmp_path):
 
     The reference is the same page with the robot's nodes hidden (grid, GUI and camera as
     before): pixels differing by more than 30 in some channel, left of the GUI panel, must be
-    more than 1% of the image.
+    more than ``_ROBOT_PIXELS``.
     """
     viewer = viewer_of("iiwa14")
     viewer.set_q(np.array([0.4, 0.6, 0.0, -1.3, 0.0, 0.8, 0.0]))
@@ -379,11 +386,11 @@ def test_browser_draws_the_robot(viewer_of, tmp_path):
         empty = _screenshot(viewer.url, tmp_path / "empty.png")
         assert robot.shape == empty.shape == (768, 1024, 3)
         changed = (np.abs(robot[canvas] - empty[canvas]).max(-1) > 30).sum()
-        if changed > 0.01 * robot.shape[0] * robot.shape[1]:
+        if changed > _ROBOT_PIXELS:
             break
     if os.environ.get("DIFFKIN_ARTIFACTS"):
         os.makedirs(os.environ["DIFFKIN_ARTIFACTS"], exist_ok=True)
         for name in ("viewer.png", "empty.png"):
             shutil.copy(tmp_path / name, os.path.join(os.environ["DIFFKIN_ARTIFACTS"], name))
-    assert changed > 0.01 * robot.shape[0] * robot.shape[1], changed
+    assert changed > _ROBOT_PIXELS, changed
     assert robot[canvas].std() > 5  # not a blank canvas
