@@ -18,8 +18,10 @@ monkeypatching its name.
 
 Elsewhere, as they are part of what those modules compute: the structure-of-arrays rigid
 transforms (:mod:`diffkin._rigid`), one stack of every entry for many poses
-(:func:`diffkin._rigid.to_matrices`, measured there) and the fused ``sincos``/``atan2``
-(:mod:`diffkin._trig`, measured there).
+(:func:`diffkin._rigid.to_matrices`, measured there), the fused ``sincos``/``atan2``
+(:mod:`diffkin._trig`, measured there), one ``sincos`` per forward pass
+(:func:`diffkin._rigid.sincos_each`: XLA's CPU compile time follows the number of kernels) and the
+IK's hashed seeds (:mod:`diffkin.ik._uniform`), each measured there.
 """
 
 from __future__ import annotations
