@@ -28,9 +28,9 @@ def propose(problem, q, ev: Eval, mu):
     return problem.retract(q, damped_step(ev.J, ev.r, mu * ev.cost + _LAM_MIN)), mu
 
 
-def judge(ev: Eval, ev_try: Eval, mu):
+def judge(cost, cost_try, mu):
     """``(accepted, mu_new, stalled)``: a trial is accepted only if it lowers ``|r|^2``; a rejected
     one raises the damping (the next trial is a shorter step from the same point)."""
-    accept = ev_try.cost < ev.cost
+    accept = cost_try < cost
     mu = jnp.where(accept, jnp.maximum(mu * _MU_DOWN, _MU_MIN), mu * _MU_UP)
     return accept, mu, mu >= _MU_MAX

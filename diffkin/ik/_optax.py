@@ -25,6 +25,6 @@ def propose(optimizer: optax.GradientTransformation, problem, q, ev: Eval, state
     return problem.retract(q, updates), state
 
 
-def judge(ev: Eval, ev_try: Eval, state):
+def judge(cost, cost_try, state):
     """Every step is taken (first-order methods may go uphill), none stalls: ``(accepted, state, stalled)``."""
-    return jnp.ones(ev.cost.shape, bool), state, jnp.zeros(ev.cost.shape, bool)
+    return jnp.ones(cost.shape, bool), state, jnp.zeros(cost.shape, bool)

@@ -36,7 +36,7 @@ def inward(limit, dtype, side: int) -> jax.Array:
 
 class Method(NamedTuple):
     """An iterative method: ``init(x) -> aux``, ``propose(problem, x, ev, aux) -> (x_try, aux)`` and
-    ``judge(ev, ev_try, aux) -> (accepted, aux, stalled)`` (see :func:`diffkin.ik._rounds.search`)."""
+    ``judge(cost, cost_try, aux) -> (accepted, aux, stalled)`` (see :func:`diffkin.ik._rounds.search`)."""
 
     init: Callable
     propose: Callable

@@ -43,6 +43,18 @@ class Eval(NamedTuple):
     rot_err: jax.Array
 
 
+class Entries(NamedTuple):
+    """The fields of an :class:`Eval` before they are computed into arrays: one entry (an array of
+    the problem shape, or a folded Python float) per value, ``J`` row by row; ``pos_err`` and
+    ``rot_err`` one entry, or a list of one per target of a tree (see :func:`settle`)."""
+
+    r: list
+    J: list
+    cost: rg.Entry
+    pos_err: rg.Entry | list
+    rot_err: rg.Entry | list
+
+
 class Problem(NamedTuple):
     """A flat batch of targets with the chain and its limits, all in one dtype.
 
@@ -74,6 +86,9 @@ class Problem(NamedTuple):
     def evaluate(self, q: jax.Array) -> Eval:
         return evaluate(self, q)
 
+    def residual(self, q: jax.Array) -> Entries:
+        return residual(self, q)
+
     def screen_cost(self, q: jax.Array) -> jax.Array:
         """``(P,)`` cheap cost for choosing seeds: ``|p_t - p|^2 + ROT_WEIGHT^2 (3 - trace(R_t^T R))``.
 
@@ -95,8 +110,8 @@ def project(q: jax.Array, lower, upper, wrap, respect_limits: bool) -> jax.Array
     return jnp.clip(wrapped, lower[:, None], upper[:, None]) if respect_limits else wrapped
 
 
-def evaluate(problem: Problem, q: jax.Array) -> Eval:
-    """Residual, weighted Jacobian and errors at ``q`` ``(dof, P)``, from one forward pass."""
+def residual(problem: Problem, q: jax.Array) -> Entries:
+    """The entries of the residual, weighted Jacobian and errors at ``q`` ``(dof, P)``, from one forward pass."""
     frames = problem.chain._frames(list(q))
     shape, dtype = q.shape[1:], q.dtype
     ee = frames.ee
@@ -111,12 +126,62 @@ def evaluate(problem: Problem, q: jax.Array) -> Eval:
         w, rot_err = rg.so3_log(rg.matmul(problem.R, tuple(rg.column(ee.R, j) for j in range(3))))
         r = e_p + [rg.mul(ROT_WEIGHT, e) for e in w]
         J = J + [[rg.mul(ROT_WEIGHT, c[1][i]) for c in columns] for i in range(3)]
-    m, n = len(r), len(J[0])
-    cost = rg.add(*(rg.mul(e, e) for e in r))
+    return Entries(r, J, rg.add(*(rg.mul(e, e) for e in r)), pos_err, rot_err)
+
+
+def evaluate(problem: Problem, q: jax.Array) -> Eval:
+    """Residual, weighted Jacobian and errors at ``q`` ``(dof, P)``, from one forward pass."""
+    return settle(residual(problem, q))
+
+
+def _errors(e) -> list:
+    """Error entries: one (a chain) or one per target (a tree: a list of entries, or ``(k, P)``)."""
+    return list(e) if isinstance(e, list) or jnp.ndim(e) == 2 else [e]
+
+
+def _arrays(entries: Entries, head, J) -> Eval:
+    """An :class:`Eval` of arrays from ``head`` (``r``, cost and errors, stacked) and ``J`` ``(m * n, P)``."""
+    m, n = len(entries.r), len(entries.J[0]) if len(entries.J) else 0
+    shape = head.shape[1:]
+    errors = () if not isinstance(entries.pos_err, list) else (len(entries.pos_err),)
+    k = len(_errors(entries.pos_err))
+    return Eval(
+        head[:m],
+        J.reshape((m, n) + shape),
+        head[m],
+        head[m + 1 : m + 1 + k].reshape(errors + shape),
+        head[m + 1 + k :].reshape(errors + shape),
+    )
+
+
+def settle(entries: Entries) -> Eval:
+    """The entries computed once into the arrays of an :class:`Eval`."""
+    head = [*entries.r, entries.cost, *_errors(entries.pos_err), *_errors(entries.rot_err)]
+    J = [e for row in entries.J for e in row]
     # Materialised: XLA's CPU fusion would otherwise recompute the whole forward pass inside
     # every kernel of the solver that consumes these entries (20x slower).
-    flat = materialize([*r, *(e for row in J for e in row), cost, pos_err, rot_err])
-    return Eval(flat[:m], flat[m : m + m * n].reshape(m, n, -1), *flat[m + m * n :])
+    done = materialize(head + J)
+    return _arrays(entries, done[: len(head)], done[len(head) :])
+
+
+def settle_choosing(entries: Entries, old: Eval, choose) -> tuple[Eval, jax.Array, object]:
+    """The entries computed once where ``choose`` takes them, ``old``'s values elsewhere.
+
+    ``choose(cost)`` maps the new cost ``(P,)`` to ``(take, extra)``, ``take`` ``(P,)`` bool;
+    returns ``(ev, take, extra)`` with ``take`` computed once. The residual, cost and errors are
+    computed first (``choose`` reads the cost); the Jacobian's entries are then computed and
+    chosen inside the same kernels. That saves writing the new Jacobian and then a pass that reads
+    it with the old one and writes one, the largest memory traffic of an LM iteration
+    (:func:`diffkin.ik._rounds._iterate`).
+    """
+    head_try = materialize([*entries.r, entries.cost, *_errors(entries.pos_err), *_errors(entries.rot_err)])
+    take, extra = choose(head_try[len(entries.r)])
+    take = materialize([take])[0]
+    errors = (e.reshape((-1,) + take.shape) for e in (old.pos_err, old.rot_err))
+    head = jnp.where(take, head_try, jnp.concatenate([old.r, old.cost[None], *errors]))
+    J_try = [e for row in entries.J for e in row]
+    J = materialize([jnp.where(take, e, o) for e, o in zip(J_try, old.J.reshape((-1,) + take.shape), strict=True)])
+    return _arrays(entries, head, J), take, extra
 
 
 def gradient(ev: Eval) -> jax.Array:

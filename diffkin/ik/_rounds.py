@@ -7,7 +7,8 @@ as ``(copies, targets, dof)`` and enter the flat layout in :func:`_run_from` onl
 
 A *problem* (:class:`diffkin.ik._problem.Problem` for a chain,
 :class:`diffkin.ik._targets.TreeProblem` for a robot) provides ``project(x)``,
-``retract(x, dx)``, ``evaluate(x) -> Eval`` and ``screen_cost(x)``. The search builds one with
+``retract(x, dx)``, ``evaluate(x) -> Eval``, ``residual(x) -> Entries`` (the same, not yet computed
+into arrays) and ``screen_cost(x)``. The search builds one with
 ``build(idx, copies)`` for the targets ``idx``, each repeated ``copies`` times.
 """
 
@@ -20,8 +21,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffkin._xla import materialize
 from diffkin.ik import _uniform
-from diffkin.ik._problem import Eval
+from diffkin.ik._problem import Eval, settle_choosing
 
 GROUP = 4  # seeds per target in a round
 # Rounds after the first run only for the targets still unsolved, packed into chunks of
@@ -96,7 +98,9 @@ def _iterate(problem, x, live, method, num_targets: int, has_first: bool, settin
     marks the seeds that are not padding: padding is finished before it starts.
 
     One loop iteration evaluates the trial state (the first one the starting state, accepted
-    as it is), judges it and proposes the next trial: the residual is traced once per loop.
+    as it is), judges it and proposes the next trial: the residual is traced once per loop. The
+    trial's Jacobian is kept or dropped inside the kernels that compute it
+    (:func:`diffkin.ik._problem.settle_choosing`).
     """
 
     def active(s: Seeds):
@@ -109,12 +113,14 @@ def _iterate(problem, x, live, method, num_targets: int, has_first: bool, settin
     def body(carry):
         i, s = carry
         first = i == 0
-        move = active(s)
-        ev_try = problem.evaluate(s.x_try)
-        accept, aux, stalled = method.judge(s.ev, ev_try, s.aux)
-        take = move & (accept | first)
+        move = materialize([active(s)])[0]  # read by many kernels: computed once
+
+        def choose(cost_try):
+            accept, aux, stalled = method.judge(s.ev.cost, cost_try, s.aux)
+            return move & (accept | first), (aux, stalled)
+
+        ev, take, (aux, stalled) = settle_choosing(problem.residual(s.x_try), s.ev, choose)
         x = _where(take, s.x_try, s.x)
-        ev = _where(take, ev_try, s.ev)
         aux = _where(move & ~first, aux, s.aux)
         x_try, aux = method.propose(problem, x, ev, aux)
         new = Seeds(
@@ -122,7 +128,7 @@ def _iterate(problem, x, live, method, num_targets: int, has_first: bool, settin
             ev=ev,
             aux=_where(move, aux, s.aux),
             x_try=x_try,
-            success=s.success | (take & succeeded(ev_try, settings.pos_tol, settings.rot_tol)),
+            success=s.success | (take & succeeded(ev, settings.pos_tol, settings.rot_tol)),
             stalled=s.stalled | (move & ~first & stalled),
             iters=s.iters + (move & ~first).astype(jnp.int32),
         )

@@ -20,8 +20,7 @@ import jax.numpy as jnp
 
 from diffkin import _rigid as rg
 from diffkin import kinematics
-from diffkin._xla import materialize
-from diffkin.ik._problem import ROT_WEIGHT, Eval, project
+from diffkin.ik._problem import ROT_WEIGHT, Entries, Eval, project, settle
 from diffkin.models.robot import Robot
 
 _ONES = (1.0,) * 6
@@ -90,6 +89,10 @@ class TreeProblem(NamedTuple):
 
     def evaluate(self, x: jax.Array, jacobian: bool = True) -> Eval:
         """Residual, Jacobian and per-target errors ``(k, P)`` at ``x``, from one forward pass."""
+        return settle(self.residual(x, jacobian))
+
+    def residual(self, x: jax.Array, jacobian: bool = True) -> Entries:
+        """The entries of :meth:`evaluate` (see :func:`diffkin.ik._problem.residual`); errors one per target."""
         dtype = x.dtype
         root = self.root(x)
         bodies, screws = self.robot._bodies(list(x[: self.dof]), root)
@@ -126,11 +129,7 @@ class TreeProblem(NamedTuple):
                 rot_err.append(_norm([e[a] for a in free if a >= 3], dtype) / ROT_WEIGHT)
             r += [rg.mul(weights[a], e[a]) for a in free]
             J += [[rg.mul(weights[a], c) for c in rows[a]] for a in free] if jacobian else []
-        cost = rg.add(*(rg.mul(e, e) for e in r))
-        m, n, k = len(r), len(J[0]) if J else 0, len(self.frames)
-        flat = materialize([*r, *(c for row in J for c in row), cost, *pos_err, *rot_err])
-        r_, J_, rest = flat[:m], flat[m : m + m * n], flat[m + m * n :]
-        return Eval(r_, J_.reshape((m, n) + r_.shape[1:]), rest[0], rest[1 : 1 + k], rest[1 + k :])
+        return Entries(r, J, rg.add(*(rg.mul(e, e) for e in r)), pos_err, rot_err)
 
     def screen_cost(self, x: jax.Array) -> jax.Array:
         return self.evaluate(x, jacobian=False).cost
