@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 
+from diffkin._xla import SOLVER_COMPILE
 from diffkin.cli._robots import chain_for, jax_x64
 
 IK_CHUNK = 64  # targets per jitted IK call: one compilation serves every batch size
@@ -25,7 +26,8 @@ def _ik_fn(key: tuple, num_seeds: int):
     return jax.jit(
         lambda T, k, q0, pos_tol, rot_tol: dk.ik.solve(
             chain, T, key=k, q0=q0, num_seeds=num_seeds, pos_tol=pos_tol, rot_tol=rot_tol
-        )
+        ),
+        compiler_options=SOLVER_COMPILE,
     )
 
 

@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffkin._xla import solver_jit
 from diffkin.ik import _args, _rounds, _tree
 from diffkin.ik._implicit import implicit_q
 from diffkin.ik._prepare import cast, detach, inward, method_steps, valid_targets
@@ -189,7 +190,7 @@ def solve(
 
 
 @functools.partial(
-    jax.jit,
+    solver_jit,
     static_argnames=(
         "known",
         "num_seeds",

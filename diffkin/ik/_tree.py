@@ -13,6 +13,7 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin._checks import real_array
+from diffkin._xla import solver_jit
 from diffkin.ik import _args, _rounds, _secondary
 from diffkin.ik._implicit import implicit_tree
 from diffkin.ik._prepare import cast, detach, inward, method_steps, valid_targets
@@ -209,7 +210,7 @@ def _flat(x, batch, tail, n, dtype, default=None):
 
 
 @functools.partial(
-    jax.jit,
+    solver_jit,
     static_argnames=("known", "spec", "num_seeds", "method", "max_iters", "respect_limits", "optimizer", "batch"),
 )
 def _solve_tree(

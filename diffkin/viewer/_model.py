@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import diffkin as dk
+from diffkin._xla import SOLVER_COMPILE
 
 
 @dataclasses.dataclass
@@ -117,4 +118,7 @@ def make_ik(kin: Kinematics, end: str, num_seeds: int) -> tuple[Callable, np.nda
     (``n`` its joints): ``dk.ik.solve(chain, T, q0=q0, key=key, num_seeds=num_seeds)``.
     """
     chain, index = kin.chain(end)
-    return jax.jit(lambda T, q0, key: dk.ik.solve(chain, T, q0=q0, key=key, num_seeds=num_seeds)), index
+    solve = jax.jit(
+        lambda T, q0, key: dk.ik.solve(chain, T, q0=q0, key=key, num_seeds=num_seeds), compiler_options=SOLVER_COMPILE
+    )
+    return solve, index
