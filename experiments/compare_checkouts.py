@@ -4,7 +4,7 @@
 
 Each round runs one subprocess per checkout (``PYTHONPATH`` set to it, so the same environment
 imports that checkout's ``diffkin``), before then after, and each subprocess times, on the
-iiwa14 in float32: ``dk.ik.solve`` (jitted, defaults) of 1 and 1,000 reachable pose targets (the
+iiwa14 in float32: ``dk.ik.solve`` (called as it is, defaults) of 1 and 1,000 reachable pose targets (the
 first call, compile included, and the median of 25 warm calls, with the success rate), FK and the
 world Jacobian of 100,000 configurations (medians of 25 warm calls). Alternating rounds spread a
 drifting machine's speed over both checkouts; compare the rows of one round, and medians over rounds.
@@ -44,7 +44,7 @@ def measure() -> dict:
     for n in (1, 1000):
         q = jnp.asarray(rng.uniform(chain.lower, chain.upper, (n, chain.dof)))
         T = jnp.asarray(np.asarray(dk.fk(chain, q)), jnp.float32)
-        solve = jax.jit(lambda T, key: dk.ik.solve(chain, T, key=key))
+        solve = lambda T, key: dk.ik.solve(chain, T, key=key)  # noqa: E731 (as a script calls it: solve jits itself)
         t = time.perf_counter()
         res = jax.block_until_ready(solve(T, jax.random.key(1)))
         out[f"IK {n} first call s"] = time.perf_counter() - t
