@@ -94,3 +94,29 @@ def test_reachability_against_the_traced_path():
     best = np.zeros(wmap.counts.shape)
     np.maximum.at(best, tuple(cells.T), np.asarray(m))
     np.testing.assert_allclose(wmap.manipulability, best, rtol=1e-10, atol=1e-12)
+
+
+def test_materialize_keeps_values_and_a_single_value_stays_an_array_of_one():
+    from diffkin._xla import materialize
+
+    x = np.random.default_rng(3).normal(size=(5,))
+    one = jax.jit(lambda x: materialize([x * 2.0]))(x)
+    assert one.shape == (1, 5)
+    np.testing.assert_array_equal(np.asarray(one[0]), x * 2.0)
+    two = jax.jit(lambda x: materialize([x, 1.5]))(x)
+    np.testing.assert_array_equal(np.asarray(two), np.stack([x, np.full(5, 1.5)]))
+
+
+def test_solver_jit_gives_its_options_to_top_level_calls_only():
+    """Compiler options are allowed on a top-level jit only: inside a user's jit (or vmap) the plain one is used."""
+    from diffkin._xla import SOLVER_COMPILE, _top_level, solver_jit
+
+    inside = []
+    jax.jit(lambda x: inside.append(_top_level()) or x)(0.0)
+    jax.vmap(lambda x: inside.append(_top_level()) or x)(np.zeros(2))
+    assert _top_level() and inside == [False, False]
+    g = solver_jit(lambda x: x + 1.0)
+    np.testing.assert_array_equal(np.asarray(g(np.zeros(3))), np.ones(3))
+    np.testing.assert_array_equal(np.asarray(jax.jit(g)(np.zeros(3))), np.ones(3))  # would raise with the options
+    np.testing.assert_array_equal(np.asarray(jax.vmap(g)(np.zeros((2, 3)))), np.ones((2, 3)))
+    assert SOLVER_COMPILE == {"xla_cpu_use_fusion_emitters": False}
