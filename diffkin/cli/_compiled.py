@@ -7,7 +7,6 @@ import sys
 
 import numpy as np
 
-from diffkin._xla import SOLVER_COMPILE
 from diffkin.cli._robots import chain_for, jax_x64
 
 IK_CHUNK = 64  # targets per jitted IK call: one compilation serves every batch size
@@ -21,6 +20,7 @@ def _ik_fn(key: tuple, num_seeds: int):
     """
     jax = jax_x64()
     import diffkin as dk
+    from diffkin._xla import SOLVER_COMPILE
 
     chain = chain_for(key)
     return jax.jit(
