@@ -135,15 +135,20 @@ def evaluate(problem: Problem, q: jax.Array) -> Eval:
 
 
 def _errors(e) -> list:
-    """Error entries: one (a chain) or one per target (a tree: a list of entries, or ``(k, P)``)."""
-    return list(e) if isinstance(e, list) or jnp.ndim(e) == 2 else [e]
+    """Error entries: one (a chain) or a list of one per target (a tree)."""
+    return e if isinstance(e, list) else [e]
+
+
+def _head(entries: Entries) -> list:
+    """The residual, cost and error entries, in the order :func:`_arrays` reads them."""
+    return [*entries.r, entries.cost, *_errors(entries.pos_err), *_errors(entries.rot_err)]
 
 
 def _arrays(entries: Entries, head, J) -> Eval:
-    """An :class:`Eval` of arrays from ``head`` (``r``, cost and errors, stacked) and ``J`` ``(m * n, P)``."""
+    """An :class:`Eval` of arrays from ``head`` (:func:`_head`, stacked) and ``J`` ``(m * n, P)``."""
     m, n = len(entries.r), len(entries.J[0]) if len(entries.J) else 0
     shape = head.shape[1:]
-    errors = () if not isinstance(entries.pos_err, list) else (len(entries.pos_err),)
+    errors = (len(entries.pos_err),) if isinstance(entries.pos_err, list) else ()
     k = len(_errors(entries.pos_err))
     return Eval(
         head[:m],
@@ -156,8 +161,7 @@ def _arrays(entries: Entries, head, J) -> Eval:
 
 def settle(entries: Entries) -> Eval:
     """The entries computed once into the arrays of an :class:`Eval`."""
-    head = [*entries.r, entries.cost, *_errors(entries.pos_err), *_errors(entries.rot_err)]
-    J = [e for row in entries.J for e in row]
+    head, J = _head(entries), [e for row in entries.J for e in row]
     # Materialised: XLA's CPU fusion would otherwise recompute the whole forward pass inside
     # every kernel of the solver that consumes these entries (20x slower).
     done = materialize(head + J)
@@ -174,14 +178,16 @@ def settle_choosing(entries: Entries, old: Eval, choose) -> tuple[Eval, jax.Arra
     it with the old one and writes one, the largest memory traffic of an LM iteration
     (:func:`diffkin.ik._rounds._iterate`).
     """
-    head_try = materialize([*entries.r, entries.cost, *_errors(entries.pos_err), *_errors(entries.rot_err)])
+    head_try = materialize(_head(entries))
     take, extra = choose(head_try[len(entries.r)])
     take = materialize([take])[0]
-    errors = (e.reshape((-1,) + take.shape) for e in (old.pos_err, old.rot_err))
-    head = jnp.where(take, head_try, jnp.concatenate([old.r, old.cost[None], *errors]))
+    shape = take.shape
+    old_head = jnp.concatenate(
+        [old.r, old.cost[None], old.pos_err.reshape((-1,) + shape), old.rot_err.reshape((-1,) + shape)]
+    )
     J_try = [e for row in entries.J for e in row]
-    J = materialize([jnp.where(take, e, o) for e, o in zip(J_try, old.J.reshape((-1,) + take.shape), strict=True)])
-    return _arrays(entries, head, J), take, extra
+    J = materialize([jnp.where(take, e, o) for e, o in zip(J_try, old.J.reshape((-1,) + shape), strict=True)])
+    return _arrays(entries, jnp.where(take, head_try, old_head), J), take, extra
 
 
 def gradient(ev: Eval) -> jax.Array:
