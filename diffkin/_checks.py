@@ -23,26 +23,29 @@ def rigid_tol(dtype) -> float:
     return 1e-9 if jnp.finfo(dtype).bits >= 64 else 1e-5
 
 
-def rigid_poses(T: jax.Array) -> jax.Array:
+def rigid_poses(T):
     """``(...,)`` whether each ``(..., 4, 4)`` pose is a rigid transform within :func:`rigid_tol`.
 
     ``|R^T R - I|``, ``|det R - 1|`` and the last row's distance from ``[0, 0, 0, 1]`` (max norms);
-    false for non-finite poses.
+    false for non-finite poses. A NumPy array is checked with NumPy (the host-side check of a
+    concrete target: op-by-op JAX dispatch of these ~60 small operations cost ~1 ms per call), a
+    JAX array or tracer with ``jax.numpy``.
     """
+    xp = np if isinstance(T, np.ndarray) else jnp
     tol = rigid_tol(T.dtype)
     R = [[T[..., i, j] for j in range(3)] for i in range(3)]  # entries: no batched 3x3 matmuls (slow on CPU)
     gram = [
-        jnp.abs(sum(R[k][i] * R[k][j] for k in range(3)) - (1.0 if i == j else 0.0))
+        xp.abs(sum(R[k][i] * R[k][j] for k in range(3)) - (1.0 if i == j else 0.0))
         for i in range(3)
         for j in range(i, 3)
     ]
-    row = [jnp.abs(T[..., 3, j] - (1.0 if j == 3 else 0.0)) for j in range(4)]
+    row = [xp.abs(T[..., 3, j] - (1.0 if j == 3 else 0.0)) for j in range(4)]
     det = (
         R[0][0] * (R[1][1] * R[2][2] - R[1][2] * R[2][1])
         - R[0][1] * (R[1][0] * R[2][2] - R[1][2] * R[2][0])
         + R[0][2] * (R[1][0] * R[2][1] - R[1][1] * R[2][0])
     )
-    worst = functools.reduce(jnp.maximum, [*gram, *row, jnp.abs(det - 1.0)])
+    worst = functools.reduce(xp.maximum, [*gram, *row, xp.abs(det - 1.0)])
     return worst <= tol  # false for NaN
 
 

@@ -275,6 +275,30 @@ def test_non_rigid_targets_are_rejected_or_fail():
         assert all(np.all(np.isfinite(np.asarray(x))) for x in res if x is not None)  # base: None for chains
 
 
+def test_rigid_check_on_the_host_equals_the_traced_check():
+    """diffkin._checks.rigid_poses: NumPy (the host-side check of a concrete target) and jax.numpy
+    (inside the solver) judge the same poses alike: rigid ones, ones perturbed below and above the
+    tolerance (rotation, last row), non-finite ones; float32 and float64."""
+    from diffkin._checks import rigid_poses, rigid_tol
+
+    chain = dk.robots.ur5()
+    rng = np.random.default_rng(4)
+    T = dh_fk(chain, random_q(chain, 400, seed=9))
+    for dtype in (np.float32, np.float64):
+        tol = rigid_tol(dtype)
+        poses = T.astype(dtype).copy()
+        scale = rng.choice([0.0, 0.1, 10.0], size=(400, 1, 1)) * tol  # below, well below, above the tolerance
+        poses[:200, :3, :3] *= 1.0 + scale[:200]
+        poses[200:, 3, :3] += scale[200:, 0]
+        poses[7, 0, 0] = np.nan
+        host = rigid_poses(poses)
+        assert isinstance(host, np.ndarray) and host.shape == (400,)
+        np.testing.assert_array_equal(host, np.asarray(jax.jit(rigid_poses)(poses)))
+        exact, above = scale[:, 0, 0] == 0, scale[:, 0, 0] > tol
+        exact[7] = False
+        assert not host[7] and host[exact].all() and not host[above].any() and exact.sum() > 50
+
+
 def test_empty_batch_gives_empty_results():
     chain = dk.robots.ur5()
     for target, batch in ((np.zeros((0, 4, 4)), (0,)), (np.zeros((2, 0, 3), np.float32), (2, 0))):

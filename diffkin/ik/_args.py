@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -56,13 +58,14 @@ def check_target(target, name: str = "target") -> tuple[jax.Array, bool, tuple[i
         raise ValueError(f"{name}: expected shape (..., 4, 4) for poses or (..., 3) for positions, got {target.shape}")
     batch = target.shape[:-1] if position_only else target.shape[:-2]
     if not position_only and is_concrete(target):
-        bad = ~np.asarray(rigid_poses(target)) & np.all(np.isfinite(np.asarray(target)), axis=(-2, -1))
+        poses = np.asarray(target)
+        bad = ~rigid_poses(poses) & np.all(np.isfinite(poses), axis=(-2, -1))
         if np.any(bad):
             i = tuple(int(k) for k in np.argwhere(bad)[0])
             raise ValueError(
                 f"{name}[{', '.join(map(str, i))}]: expected a rigid transform (R^T R = I, det R = +1, "
                 f"last row [0, 0, 0, 1], within {rigid_tol(target.dtype):g}), "
-                f"got {np.asarray(target)[i].tolist()}"
+                f"got {poses[i].tolist()}"
             )
     return target, position_only, tuple(batch)
 
@@ -79,6 +82,19 @@ def check_batched(value, name: str, tail: tuple[int, ...], batch: tuple[int, ...
         fits = False
     if not fits:
         raise ValueError(f"{name}: batch shape {head} does not broadcast to the targets' {batch}")
+
+
+def tolerance(value, dtype):
+    """A checked tolerance as a solver argument of ``dtype``: a NumPy scalar when known (no device dispatch)."""
+    return np.asarray(value, dtype) if is_concrete(value) else jnp.asarray(value, dtype)
+
+
+@functools.cache
+def default_key() -> jax.Array:
+    """``jax.random.key(0)``, made once and concrete even when first asked for inside a trace (each
+    ``jax.random.key`` call is a device dispatch)."""
+    with jax.ensure_compile_time_eval():
+        return jax.random.key(0)
 
 
 class KnownLeaves:

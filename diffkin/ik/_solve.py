@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import functools
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -175,10 +174,10 @@ def solve(
         known,
         traced,
         target,
-        jax.random.key(0) if key is None else key,
+        _args.default_key() if key is None else key,
         None if q0 is None else jnp.asarray(q0),
-        jnp.asarray(pos_tol, target.dtype),
-        jnp.asarray(rot_tol, target.dtype),
+        _args.tolerance(pos_tol, target.dtype),
+        _args.tolerance(rot_tol, target.dtype),
         num_seeds=int(num_seeds),
         method=method,
         max_iters=int(max_iters),
