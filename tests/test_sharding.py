@@ -7,14 +7,18 @@ import sys
 import textwrap
 
 import pytest
+from conftest import DATA
+
+FINGER = os.path.join(DATA, "example-robot-data", "robots", "finger_edu_description", "robots", "finger_edu.urdf")
 
 SCRIPT = """
     import json, jax, numpy as np
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+    from jax.sharding import AxisType, Mesh, NamedSharding, PartitionSpec as P
     jax.config.update("jax_enable_x64", True)
     import diffkin as dk
 
     chain = dk.robots.iiwa14()
+    FINGER = {finger!r}
     devices = jax.devices()
     sharded = NamedSharding(Mesh(np.array(devices), ("batch",)), P("batch"))  # automatic axes: jit partitions
     one = devices[0]
@@ -27,7 +31,20 @@ SCRIPT = """
     solve = jax.jit(lambda T, key: dk.ik.solve(chain, T, key=key))
     key = jax.random.key(5)
     r1, r4 = solve(jax.device_put(targets, one), key), solve(jax.device_put(targets, sharded), key)
+    # A mesh with explicit axes (jax.make_mesh's default): the IK runs with them automatic.
+    explicit = NamedSharding(jax.make_mesh((4,), ("batch",), axis_types=(AxisType.Explicit,)), P("batch"))
+    Tx = jax.device_put(targets, explicit)
+    rx = [dk.ik.solve(chain, Tx, key=key), solve(Tx, key)]  # a direct call and one inside a user's jit
+    robot = dk.load_robot(FINGER)
+    p = np.asarray(dk.fk(robot, rng.uniform(robot.lower, robot.upper, (8, 3)), "finger_tip_link"))[:, :3, 3]
+    rr1 = dk.ik.solve(robot, {"finger_tip_link": p}, key=key)
+    rrx = dk.ik.solve(robot, {"finger_tip_link": jax.device_put(p, explicit)}, key=key)
     print(json.dumps(dict(
+        explicit_specs=[list(r.q.sharding.spec) for r in rx + [rrx]],
+        explicit_devices=[len(r.q.sharding.device_set) for r in rx + [rrx]],
+        explicit_q_diff=float(max(np.abs(np.asarray(r.q) - np.asarray(r1.q)).max() for r in rx)),
+        explicit_robot_q_diff=float(np.abs(np.asarray(rrx.q) - np.asarray(rr1.q)).max()),
+        explicit_success=[bool(np.all(r.success)) for r in rx + [rr1, rrx]],
         n_devices=len(devices),
         fk_devices=len(T4.sharding.device_set),
         ik_devices=len(r4.q.sharding.device_set),
@@ -44,7 +61,7 @@ SCRIPT = """
 def test_fk_and_ik_sharded_over_4_devices_match_one_device():
     env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=4", "JAX_PLATFORMS": "cpu"}
     out = subprocess.run(
-        [sys.executable, "-c", textwrap.dedent(SCRIPT)],
+        [sys.executable, "-c", textwrap.dedent(SCRIPT).replace("{finger!r}", repr(FINGER))],
         capture_output=True,
         text=True,
         env=env,
@@ -58,3 +75,7 @@ def test_fk_and_ik_sharded_over_4_devices_match_one_device():
     assert r["success"] == [True, True]
     # The same solutions in float64: only the last bits may differ between the two compiled programs.
     assert r["ik_q_diff"] < 1e-10 and r["ik_err_diff"] < 1e-12, r
+    # Explicit axes: sharded over the 4 devices like the targets, the same solutions as one device.
+    assert r["explicit_specs"] == [["batch", None]] * 3 and r["explicit_devices"] == [4, 4, 4]
+    assert r["explicit_success"] == [True] * 4
+    assert r["explicit_q_diff"] < 1e-10 and r["explicit_robot_q_diff"] < 1e-10, r

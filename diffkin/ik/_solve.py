@@ -10,6 +10,7 @@ import functools
 import jax.numpy as jnp
 import numpy as np
 
+from diffkin._sharding import automatic_axes
 from diffkin._xla import solver_jit
 from diffkin.ik import _args, _rounds, _tree
 from diffkin.ik._implicit import implicit_q
@@ -170,14 +171,14 @@ def solve(
         empty = lambda *shape, dtype=target.dtype: jnp.zeros(batch + shape, dtype)  # noqa: E731
         return IKResult(empty(chain.dof), empty(dtype=bool), empty(), empty(), empty(dtype=jnp.int32))
     known, traced = _args.split_model(chain)
-    return _solve(
-        known,
+    return automatic_axes(_solve, target, len(batch))(
         traced,
         target,
         _args.default_key() if key is None else key,
         None if q0 is None else jnp.asarray(q0),
         _args.tolerance(pos_tol, target.dtype),
         _args.tolerance(rot_tol, target.dtype),
+        known=known,
         num_seeds=int(num_seeds),
         method=method,
         max_iters=int(max_iters),
@@ -202,7 +203,6 @@ def solve(
     ),
 )
 def _solve(
-    known: _args.KnownLeaves,
     traced: tuple,
     target,
     key,
@@ -210,6 +210,7 @@ def _solve(
     pos_tol,
     rot_tol,
     *,
+    known: _args.KnownLeaves,
     num_seeds,
     method,
     max_iters,

@@ -13,6 +13,7 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin._checks import real_array
+from diffkin._sharding import automatic_axes
 from diffkin._xla import solver_jit
 from diffkin.ik import _args, _rounds, _secondary
 from diffkin.ik._implicit import implicit_tree
@@ -171,8 +172,7 @@ def solve(
         )
     known, traced = _args.split_model(robot)
     as_dtype = lambda x: None if x is None else jnp.asarray(x, dtype)  # noqa: E731
-    return _solve_tree(
-        known,
+    return automatic_axes(_solve_tree, arrays[0], len(batch))(
         traced,
         tuple(jnp.asarray(a, dtype) for a in arrays),
         _args.default_key() if key is None else key,
@@ -182,6 +182,7 @@ def solve(
         as_dtype(locked_q),
         _args.tolerance(pos_tol, dtype),
         _args.tolerance(rot_tol, dtype),
+        known=known,
         spec=spec,
         num_seeds=int(num_seeds),
         method=method,
@@ -214,7 +215,6 @@ def _flat(x, batch, tail, n, dtype, default=None):
     static_argnames=("known", "spec", "num_seeds", "method", "max_iters", "respect_limits", "optimizer", "batch"),
 )
 def _solve_tree(
-    known: _args.KnownLeaves,
     traced: tuple,
     targets: tuple,
     key,
@@ -225,6 +225,7 @@ def _solve_tree(
     pos_tol,
     rot_tol,
     *,
+    known: _args.KnownLeaves,
     spec: Spec,
     num_seeds,
     method,
