@@ -89,12 +89,16 @@ def tolerance(value, dtype):
     return np.asarray(value, dtype) if is_concrete(value) else jnp.asarray(value, dtype)
 
 
-@functools.cache
 def default_key() -> jax.Array:
-    """``jax.random.key(0)``, made once and concrete even when first asked for inside a trace (each
-    ``jax.random.key`` call is a device dispatch)."""
+    """``jax.random.key(0)`` of the configured PRNG implementation, made once per implementation and
+    concrete even when first asked for inside a trace (each ``jax.random.key`` call is a device dispatch)."""
+    return _key_zero(jax.config.jax_default_prng_impl)  # type: ignore[attr-defined]  # a flag JAX sets at run time
+
+
+@functools.cache
+def _key_zero(impl: str) -> jax.Array:
     with jax.ensure_compile_time_eval():
-        return jax.random.key(0)
+        return jax.random.key(0, impl=impl)
 
 
 class KnownLeaves:
