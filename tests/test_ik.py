@@ -287,7 +287,7 @@ def test_rigid_check_on_the_host_equals_the_traced_check():
     for dtype in (np.float32, np.float64):
         tol = rigid_tol(dtype)
         poses = T.astype(dtype).copy()
-        scale = rng.choice([0.0, 0.1, 10.0], size=(400, 1, 1)) * tol  # below, well below, above the tolerance
+        scale = rng.choice([0.0, 0.1, 10.0], size=(400, 1, 1)) * tol  # exact, below, above the tolerance
         poses[:200, :3, :3] *= 1.0 + scale[:200]
         poses[200:, 3, :3] += scale[200:, 0]
         poses[7, 0, 0] = np.nan

@@ -12,13 +12,13 @@ from conftest import DATA
 FINGER = os.path.join(DATA, "example-robot-data", "robots", "finger_edu_description", "robots", "finger_edu.urdf")
 
 SCRIPT = """
-    import json, jax, numpy as np
+    import json, sys, jax, numpy as np
     from jax.sharding import AxisType, Mesh, NamedSharding, PartitionSpec as P
     jax.config.update("jax_enable_x64", True)
     import diffkin as dk
 
     chain = dk.robots.iiwa14()
-    FINGER = {finger!r}
+    FINGER = sys.argv[1]  # a URDF path, from the test
     devices = jax.devices()
     sharded = NamedSharding(Mesh(np.array(devices), ("batch",)), P("batch"))  # automatic axes: jit partitions
     one = devices[0]
@@ -61,7 +61,7 @@ SCRIPT = """
 def test_fk_and_ik_sharded_over_4_devices_match_one_device():
     env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=4", "JAX_PLATFORMS": "cpu"}
     out = subprocess.run(
-        [sys.executable, "-c", textwrap.dedent(SCRIPT).replace("{finger!r}", repr(FINGER))],
+        [sys.executable, "-c", textwrap.dedent(SCRIPT), FINGER],
         capture_output=True,
         text=True,
         env=env,
