@@ -1,6 +1,7 @@
 """The browser viewer (diffkin.viewer, viser): scene graph, sliders, IK gizmos, arm angle, overlays, a real browser."""
 
 import os
+import re
 import shutil
 import socket
 import subprocess
@@ -279,6 +280,92 @@ def test_mjcf_robot(viewer_of):
     viewer = viewer_of(robot, source=xml)
     assert len(viewer.visuals["b1"]) == 1
     _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, viewer.q)))
+
+
+def _sent(url: str) -> list[dict]:
+    """The messages viser's server sends a browser that connects to ``url``, up to the end of its replay.
+
+    The wire format of viser 1.1: per websocket frame, the sizes of the msgpack payload (8 bytes
+    each, decompressed then compressed), the zstd-compressed msgpack ``{"messages": [...]}``, then
+    raw array buffers (left undecoded: the strings are in the msgpack part).
+    """
+    import msgspec
+    import viser
+    import zstandard
+    from websockets.sync.client import connect
+
+    messages: list[dict] = []
+    with connect(url.replace("http://", "ws://"), subprotocols=[f"viser-v{viser.__version__}"]) as ws:
+        while not messages or messages[-1]["type"] != "ReplayDoneMessage":
+            frame = ws.recv(timeout=30)
+            size, compressed = int.from_bytes(frame[:8], "little"), int.from_bytes(frame[8:16], "little")
+            payload = zstandard.ZstdDecompressor().decompress(frame[16 : 16 + compressed], max_output_size=size)
+            messages.extend(msgspec.msgpack.decode(payload)["messages"])
+    return messages
+
+
+def _strings(value) -> list[str]:
+    """Every string in a decoded message (keys excluded)."""
+    if isinstance(value, str):
+        return [value]
+    if isinstance(value, dict):
+        return [s for v in value.values() for s in _strings(v)]
+    if isinstance(value, (list, tuple)):
+        return [s for v in value for s in _strings(v)]
+    return []
+
+
+# viser warns when a Markdown image path is read without an image root; the test below must see
+# whether the file's bytes are sent, so the warning may not stop it first
+@pytest.mark.filterwarnings("ignore:No `image_root` provided")
+def test_names_from_the_file_reach_the_page_as_plain_text(viewer_of, tmp_path):
+    """Robot, link and joint names reach the page as text, whatever Markdown or HTML they hold.
+
+    What the server sends a connecting browser is decoded; each Markdown element is rendered by
+    a CommonMark renderer with raw HTML allowed (as viser's page does): no tag, image or code
+    span comes from the names, each name appears in the rendered text verbatim, and the bytes of
+    the image a name points at are not sent.
+    """
+    from html import unescape
+    from xml.sax.saxutils import quoteattr
+
+    markdown_it = pytest.importorskip("markdown_it")
+    png = tmp_path / "private.png"
+    pixels = np.zeros((4, 4, 3), np.uint8)
+    pixels[1, 2] = (255, 7, 3)
+    import imageio.v3 as iio
+
+    iio.imwrite(png, pixels)
+    robot = f'<iframe srcdoc="<script>alert(1)</script>"></iframe> ![x]({png}) **b** &amp; <b>x</b>'
+    tip = "tip`<img src=x onerror=alert(1)>`_*em*_ [a](http://x) ![y](" + str(png) + ")"
+    joint = "j![z](" + str(png) + ")<i>"
+    urdf = tmp_path / "hostile.urdf"
+    urdf.write_text(f"""<robot name={quoteattr(robot)}>
+      <link name="base"/><link name={quoteattr(tip)}/>
+      <joint name={quoteattr(joint)} type="revolute"><parent link="base"/><child link={quoteattr(tip)}/>
+        <origin xyz="0 0 0.3"/><axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+    </robot>""")
+    viewer = viewer_of(str(urdf))
+    assert viewer.kin.ends == (tip,)
+    messages = _sent(viewer.url)
+    strings = [s for m in messages for s in _strings(m)]
+    assert not any("data:image" in s for s in strings)  # viser's server read no file for the page
+    rendered = [
+        markdown_it.MarkdownIt("commonmark", {"html": True}).render(m["props"]["_markdown"])
+        for m in messages
+        if m["type"] == "GuiMarkdownMessage"
+    ] + [
+        markdown_it.MarkdownIt("commonmark", {"html": True}).render(m["updates"]["_markdown"])
+        for m in messages
+        if m["type"] == "GuiUpdateMessage" and "_markdown" in m["updates"]
+    ]
+    for html in rendered:
+        tags = set(re.findall(r"</?([a-zA-Z]+)", html))
+        assert tags <= {"p", "strong", "br"}, html  # the viewer's own formatting only
+    text = unescape(" ".join(re.sub(r"<[^>]*>", "", html) for html in rendered))
+    assert robot in text and tip in text
+    labels = [m["props"]["label"] for m in messages if m["type"] == "GuiSliderMessage"]
+    assert labels == [joint]  # a label is text in viser's page
 
 
 def test_cli_view_errors(capsys):

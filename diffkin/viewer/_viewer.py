@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import string
 import threading
 from collections.abc import Sequence
 from typing import Any
@@ -26,6 +27,25 @@ BUILTIN = ("iiwa7", "iiwa14", "panda", "ur5", "puma560")
 def _shown(x: float) -> float:
     """A value as a slider shows it: 6 decimals (the browser breaks on values such as ``1e-17``)."""
     return round(float(x), 6) + 0.0
+
+
+_MARKDOWN_ESCAPES = {
+    **{c: "\\" + c for c in string.punctuation},  # CommonMark: any ASCII punctuation escapes with a backslash
+    "&": "&amp;",
+    "<": "&lt;",
+    ">": "&gt;",
+    **{c: " " for c in "\n\r\t\f\v"},  # one line: no block structure
+}
+
+
+def _plain(text: str) -> str:
+    """``text`` (a name or path from a file or the command line) as Markdown that shows it verbatim.
+
+    viser renders Markdown with raw HTML and its server reads the file of an image ``![x](path)``
+    into the page: every ASCII punctuation character is escaped (``<``, ``>``, ``&`` as HTML
+    entities), so the text forms no tag, link, image, code span or emphasis.
+    """
+    return "".join(_MARKDOWN_ESCAPES.get(c, c) for c in str(text))
 
 
 def _safe(name: str) -> str:
@@ -210,7 +230,7 @@ class Viewer:
     def _build_gui(self, workspace_map, results) -> None:
         gui = self.server.gui
         name = getattr(self.model, "name", "") or type(self.model).__name__
-        gui.add_markdown(f"**{name}**: {self.kin.dof} joints, {len(self.kin.frame_names)} frames")
+        gui.add_markdown(f"**{_plain(name)}**: {self.kin.dof} joints, {len(self.kin.frame_names)} frames")
         with gui.add_folder("Display"):
             self.show_frames = gui.add_checkbox("Show frames", initial_value=not self.has_meshes)
             self.show_skeleton = gui.add_checkbox("Show skeleton", initial_value=not self.has_meshes)
@@ -251,7 +271,7 @@ class Viewer:
         with gui.add_folder("IK targets"):
             gui.add_markdown("Drag a gizmo: IK from the current configuration (LM, warm start).")
             for end in self.kin.ends:
-                self.ik_status[end] = gui.add_markdown(f"`{end}`: not solved yet")
+                self.ik_status[end] = gui.add_markdown(f"{_plain(end)}: not solved yet")
                 gizmo = self.server.scene.add_transform_controls(f"/targets/{_safe(end)}", scale=0.18 * self.size)
 
                 def dragged(_event, end: str = end) -> None:
@@ -401,7 +421,7 @@ class Viewer:
             self.ik_results[end] = res
             mark = "✓ solved" if bool(res.success) else "✗ not reached (best shown)"
             self.ik_status[end].content = (
-                f"`{end}`: {mark}, pos err {float(res.pos_err):.2e} m, "
+                f"{_plain(end)}: {mark}, pos err {float(res.pos_err):.2e} m, "
                 f"rot err {float(res.rot_err):.2e} rad, {int(res.iters)} iters"
             )
         return res
