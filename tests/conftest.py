@@ -1,7 +1,9 @@
 """Test settings: float64 enabled (float32 tests pass float32 arrays explicitly), strict promotion off,
 warnings are errors (pyproject), and shared robot fixtures."""
 
+import contextlib
 import os
+import signal
 
 import jax
 import numpy as np
@@ -23,6 +25,25 @@ URDF_ROBOTS = {
     "ur5": (os.path.join(DATA, "ur5.urdf"), "tool0"),
 }
 BUILTIN = ("iiwa7", "iiwa14", "panda", "ur5", "puma560")
+
+
+@contextlib.contextmanager
+def time_limit(seconds: float, what: str):
+    """Fail (``TimeoutError``) if the block runs longer than ``seconds``: a hang fails a test instead of stalling CI.
+
+    SIGALRM interrupts Python code only (not a running XLA computation); main thread, POSIX.
+    """
+
+    def expire(signum, frame):
+        raise TimeoutError(f"{what}: still running after {seconds:g} s")
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def random_q(chain, n, seed=0):

@@ -6,7 +6,7 @@ import os
 import mujoco
 import numpy as np
 import pytest
-from conftest import DATA, random_q
+from conftest import DATA, random_q, time_limit
 
 import diffkin as dk
 
@@ -451,6 +451,52 @@ def test_published_models_against_mujoco(name):
 def test_published_models_with_unsupported_elements_are_rejected(path, message):
     with pytest.raises(ValueError, match=message):
         dk.load_robot(os.path.join(DM_CONTROL, path))
+
+
+def _write(folder, files: dict[str, str]) -> None:
+    for name, text in files.items():
+        (folder / name).write_text(text)
+
+
+@pytest.mark.parametrize(
+    "files",
+    [
+        # one file includes the same file twice
+        {"main.xml": '<include file="a.xml"/>', "a.xml": '<include file="leaf.xml"/><include file="./leaf.xml"/>'},
+        # two files include the same file
+        {
+            "main.xml": '<include file="a.xml"/><include file="b.xml"/>',
+            "a.xml": '<include file="leaf.xml"/>',
+            "b.xml": '<include file="leaf.xml"/>',
+        },
+    ],
+    ids=["twice_in_one_file", "from_two_files"],
+)
+def test_a_file_included_twice_is_rejected_as_mujoco_does(tmp_path, files):
+    """MuJoCo rejects a second include of the same file anywhere in the model; so does diffkin, naming it."""
+    _write(tmp_path, {name: f"<mujoco>{text}</mujoco>" for name, text in files.items() if name != "main.xml"})
+    (tmp_path / "leaf.xml").write_text('<mujoco><body><joint type="hinge"/></body></mujoco>')
+    (tmp_path / "main.xml").write_text(f"<mujoco>{HEAD}<worldbody>{files['main.xml']}</worldbody></mujoco>")
+    with pytest.raises(ValueError, match="already included"):
+        mujoco.MjModel.from_xml_path(str(tmp_path / "main.xml"))
+    message = rf"MJCF <include file='(\./)?leaf.xml'>: file '{tmp_path / 'leaf.xml'}' is included more than once"
+    with pytest.raises(ValueError, match=message):
+        dk.load_robot(str(tmp_path / "main.xml"))
+
+
+def test_include_bomb_is_rejected_at_once(tmp_path):
+    """26 files that each include the next twice (2**25 copies if expanded) are rejected at the first repeat."""
+    for k in range(25):
+        (tmp_path / f"f{k}.xml").write_text(
+            f'<mujoco><include file="f{k + 1}.xml"/><include file="f{k + 1}.xml"/></mujoco>'
+        )
+    (tmp_path / "f25.xml").write_text("<mujoco><body/></mujoco>")
+    (tmp_path / "main.xml").write_text('<mujoco><worldbody><include file="f0.xml"/></worldbody></mujoco>')
+    with (
+        time_limit(10, "loading an include bomb"),
+        pytest.raises(ValueError, match="f25.xml' is included more than once"),
+    ):
+        dk.load_robot(str(tmp_path / "main.xml"))
 
 
 # --------------------------------------------------------------------------------------------- bad input

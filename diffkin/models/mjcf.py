@@ -23,7 +23,8 @@ Rejected with a ValueError naming the element: ball joints, free joints below th
 with other joints, several free bodies, moving top-level bodies beside a free one, equality
 constraints other than linear ``<joint>`` ones (``connect``, ``weld``, ``tendon``, ``flex``:
 they close loops or couple tendons), ``<attach>``, ``<replicate>``, ``<composite>``,
-``<flexcomp>``, unknown default classes, missing include files. Inactive equalities
+``<flexcomp>``, unknown default classes, missing include files, a file included more than once
+(MuJoCo's rule). Inactive equalities
 (``active="false"``) are ignored. ``<include>`` paths are relative to the main file's folder
 (as MuJoCo resolves them; the working directory for XML text).
 """
@@ -401,12 +402,17 @@ def _equalities(reader: _Reader, root: ET.Element, joints: list[JointSpec]) -> l
 # --------------------------------------------------------------------------------------------- front door
 
 
-def _expand_includes(el: ET.Element, folder: str, stack: tuple[str, ...] = ()) -> None:
-    """Replace every ``<include file=...>`` by the children of the included ``<mujoco>`` (recursively)."""
+def _expand_includes(el: ET.Element, folder: str, stack: tuple[str, ...] = (), seen: set[str] | None = None) -> None:
+    """Replace every ``<include file=...>`` by the children of the included ``<mujoco>`` (recursively).
+
+    Each file may be included once in the whole model (MuJoCo's rule; repeated includes would
+    expand exponentially). ``seen`` holds the real paths of the files included so far.
+    """
+    seen = set() if seen is None else seen
     children = []
     for child in el:
         if child.tag != "include":
-            _expand_includes(child, folder, stack)
+            _expand_includes(child, folder, stack, seen)
             children.append(child)
             continue
         if not child.get("file"):
@@ -416,10 +422,15 @@ def _expand_includes(el: ET.Element, folder: str, stack: tuple[str, ...] = ()) -
             raise ValueError(f"{_describe(child)}: file not found: {path!r}")
         if path in stack:
             raise ValueError(f"{_describe(child)}: recursive include of {path!r}")
+        if os.path.realpath(path) in seen:
+            raise ValueError(
+                f"{_describe(child)}: file {path!r} is included more than once (MuJoCo allows one include of a file)"
+            )
+        seen.add(os.path.realpath(path))
         included, _ = _xml.read(path, "MJCF")
         if included.tag != "mujoco":
             raise ValueError(f"{_describe(child)}: expected a <mujoco> root element in {path!r}, got <{included.tag}>")
-        _expand_includes(included, folder, (*stack, path))
+        _expand_includes(included, folder, (*stack, path), seen)
         children.extend(included)
     el[:] = children
 
