@@ -9,6 +9,7 @@ import pytest
 from conftest import DATA, random_q, time_limit
 
 import diffkin as dk
+import diffkin.cli
 
 TOL = 1e-10
 DM_CONTROL = os.path.join(os.path.dirname(os.path.dirname(mujoco.__file__)), "dm_control")
@@ -497,6 +498,91 @@ def test_include_bomb_is_rejected_at_once(tmp_path):
         pytest.raises(ValueError, match="f25.xml' is included more than once"),
     ):
         dk.load_robot(str(tmp_path / "main.xml"))
+
+
+def _nested(kind: str, depth: int) -> str:
+    """A model nested ``depth`` deep in ``kind``.
+
+    ``bodies``: a chain of bodies (each ``pos="0 0 .01" euler="0 0 3"`` and a hinge, a site ``tip``
+    in the last), then a top-level body ``side``. ``frames``: ``<frame>``s with that offset around a
+    site ``tip`` and a body ``c``. ``default_classes``: classes ``c0 ... c{depth-1}`` (``c0`` sets
+    the joint axis to y, ``c{depth // 2}`` a range of -30..60 degrees) used by the joints ``j``
+    (innermost class, as ``childclass``) and ``k`` (the class above ``c{depth // 2}``).
+    """
+    step = 'pos="0 0 .01" euler="0 0 3"'
+    head = ""
+    if kind == "bodies":
+        body = "".join(f'<body name="b{k}" {step}><joint name="j{k}" axis="1 0 0" range="-1 1"/>' for k in range(depth))
+        body += '<site name="tip" pos="0 0 .5"/>' + "</body>" * depth + '<body name="side"><joint name="s"/></body>'
+    elif kind == "frames":
+        body = (
+            '<body name="b"><joint name="j" axis="1 0 0"/>'
+            + f"<frame {step}>" * depth
+            + '<site name="tip"/><body name="c"><joint name="k" axis="0 1 0"/></body>'
+            + "</frame>" * depth
+            + "</body>"
+        )
+    else:
+        joint = {0: '<joint axis="0 1 0"/>', depth // 2: '<joint range="-30 60"/>'}
+        head = "<default>" + "".join(f'<default class="c{k}">{joint.get(k, "")}' for k in range(depth))
+        head += "</default>" * (depth + 1)
+        body = (
+            f'<body name="b" childclass="c{depth - 1}"><joint name="j"/>'
+            f'<body name="c"><joint name="k" class="c{depth // 2 - 1}"/></body></body>'
+        )
+    return mjcf(body, head)
+
+
+@pytest.mark.parametrize(("kind", "depth"), [("bodies", 12), ("frames", 150), ("default_classes", 150)])
+def test_nesting_against_mujoco(kind, depth):
+    """Nested bodies, frames and default classes as MuJoCo reads them (its XML parser stops at 500 levels)."""
+    robot, model = dk.load_robot(_nested(kind, depth)), mujoco.MjModel.from_xml_string(_nested(kind, depth))
+    check_limits(robot, model)
+    against_mujoco(robot, model, frames=["tip"] if kind != "default_classes" else None)
+
+
+@pytest.mark.parametrize("kind", ["bodies", "frames", "default_classes"])
+def test_nesting_5000_deep_loads(kind, tmp_path, capsys):
+    """5,000 levels of bodies, frames or default classes load (no RecursionError), as the closed form says;
+    ``diffkin info`` prints the tree (the bodies' tree has two branches: info stops there, the
+    chain of 5,000 joints is not built)."""
+    depth = 5000
+    xml = _nested(kind, depth)
+    robot = dk.load_robot(xml)
+
+    def about_z(degrees: float, height: float) -> np.ndarray:
+        c, s = np.cos(np.deg2rad(degrees)), np.sin(np.deg2rad(degrees))
+        return np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, height], [0, 0, 0, 1]])
+
+    step = about_z(3, 0.01)
+    if kind == "bodies":
+        assert robot.frame_names == ("world", *(f"b{k}" for k in range(depth)), "side", "tip")
+        assert robot.parents == (*range(depth), 0) and robot.frame_bodies[-1] == depth
+        np.testing.assert_allclose(robot.joint_poses[:-1], np.broadcast_to(step, (depth, 4, 4)), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(robot.lower[:-1], np.full(depth, -np.deg2rad(1)), rtol=0, atol=1e-15)
+    elif kind == "frames":
+        T_b_tip = about_z(3 * depth, 0.01 * depth)  # rotations about z, offsets along z: they commute
+        np.testing.assert_allclose(robot.frame_poses[robot.frame_index("tip")], T_b_tip, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(robot.joint_poses[1], T_b_tip, rtol=0, atol=1e-10)
+    else:
+        np.testing.assert_array_equal(robot.screws, [[0, 0, 0, 0, 1, 0]] * 2)
+        np.testing.assert_allclose(robot.lower, np.deg2rad([-30, -np.inf]), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(robot.upper, np.deg2rad([60, np.inf]), rtol=0, atol=1e-15)
+    path = tmp_path / "deep.xml"
+    path.write_text(xml)
+    assert dk.cli.main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("m: Robot (tree)")
+
+
+def test_includes_nested_1500_deep(tmp_path):
+    """A chain of 1,500 files, each including the next, loads (the expansion recursed once per file)."""
+    depth = 1500
+    for k in range(depth):
+        (tmp_path / f"f{k}.xml").write_text(f'<mujoco><include file="f{k + 1}.xml"/></mujoco>')
+    (tmp_path / f"f{depth}.xml").write_text('<mujoco><body name="b"><joint name="j"/></body></mujoco>')
+    (tmp_path / "main.xml").write_text('<mujoco><worldbody><include file="f0.xml"/></worldbody></mujoco>')
+    assert dk.load_robot(str(tmp_path / "main.xml")).joint_names == ("j",)
 
 
 # --------------------------------------------------------------------------------------------- bad input

@@ -270,6 +270,14 @@ def test_mjcf_visuals():
     assert visuals[1].size == pytest.approx((0.2, 0.4, 0.6)) and visuals[1].rgba == (0, 1, 0, 1)
 
 
+def test_mjcf_visuals_of_5000_nested_bodies():
+    """The geoms of bodies nested 5,000 deep, each on its body in document order (no RecursionError)."""
+    depth = 5000
+    bodies = "".join(f'<body name="b{k}"><geom type="sphere" size="{k + 1}"/>' for k in range(depth))
+    visuals = _visuals.read_visuals(f"<mujoco><worldbody>{bodies}{'</body>' * depth}</worldbody></mujoco>")
+    assert [(v.frame, v.size) for v in visuals] == [(f"b{k}", (k + 1.0,)) for k in range(depth)]
+
+
 def test_mjcf_robot(viewer_of):
     xml = """<mujoco><worldbody><body name="b1" pos="0 0 0.1"><joint name="j1" type="hinge" axis="0 0 1"/>
         <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/></body></worldbody></mujoco>"""

@@ -26,7 +26,9 @@ they close loops or couple tendons), ``<attach>``, ``<replicate>``, ``<composite
 ``<flexcomp>``, unknown default classes, missing include files, a file included more than once
 (MuJoCo's rule). Inactive equalities
 (``active="false"``) are ignored. ``<include>`` paths are relative to the main file's folder
-(as MuJoCo resolves them; the working directory for XML text).
+(as MuJoCo resolves them; the working directory for XML text). Bodies, ``<frame>``s and
+``<default>`` classes may nest to any depth (walked with explicit stacks; MuJoCo's XML parser
+stops at 500 nested elements).
 """
 
 from __future__ import annotations
@@ -141,17 +143,23 @@ class _Reader:
             self.autolimits = self._bool(el, "autolimits", auto) is True
 
     def _defaults(self, el: ET.Element, name: str, parent: str | None) -> None:
-        """Record a ``<default>`` class: per element tag, its attributes (nested classes inherit)."""
-        if name in self.classes and name != "main":
-            raise ValueError(f"{_describe(el)}: repeated default class {name!r}")
-        tags = self.classes.setdefault(name, (parent, {}))[1]
-        for child in el:
-            if child.tag == "default":
-                if not child.get("class"):
-                    raise ValueError(f"MJCF nested <default> in class {name!r}: missing 'class' attribute")
-                self._defaults(child, child.get("class", ""), name)
-            else:
-                tags.setdefault(child.tag, {}).update(child.attrib)
+        """Record a ``<default>`` class and the classes nested in it: per element tag, its attributes
+        (nested classes inherit). Walked with a stack, in document order: any depth."""
+        todo = [(el, name, parent)]
+        while todo:
+            el, name, parent = todo.pop()
+            if name in self.classes and name != "main":
+                raise ValueError(f"{_describe(el)}: repeated default class {name!r}")
+            tags = self.classes.setdefault(name, (parent, {}))[1]
+            nested = []
+            for child in el:
+                if child.tag == "default":
+                    if not child.get("class"):
+                        raise ValueError(f"MJCF nested <default> in class {name!r}: missing 'class' attribute")
+                    nested.append((child, child.get("class", ""), name))
+                else:
+                    tags.setdefault(child.tag, {}).update(child.attrib)
+            todo.extend(reversed(nested))
 
     # -- attributes
 
@@ -235,15 +243,18 @@ class _Reader:
 
     # -- the body tree
 
-    def _contents(self, el: ET.Element, T: np.ndarray, cls: str, out: list) -> list:
-        """The joints, sites and bodies of a body (through its ``<frame>``s), in document order,
-        each as ``(element, pose of its container in the body frame, class)``."""
-        for child in el:
+    def _contents(self, el: ET.Element, cls: str) -> list[tuple[ET.Element, np.ndarray, str]]:
+        """The joints, sites and bodies of a body (through its ``<frame>``s, any depth), in document
+        order, each as ``(element, pose of its container in the body frame, class)``."""
+        out = []
+        todo = [(child, np.eye(4), cls) for child in reversed(el)]
+        while todo:
+            child, T, cls = todo.pop()
             if child.tag in _REJECTED:
                 raise ValueError(f"{_describe(child)}: <{child.tag}> is not supported")
             if child.tag == "frame":
-                inner = self._class(child, cls, "childclass")
-                self._contents(child, T @ self._pose(child), inner, out)
+                inner, T_frame = self._class(child, cls, "childclass"), T @ self._pose(child)
+                todo.extend((grandchild, T_frame, inner) for grandchild in reversed(child))
             elif child.tag in ("joint", "freejoint", "site", "body"):
                 out.append((child, T, cls))
         return out
@@ -295,14 +306,31 @@ class _Reader:
         return (self._angle(lower), self._angle(upper)) if hinge else (float(lower), float(upper))
 
     def _body(self, el: ET.Element, parent: str, T_parent_body: np.ndarray, cls: str, part: _Part) -> None:
-        """Add a body, its joints and sites, then its children (depth first, MuJoCo's id order)."""
+        """Add a body, its joints and sites, then its children: the subtree depth first (MuJoCo's id
+        order), sites and child bodies in document order; walked with a stack, any depth."""
+        # (body, parent body, pose in the parent, class) or (named site, its body, pose in the body, class)
+        todo = [(el, parent, T_parent_body, cls)]
+        while todo:
+            el, parent, T, cls = todo.pop()
+            if el.tag == "site":
+                part.sites.append((el.get("name", ""), parent, T))
+                continue
+            name = self._add_body(el, parent, T, cls, part)
+            later = []
+            for child, T_body_container, c in self._contents(el, self._class(el, cls, "childclass")):
+                if child.tag == "site" and child.get("name"):
+                    later.append((child, name, T_body_container @ self._pose(child, self._class(child, c)), c))
+                elif child.tag == "body":
+                    later.append((child, name, T_body_container @ self._pose(child), c))
+            todo.extend(reversed(later))
+
+    def _add_body(self, el: ET.Element, parent: str, T_parent_body: np.ndarray, cls: str, part: _Part) -> str:
+        """Add one body (its name, MuJoCo id and joints) to ``part``; returns its name."""
         bid, self.n_bodies = self.n_bodies, self.n_bodies + 1
         name = el.get("name") or f"body{bid}"
-        cls = self._class(el, cls, "childclass")
         part.links.append(name)
-        contents = self._contents(el, np.eye(4), cls, [])
         moving: list[JointSpec] = []
-        for child, T, c in contents:
+        for child, T, c in self._contents(el, self._class(el, cls, "childclass")):
             if child.tag in ("joint", "freejoint"):
                 spec, free = self._joint(child, T, c, name)
                 if free and (parent != "world" or part.free is not None):
@@ -315,11 +343,7 @@ class _Reader:
             raise ValueError(f"{_describe(part.free)}: a free joint must be the only joint of a top-level body")
         if part.free is None or parent != "world":
             self._connect(parent, name, T_parent_body, moving, part)
-        for child, T, c in contents:
-            if child.tag == "site" and child.get("name"):
-                part.sites.append((child.get("name"), name, T @ self._pose(child, self._class(child, c))))
-            elif child.tag == "body":
-                self._body(child, name, T @ self._pose(child), c, part)
+        return name
 
     @staticmethod
     def _connect(parent: str, body: str, T_parent_body: np.ndarray, moving: list[JointSpec], part: _Part) -> None:
@@ -334,12 +358,12 @@ class _Reader:
             parent = child
 
     def worldbody(self, el: ET.Element) -> None:
-        for child, T, cls in self._contents(el, np.eye(4), "main", []):
+        for child, T, cls in self._contents(el, "main"):
             if child.tag in ("joint", "freejoint"):
                 raise ValueError(f"{_describe(child)}: the world body cannot have joints")
             if child.tag == "site" and child.get("name"):
                 T_world_site = T @ self._pose(child, self._class(child, cls))
-                self.parts["world"].sites.append((child.get("name"), "world", T_world_site))
+                self.parts["world"].sites.append((child.get("name", ""), "world", T_world_site))
             elif child.tag == "body":
                 part = _Part()
                 self._body(child, "world", T @ self._pose(child), cls, part)
@@ -402,37 +426,53 @@ def _equalities(reader: _Reader, root: ET.Element, joints: list[JointSpec]) -> l
 # --------------------------------------------------------------------------------------------- front door
 
 
-def _expand_includes(el: ET.Element, folder: str, stack: tuple[str, ...] = (), seen: set[str] | None = None) -> None:
-    """Replace every ``<include file=...>`` by the children of the included ``<mujoco>`` (recursively).
+def _included(el: ET.Element, folder: str, inside: tuple[str, ...], seen: set[str]) -> tuple[ET.Element, str]:
+    """The ``<mujoco>`` root of the file an ``<include>`` names, and its path.
+
+    Args:
+        el: the ``<include>`` element.
+        folder: the folder include paths are relative to.
+        inside: the paths of the includes that led to ``el`` (a cycle repeats one).
+        seen: the real paths of every file included so far (updated).
+    """
+    if not el.get("file"):
+        raise ValueError("MJCF <include>: missing 'file' attribute")
+    where = _describe(el)
+    path = os.path.normpath(os.path.join(folder, el.get("file", "")))
+    if not os.path.isfile(path):
+        raise ValueError(f"{where}: file not found: {path!r}")
+    if path in inside:
+        raise ValueError(f"{where}: recursive include of {path!r}")
+    if os.path.realpath(path) in seen:
+        raise ValueError(f"{where}: file {path!r} is included more than once (MuJoCo allows one include of a file)")
+    seen.add(os.path.realpath(path))
+    included, _ = _xml.read(path, "MJCF")
+    if included.tag != "mujoco":
+        raise ValueError(f"{where}: expected a <mujoco> root element in {path!r}, got <{included.tag}>")
+    return included, path
+
+
+def _expand_includes(root: ET.Element, folder: str) -> None:
+    """Replace every ``<include file=...>`` by the children of the included ``<mujoco>``, at any depth.
 
     Each file may be included once in the whole model (MuJoCo's rule; repeated includes would
-    expand exponentially). ``seen`` holds the real paths of the files included so far.
+    expand exponentially). Walked with a stack: any nesting depth.
     """
-    seen = set() if seen is None else seen
-    children = []
-    for child in el:
-        if child.tag != "include":
-            _expand_includes(child, folder, stack, seen)
-            children.append(child)
-            continue
-        if not child.get("file"):
-            raise ValueError("MJCF <include>: missing 'file' attribute")
-        path = os.path.normpath(os.path.join(folder, child.get("file", "")))
-        if not os.path.isfile(path):
-            raise ValueError(f"{_describe(child)}: file not found: {path!r}")
-        if path in stack:
-            raise ValueError(f"{_describe(child)}: recursive include of {path!r}")
-        if os.path.realpath(path) in seen:
-            raise ValueError(
-                f"{_describe(child)}: file {path!r} is included more than once (MuJoCo allows one include of a file)"
-            )
-        seen.add(os.path.realpath(path))
-        included, _ = _xml.read(path, "MJCF")
-        if included.tag != "mujoco":
-            raise ValueError(f"{_describe(child)}: expected a <mujoco> root element in {path!r}, got <{included.tag}>")
-        _expand_includes(included, folder, (*stack, path), seen)
-        children.extend(included)
-    el[:] = children
+    seen: set[str] = set()
+    elements: list[tuple[ET.Element, tuple[str, ...]]] = [(root, ())]  # with the includes that led to each
+    while elements:
+        el, inside = elements.pop()
+        children = []
+        todo = [(child, inside) for child in reversed(el)]
+        while todo:
+            child, where = todo.pop()
+            if child.tag == "include":
+                included, path = _included(child, folder, where, seen)
+                todo.extend((grandchild, (*where, path)) for grandchild in reversed(included))
+            else:
+                children.append(child)
+                elements.append((child, where))
+        el[:] = children
 
 
 def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:

@@ -182,7 +182,7 @@ def mjcf_visuals(root: ET.Element, base_dir: str | None) -> list[Visual]:
                 meshes[name] = (file, resolve_mesh(file, mesh_dir), tuple(_floats(mesh.get("scale"), 3, (1, 1, 1))))
     visuals: list[Visual] = []
 
-    def walk(body: ET.Element, name: str) -> None:
+    def add_geoms(body: ET.Element, name: str) -> None:
         for geom in body.findall("geom"):
             if int(geom.get("group", "0")) >= 3:
                 continue
@@ -213,11 +213,12 @@ def mjcf_visuals(root: ET.Element, base_dir: str | None) -> list[Visual]:
             elif kind in ("capsule", "cylinder") and size is not None:
                 half = length / 2 if length is not None else float(size[1]) if size.size > 1 else 0.0
                 visuals.append(Visual(name, _pose(R, p), kind, (float(size[0]), 2 * half), rgba=rgba))
-        for child in body.findall("body"):
-            walk(child, child.get("name", ""))
 
-    for worldbody in root.findall("worldbody"):
-        walk(worldbody, "world")
+    todo = [(worldbody, "world") for worldbody in reversed(root.findall("worldbody"))]
+    while todo:  # depth first in document order, with a stack: any nesting depth
+        body, name = todo.pop()
+        add_geoms(body, name)
+        todo.extend((child, child.get("name", "")) for child in reversed(body.findall("body")))
     return visuals
 
 
