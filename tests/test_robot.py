@@ -37,9 +37,11 @@ PANDA = os.path.join(DATA, "panda.urdf")
 
 
 def _random_q(robot, n, seed):
-    """In-limit configurations; unlimited (or huge-limit) joints within one turn either way."""
+    """In-limit configurations; unlimited (or huge-limit) joints within one turn either way, and so are
+    joints limited to one value (``<limit>`` without ``lower``/``upper``: wheels), for the kinematics."""
     lo = np.maximum(np.where(np.isfinite(robot.lower), robot.lower, -np.pi), -np.pi)
     hi = np.minimum(np.where(np.isfinite(robot.upper), robot.upper, np.pi), np.pi)
+    lo, hi = np.where(lo < hi, lo, -np.pi), np.where(lo < hi, hi, np.pi)
     return np.random.default_rng(seed).uniform(lo, hi, (n, robot.dof))
 
 
@@ -99,6 +101,40 @@ def test_every_frame_and_jacobian_matches_pinocchio(path):
             J_pin = pin.getFrameJacobian(model, data, model.getFrameId(robot.frame_names[f], pin.BODY), ref_frames[ref])
             worst_jac = max(worst_jac, np.abs(_pin_columns(model, robot, J_pin) - J[k]).max())
     assert worst_pose < 1e-10 and worst_jac < 1e-10, (worst_pose, worst_jac)
+    # the limits of the revolute and prismatic joints (continuous ones: (cos, sin) in Pinocchio)
+    for i, name in enumerate(robot.joint_names):
+        joint = model.joints[model.getJointId(name)]
+        if joint.nq == 1:
+            limits = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
+            assert (float(robot.lower[i]), float(robot.upper[i])) == limits, name
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["revolute", "prismatic"])
+@pytest.mark.parametrize(
+    "attributes", ['upper="1.5"', 'lower="-0.5"', "", 'lower="-2" upper="0.25"', 'upper="1e-3" lower="-1e-3"']
+)
+def test_urdf_limit_attributes_as_pinocchio_reads_them(kind, attributes):
+    """``<limit>``'s ``lower`` and ``upper`` default to 0 each (urdfdom's reading, which Pinocchio uses)."""
+    urdf = f"""<robot name="r"><link name="a"/><link name="b"/>
+      <joint name="j" type="{kind}"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>
+        <limit {attributes} effort="1" velocity="1"/></joint></robot>"""
+    robot, model = dk.load_robot(urdf), pin.buildModelFromXML(urdf)
+    assert (float(robot.lower[0]), float(robot.upper[0])) == (model.lowerPositionLimit[0], model.upperPositionLimit[0])
+    chain = dk.load_urdf(urdf)
+    assert (float(chain.lower[0]), float(chain.upper[0])) == (model.lowerPositionLimit[0], model.upperPositionLimit[0])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["revolute", "prismatic"])
+def test_urdf_joint_without_limit_is_unlimited_where_urdfdom_rejects_it(kind):
+    """A revolute or prismatic joint without ``<limit>`` loads, unlimited (urdfdom, so Pinocchio, rejects the file)."""
+    urdf = f"""<robot name="r"><link name="a"/><link name="b"/>
+      <joint name="j" type="{kind}"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/></joint></robot>"""
+    robot = dk.load_robot(urdf)
+    assert (float(robot.lower[0]), float(robot.upper[0])) == (-np.inf, np.inf)
+    with pytest.raises(ValueError, match="does not contain a valid URDF model"):
+        pin.buildModelFromXML(urdf)
 
 
 @pytest.mark.skipif(not ERD, reason="example-robot-data is not installed")

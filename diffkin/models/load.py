@@ -14,10 +14,13 @@ def load_robot(source, *, floating: bool = False) -> Robot:
     """Read a whole robot from a URDF (root element ``<robot>``) or MJCF (root ``<mujoco>``) file.
 
     URDF: fixed joints are merged (their links become frames of the moving body they are fixed
-    to); ``continuous`` joints and revolute or prismatic joints without ``<limit lower= upper=>``
-    are unlimited (as urdfdom and Pinocchio read them); ``<mimic joint= multiplier= offset=>``
-    makes a joint follow its source, ``q_j = multiplier * q_source + offset``, outside ``q``. A
-    ``floating`` joint from the root link makes its child the floating root.
+    to); ``continuous`` joints are unlimited; a revolute or prismatic joint's ``<limit lower=
+    upper=>`` limits it, each attribute 0 if absent (as urdfdom and Pinocchio read it). A
+    revolute or prismatic joint without ``<limit>`` is unlimited: urdfdom (so Pinocchio and ROS)
+    rejects such a file, diffkin reads it (wheels are often written so). ``<mimic joint=
+    multiplier= offset=>`` makes a joint follow its source, ``q_j = multiplier * q_source +
+    offset``, outside ``q``. A ``floating`` joint from the root link makes its child the
+    floating root.
 
     MJCF (see :mod:`diffkin.models.mjcf`): bodies (with ``pos`` and ``quat``/``axisangle``/
     ``euler``/``xyaxes``/``zaxis``, in ``<compiler angle= eulerseq=>`` units), ``<frame>``s,

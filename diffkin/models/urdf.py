@@ -57,9 +57,9 @@ def _parse_joint(el: ET.Element) -> JointSpec:
         axis = axis / norm
         screw = np.concatenate([np.zeros(3), axis]) if kind_letter == "R" else np.concatenate([axis, np.zeros(3)])
     limit = el.find("limit")
-    if kind in ("revolute", "prismatic") and limit is not None and limit.get("lower") is not None:
-        lower = float(_xml.numbers(limit, "lower", 1, None, f"{where} <limit>")[0])
-        upper = float(_xml.numbers(limit, "upper", 1, None, f"{where} <limit>")[0])
+    if kind in ("revolute", "prismatic") and limit is not None:  # urdfdom's defaults: 0 each
+        lower = float(_xml.numbers(limit, "lower", 1, "0", f"{where} <limit>")[0])
+        upper = float(_xml.numbers(limit, "upper", 1, "0", f"{where} <limit>")[0])
         if lower > upper:
             raise ValueError(f"{where} <limit>: expected lower <= upper, got lower={lower}, upper={upper}")
     mimic = None
@@ -122,10 +122,9 @@ def _robot(root: ET.Element, joints: list[JointSpec], links: list[str], *, float
 def load_urdf(source, end_link: str | None = None, *, base_link: str | None = None) -> PoEChain:
     """Read the serial chain from ``base_link`` to ``end_link`` of a URDF.
 
-    Fixed joints are merged into the neighbouring links; ``continuous`` joints, and revolute or
-    prismatic joints without ``<limit lower= upper=>`` (wheels, as urdfdom and Pinocchio read
-    them), are unlimited; joint axes may point in any direction (they are normalised). A mimic
-    joint on the chain is folded into its source joint (see :meth:`Robot.chain`).
+    Fixed joints are merged into the neighbouring links; joint limits are read as in
+    :func:`diffkin.load_robot`; joint axes may point in any direction (they are normalised). A
+    mimic joint on the chain is folded into its source joint (see :meth:`Robot.chain`).
 
     Args:
         source: path to a ``.urdf`` file, or the XML text itself.
