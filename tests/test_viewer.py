@@ -73,8 +73,9 @@ def test_builtin_iiwa14_scene_and_sliders(viewer_of):
     assert viewer.kin.frame_names == ("base", *(f"link{i}" for i in range(1, 8)), "ee")
     assert not viewer.has_meshes and viewer.missing == []
     # a cylinder from each frame to its parent, a joint sphere at each frame, axes shown
-    assert sorted(k for k in viewer.skeleton if "/" not in k) == sorted(viewer.kin.frame_names[1:])
-    assert all(h.visible for h in viewer.skeleton.values())
+    assert sorted(viewer.skeleton) == sorted(viewer.kin.frame_names[1:])
+    assert sorted(viewer.joint_spheres) == sorted(viewer.kin.frame_names)
+    assert all(h.visible for h in (*viewer.skeleton.values(), *viewer.joint_spheres.values()))
     assert all(h.show_axes for h in viewer.frames.values())
     assert viewer.arm is not None and set(viewer.targets) == {"ee"}
     _assert_scene_matches(viewer, _chain_poses(chain, viewer.q))
@@ -104,7 +105,7 @@ def test_urdf_meshes_and_tree(viewer_of):
         for handle in handles:
             assert handle.name.startswith(f"/robot/{frame}/")  # meshes ride on their link's frame node
     assert viewer.kin.ends == ("finger_tip_link",)
-    assert not any(h.visible for h in viewer.skeleton.values())  # meshes shown, skeleton hidden
+    assert not any(h.visible for h in (*viewer.skeleton.values(), *viewer.joint_spheres.values()))  # meshes shown
     _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, viewer.q)))
     for i, value in enumerate((0.3, -0.7, 1.1)):
         viewer.sliders[i].value = value
@@ -129,6 +130,32 @@ def test_mimic_joints_follow(viewer_of):
     viewer.sliders[0].value = 0.25
     _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, viewer.q)))
     assert viewer.skeleton["c"].height == pytest.approx(0.4)
+
+
+def test_frame_names_that_look_alike_get_their_own_scene_nodes(viewer_of):
+    """``arm/base`` and ``arm_base`` (one path component each once ``/`` is replaced), ``a`` and
+    ``a/joint`` (the name of ``a``'s joint sphere), ``%2F``: each frame keeps its own node."""
+    names = ["arm/base", "arm_base", "arm%2Fbase", "a", "a/joint", "joint", "%"]
+    links = "".join(f'<link name="{n}"/>' for n in names)
+    joints = "".join(
+        f'<joint name="j{k}" type="revolute"><parent link="{names[k - 1]}"/><child link="{n}"/>'
+        f'<origin xyz="0.1 0 0.2"/><axis xyz="0 1 0"/><limit lower="-1" upper="1"/></joint>'
+        for k, n in enumerate(names)
+        if k
+    )
+    robot = dk.load_robot(f'<robot name="r">{links}{joints}</robot>')
+    viewer = viewer_of(robot)
+    assert viewer.kin.frame_names == tuple(names)
+    assert len({viewer.frames[n].name for n in names}) == len(names)  # one scene node each
+    assert len({viewer.skeleton[n].name for n in names[1:]}) == len(names) - 1
+    assert len({viewer.joint_spheres[n].name for n in names}) == len(names)
+    for k, value in enumerate((0.3, -0.2, 0.5, 0.1, -0.4, 0.7)):
+        viewer.sliders[k].value = value
+    _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, viewer.q)))
+    T = np.asarray(dk.link_poses(robot, viewer.q))
+    for f in range(1, len(names)):  # each cylinder joins its frame to the parent frame
+        np.testing.assert_allclose(viewer.skeleton[names[f]].position, (T[f - 1, :3, 3] + T[f, :3, 3]) / 2, atol=1e-9)
+        assert viewer.skeleton[names[f]].height == pytest.approx(np.hypot(0.1, 0.2))
 
 
 def test_unlimited_joints_slide_over_one_turn(viewer_of):
@@ -468,7 +495,8 @@ def test_browser_draws_the_robot(viewer_of, tmp_path):
     """
     viewer = viewer_of("iiwa14")
     viewer.set_q(np.array([0.4, 0.6, 0.0, -1.3, 0.0, 0.8, 0.0]))
-    handles = (*viewer.frames.values(), *viewer.skeleton.values(), *viewer.targets.values())
+    handles = (*viewer.frames.values(), *viewer.skeleton.values(), *viewer.joint_spheres.values())
+    handles += tuple(viewer.targets.values())
     canvas = (slice(160, 768), slice(0, 680))  # below the WebGL notice, left of the GUI panel
     # A loaded machine can take the screenshot before the scene has arrived over the websocket:
     # up to three tries of the pair, each judged as a whole.

@@ -48,9 +48,10 @@ def _plain(text: str) -> str:
     return "".join(_MARKDOWN_ESCAPES.get(c, c) for c in str(text))
 
 
-def _safe(name: str) -> str:
-    """A frame name as one scene-tree path component."""
-    return name.replace("/", "_") or "_"
+def _node(name: str) -> str:
+    """A frame name as one scene-tree path component, one-to-one: ``%`` and ``/`` percent-encoded
+    (``arm/base`` is ``arm%2Fbase``, apart from ``arm_base``), the empty name ``%``."""
+    return name.replace("%", "%25").replace("/", "%2F") or "%"
 
 
 def _wxyz(R: np.ndarray) -> np.ndarray:
@@ -89,7 +90,8 @@ def _intervals_text(intervals: np.ndarray, mask: np.ndarray) -> str:
 class Viewer:
     """A running viser page showing one model; every control is also a method.
 
-    Scene tree: ``/robot/<frame>`` is a frame node per model frame at its world pose (axes
+    Scene tree (``<frame>``: the frame's name with ``%`` and ``/`` percent-encoded, one path
+    component): ``/robot/<frame>`` is a frame node per model frame at its world pose (axes
     toggled by "Show frames"), its visual meshes below it at their fixed pose in the frame;
     ``/skeleton/<frame>`` cylinders join each frame to its parent frame; ``/targets/<frame>``
     are the IK gizmos; ``/map`` the reachability point cloud.
@@ -99,6 +101,8 @@ class Viewer:
         kin: the model's frames, joints and jitted poses (``diffkin.viewer._model.Kinematics``).
         q: ``(dof,)`` float64, the configuration shown (actuated joints; mimic joints follow).
         frames: ``{frame name: FrameHandle}``.
+        skeleton: ``{frame name: cylinder}`` from each frame (but the root) to its parent frame.
+        joint_spheres: ``{frame name: sphere}`` at each frame (shown with the skeleton).
         visuals: ``{frame name: [mesh handles]}`` of the meshes and primitives drawn.
         missing: mesh references that could not be found or read (not drawn; "Show skeleton"
             draws every link as a cylinder).
@@ -173,7 +177,7 @@ class Viewer:
         axes = 0.08 * size
         for name in names:
             self.frames[name] = scene.add_frame(
-                f"/robot/{_safe(name)}", show_axes=True, axes_length=axes, axes_radius=axes / 25
+                f"/robot/{_node(name)}", show_axes=True, axes_length=axes, axes_radius=axes / 25
             )
         for k, visual in enumerate(visuals):
             if visual.frame not in self.frames:
@@ -184,7 +188,7 @@ class Viewer:
                 continue
             has_meshes = True
             handle = scene.add_mesh_trimesh(
-                f"/robot/{_safe(visual.frame)}/visual{k}",
+                f"/robot/{_node(visual.frame)}/visual{k}",
                 mesh,
                 position=visual.T_frame_visual[:3, 3],
                 wxyz=_wxyz(visual.T_frame_visual[:3, :3]),
@@ -192,16 +196,16 @@ class Viewer:
             self.visuals[visual.frame].append(handle)
         self.has_meshes = has_meshes
         radius = 0.025 * size
-        self.skeleton: dict[str, Any] = {}  # joint spheres and link cylinders, by frame
+        self.skeleton: dict[str, Any] = {}
+        self.joint_spheres: dict[str, Any] = {}
         for f, parent in enumerate(self.kin.frame_parents):
             name = names[f]
-            joint = scene.add_icosphere(
-                f"/robot/{_safe(name)}/joint", radius=radius * 1.3, color=(240, 140, 40), visible=not has_meshes
+            self.joint_spheres[name] = scene.add_icosphere(
+                f"/robot/{_node(name)}/joint", radius=radius * 1.3, color=(240, 140, 40), visible=not has_meshes
             )
-            self.skeleton[f"{name}/joint"] = joint
             if parent >= 0:
                 self.skeleton[name] = scene.add_cylinder(
-                    f"/skeleton/{_safe(name)}", radius=radius, height=1.0, color=(120, 130, 150), visible=not has_meshes
+                    f"/skeleton/{_node(name)}", radius=radius, height=1.0, color=(120, 130, 150), visible=not has_meshes
                 )
         self._lengths = {name: 1.0 for name in self.skeleton}
         for frame in self.frames.values():
@@ -243,7 +247,7 @@ class Viewer:
 
         @self.show_skeleton.on_update
         def _(_event) -> None:
-            for handle in self.skeleton.values():
+            for handle in (*self.skeleton.values(), *self.joint_spheres.values()):
                 handle.visible = self.show_skeleton.value
 
         @self.show_meshes.on_update
@@ -272,7 +276,7 @@ class Viewer:
             gui.add_markdown("Drag a gizmo: IK from the current configuration (LM, warm start).")
             for end in self.kin.ends:
                 self.ik_status[end] = gui.add_markdown(f"{_plain(end)}: not solved yet")
-                gizmo = self.server.scene.add_transform_controls(f"/targets/{_safe(end)}", scale=0.18 * self.size)
+                gizmo = self.server.scene.add_transform_controls(f"/targets/{_node(end)}", scale=0.18 * self.size)
 
                 def dragged(_event, end: str = end) -> None:
                     self._on_gizmo(end)
