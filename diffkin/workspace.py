@@ -30,8 +30,6 @@ import itertools
 import math
 import os
 import sys
-import zipfile
-import zlib
 from collections.abc import Sequence
 
 import jax
@@ -43,6 +41,7 @@ from jax.sharding import PartitionSpec as P
 from diffkin import _rigid as rg
 from diffkin import kinematics
 from diffkin._checks import instance, positive_int
+from diffkin._npz import read_npz
 from diffkin._trig import atan2, sincos
 from diffkin._xla import opaque_index
 from diffkin.models import forward
@@ -112,21 +111,10 @@ class ReachabilityMap:
         path = os.fspath(path)
         if not os.path.exists(path) and not path.endswith(".npz") and os.path.exists(path + ".npz"):
             path += ".npz"  # as np.savez named it
-        unreadable = f"{path}: expected a .npz archive written by ReachabilityMap.save, could not read it"
-        with open(path, "rb") as file:  # closed here even when numpy fails half-way
-            try:
-                data = np.load(file, allow_pickle=False)
-            except (EOFError, OSError, ValueError, zipfile.BadZipFile) as err:
-                raise ValueError(f"{unreadable} ({type(err).__name__}: {err})") from err
-            if not isinstance(data, np.lib.npyio.NpzFile):
-                raise ValueError(f"{path}: expected a .npz archive written by ReachabilityMap.save, got a single array")
-            missing = [f.name for f in dataclasses.fields(cls) if f.name not in data.files]
-            if missing:
-                raise ValueError(f"{path}: not a complete reachability map, missing field(s) {', '.join(missing)}")
-            try:
-                fields = {name: data[name] for name in data.files}
-            except (EOFError, OSError, ValueError, zipfile.BadZipFile, zlib.error) as err:
-                raise ValueError(f"{unreadable} ({type(err).__name__}: {err})") from err
+        fields = read_npz(path, "written by ReachabilityMap.save")
+        missing = [f.name for f in dataclasses.fields(cls) if f.name not in fields]
+        if missing:
+            raise ValueError(f"{path}: not a complete reachability map, missing field(s) {', '.join(missing)}")
         if fields["counts"].ndim != 3:
             raise ValueError(f"{path}: field counts: expected a 3-d grid, got shape {fields['counts'].shape}")
         return cls(

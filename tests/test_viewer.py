@@ -412,6 +412,39 @@ def test_cli_view_errors(capsys):
     assert "--map: no such file 'missing.npz'" in capsys.readouterr().err
 
 
+def _bad_archives(folder) -> dict[str, str]:
+    """Files that are no readable ``.npz`` of arrays, and what the error says about each."""
+    np.savez(folder / "good.npz", q=np.zeros((2, 7)), counts=np.zeros((2, 2, 2)))
+    whole = (folder / "good.npz").read_bytes()
+    (folder / "empty.npz").write_bytes(b"")
+    (folder / "text.npz").write_text("not a zip archive")
+    (folder / "cut.npz").write_bytes(whole[: len(whole) // 2])
+    (folder / "cut_member.npz").write_bytes(whole[:-30])  # the central directory damaged
+    np.save(folder / "array.npy", np.zeros((2, 7)))
+    np.savez(folder / "objects.npz", q=np.array([{"a": 1}, None], dtype=object))  # pickled objects
+    return {
+        "empty.npz": "could not read it",
+        "text.npz": "could not read it",
+        "cut.npz": "could not read it",
+        "cut_member.npz": "could not read it",
+        "array.npy": "got a single array",
+        "objects.npz": "could not read it",
+    }
+
+
+@pytest.mark.parametrize("flag", ["--map", "--ik-results"])
+def test_cli_view_unreadable_npz_is_one_line(capsys, tmp_path, flag):
+    """A corrupt, truncated, single-array or pickled file after --map or --ik-results: one line, exit 2."""
+    from diffkin.cli import main
+
+    for name, message in _bad_archives(tmp_path).items():
+        path = tmp_path / name
+        assert main(["view", "iiwa14", flag, str(path)]) == 2, name
+        out, err = capsys.readouterr()
+        assert err.startswith(f"diffkin: error: {path}: expected a .npz archive") and err.count("\n") == 1, err
+        assert message in err, err
+
+
 @pytest.mark.slow
 def test_cli_view_serves_the_page():
     """``diffkin view iiwa14`` prints its URL, serves the viser page, and stops on Ctrl-C.

@@ -15,6 +15,7 @@ import viser
 import viser.transforms as vtf
 
 import diffkin as dk
+from diffkin._npz import read_npz
 from diffkin.viewer import _overlays, _visuals
 from diffkin.viewer._model import kinematics, make_ik
 
@@ -595,8 +596,7 @@ def show(
     if isinstance(workspace_map, (str, bytes)) or hasattr(workspace_map, "__fspath__"):
         workspace_map = dk.workspace.ReachabilityMap.load(workspace_map)
     if isinstance(results, (str, bytes)) or hasattr(results, "__fspath__"):
-        with np.load(results) as data:
-            results = {k: data[k] for k in data.files}
+        results = read_npz(results, "of batch results (q, and optionally success, pos_err, rot_err)")
     if results is not None:
         if "q" not in results:
             raise ValueError(f"results: expected an array 'q' (N, dof), got fields {sorted(results)}")
