@@ -259,6 +259,67 @@ def test_map_overlay_and_batch_results(viewer_of, tmp_path):
         show("iiwa14", results={"q": np.zeros((3, 6))}, port=_free_port(), verbose=False)
 
 
+def _results(**fields):
+    """Batch results of the iiwa14 (5 rows), with ``fields`` replaced (``None``: left out)."""
+    q = np.random.default_rng(1).uniform(-1, 1, (5, 7))
+    base = {"q": q, "success": np.ones(5, bool), "pos_err": np.full(5, 1e-6), "rot_err": np.full(5, 1e-5)}
+    return {k: v for k, v in {**base, **fields}.items() if v is not None}
+
+
+_NAN_ROW = np.where(np.arange(5)[:, None] == 3, np.nan, np.zeros((5, 7)))
+_BAD_RESULTS = {  # (results, the ValueError's message; a TypeError's for a list)
+    "q_missing": (_results(q=None), r"results: expected an array 'q' \(N, dof\)"),
+    "q_1d": (_results(q=np.zeros(7)), r"results q: expected shape \(N, 7\) with N >= 1, got \(7,\)"),
+    "q_empty": (_results(q=np.zeros((0, 7))), r"results q: expected shape \(N, 7\) with N >= 1"),
+    "q_nan_row": (_results(q=_NAN_ROW), r"results q: expected finite numbers, got NaN or inf in rows \[3\]"),
+    "q_inf": (_results(q=np.full((5, 7), np.inf)), r"results q: expected finite numbers"),
+    "q_strings": (_results(q=np.full((5, 7), "1")), r"results q: expected real numbers, got dtype <U1"),
+    "q_complex": (_results(q=np.zeros((5, 7), complex)), r"results q: expected real numbers, got dtype complex"),
+    "success_short": (
+        _results(success=np.ones(4, bool)),
+        r"results success: expected shape \(5,\) \(one per row of q\), got \(4,\)",
+    ),
+    "success_ints": (_results(success=np.ones(5, int)), r"results success: expected booleans, got dtype int"),
+    "pos_err_text": (_results(pos_err=np.full(5, "small")), r"results pos_err: expected real numbers, got dtype <U5"),
+    "pos_err_long": (
+        _results(pos_err=np.zeros(6)),
+        r"results pos_err: expected shape \(5,\) or \(5, k\) \(one per row of q\), got \(6,\)",
+    ),
+    "rot_err_nan": (
+        _results(rot_err=np.array([0, 0, np.nan, 0, 0])),
+        r"results rot_err: expected errors >= 0 \(inf allowed\), got NaN or a negative value in rows \[2\]",
+    ),
+    "rot_err_negative": (_results(rot_err=-np.ones(5)), r"results rot_err: expected errors >= 0"),
+    "not_a_mapping": ([np.zeros((5, 7))], r"results: expected a mapping of arrays \(or an .npz path\), got list"),
+}
+
+
+@pytest.mark.parametrize("case", _BAD_RESULTS)
+def test_batch_results_are_checked_before_serving(case):
+    """Every field of the batch results is checked when they are given, before the page is served."""
+    results, message = _BAD_RESULTS[case]
+    port = _free_port()
+    with pytest.raises(TypeError if case == "not_a_mapping" else ValueError, match=message):
+        show("iiwa14", results=results, port=port, verbose=False, warmup=False)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", port))  # nothing serves there
+
+
+def test_batch_results_errors_per_target_and_from_the_command_line(viewer_of, tmp_path, capsys):
+    """Per-target errors ``(N, k)`` (a whole robot's IK) are shown per target; a bad file is one CLI line."""
+    results = _results(pos_err=np.arange(10.0).reshape(5, 2) * 1e-3, rot_err=np.arange(5))  # integer errors too
+    viewer = viewer_of("iiwa14", results=results)
+    viewer.result_slider.value = 2
+    assert "pos_err [0.004, 0.005]" in viewer.result_status.content and "rot_err 2" in viewer.result_status.content
+    np.testing.assert_allclose(viewer.q, np.clip(results["q"][2], viewer.kin.lower, viewer.kin.upper))
+    from diffkin.cli import main
+
+    np.savez(tmp_path / "bad.npz", **_results(success=np.ones(3, bool)))
+    assert main(["view", "iiwa14", "--ik-results", str(tmp_path / "bad.npz")]) == 2
+    err = capsys.readouterr().err
+    assert err == "diffkin: error: results success: expected shape (5,) (one per row of q), got (3,)\n"
+
+
 def test_mesh_references_resolve_or_are_reported(tmp_path, viewer_of):
     mesh = os.path.join(os.path.dirname(FINGER), "..", "meshes", "upper_link.stl")
     package = "package://example-robot-data/robots/finger_edu_description/meshes/upper_link.stl"

@@ -18,6 +18,7 @@ import diffkin as dk
 from diffkin._npz import read_npz
 from diffkin.viewer import _overlays, _visuals
 from diffkin.viewer._model import kinematics, make_ik
+from diffkin.viewer._results import check_results, describe
 
 GC_OPTIONS = tuple(" ".join(f"{s:+d}" for s in signs) for signs in itertools.product((1, -1), repeat=3))
 IIWA_READY = np.array([0.0, 0.5, 0.0, -1.2, 0.0, 0.7, 0.0])  # a bent pose: the arm angle is defined
@@ -110,6 +111,7 @@ class Viewer:
         sliders: one slider per joint, in ``q`` order.
         targets: ``{end frame: TransformControlsHandle}``.
         ik_results: ``{end frame: last IKResult}`` (numpy fields).
+        results: the batch results browsed, ``{field: array}`` as checked, or ``None``.
         arm: the ``dk.srs.SRSArm`` driving the arm-angle controls, or ``None``.
         url: ``http://host:port``.
     """
@@ -145,6 +147,7 @@ class Viewer:
         if q0.shape != (dof,):
             raise ValueError(f"q0: expected shape ({dof},), got {q0.shape}")
         self.q = np.clip(q0, self.kin.lower, self.kin.upper)
+        self.results = check_results(results, dof) if results is not None else None
 
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.url = f"http://{host}:{self.server.get_port()}"
@@ -160,7 +163,7 @@ class Viewer:
         )
 
         self._build_robot(source, size)
-        self._build_gui(workspace_map, results)
+        self._build_gui(workspace_map)
         self._apply(self.q, source=None)
         if warmup:
             threading.Thread(target=self._warmup, daemon=True).start()
@@ -232,7 +235,7 @@ class Viewer:
 
     # ------------------------------------------------------------------------------------- gui
 
-    def _build_gui(self, workspace_map, results) -> None:
+    def _build_gui(self, workspace_map) -> None:
         gui = self.server.gui
         name = getattr(self.model, "name", "") or type(self.model).__name__
         gui.add_markdown(f"**{_plain(name)}**: {self.kin.dof} joints, {len(self.kin.frame_names)} frames")
@@ -319,9 +322,8 @@ class Viewer:
             self.show_map.on_update(lambda _event: setattr(self.map_cloud, "visible", self.show_map.value))
             self.map_quantity.on_update(lambda _event: self._draw_map())
 
-        self.results = results
-        if results is not None:
-            n = len(results["q"])
+        if self.results is not None:
+            n = len(self.results["q"])
             with gui.add_folder("Batch results"):
                 self.result_slider = gui.add_slider("result", min=0, max=max(n - 1, 1), step=1, initial_value=0)
                 self.result_status = gui.add_markdown(f"{n} configurations")
@@ -512,18 +514,11 @@ class Viewer:
 
     def show_result(self, i: int) -> None:
         """Show configuration ``i`` of the batch results."""
-        n = len(self.results["q"])
-        i = int(np.clip(i, 0, n - 1))
-        text = f"result {i} of {n}"
-        for field in ("success", "pos_err", "rot_err"):
-            if field in self.results:
-                text += (
-                    f", {field} {np.asarray(self.results[field])[i]:.3g}"
-                    if field != "success"
-                    else f", success {bool(np.asarray(self.results[field])[i])}"
-                )
-        self.result_status.content = text
-        self.set_q(np.asarray(self.results["q"][i], dtype=np.float64))
+        if self.results is None:
+            raise ValueError("show_result: the viewer has no batch results (show(..., results=...))")
+        i = int(np.clip(i, 0, len(self.results["q"]) - 1))
+        self.result_status.content = describe(self.results, i)
+        self.set_q(self.results["q"][i])
 
     # ------------------------------------------------------------------------------------- lifecycle
 
@@ -572,7 +567,9 @@ def show(
         q0: initial configuration ``(dof,)`` (default zeros; a bent pose for the iiwa).
         workspace_map: a ``dk.workspace.ReachabilityMap`` (or the path of its ``.npz``) drawn as points.
         results: batched configurations to browse: a mapping (or ``.npz`` path) with ``q (N, dof)``
-            and optionally ``success``, ``pos_err``, ``rot_err`` ``(N,)``.
+            and optionally ``success (N,)``, ``pos_err`` and ``rot_err`` ``(N,)`` or ``(N, k)``
+            (a whole robot's per-target errors); each field is checked before the page is served
+            (``q`` finite, ``success`` booleans, errors real and ``>= 0``, one row per row of ``q``).
         host, port: where to serve (the next free port is taken if ``port`` is in use).
         num_seeds: seeds of each interactive IK solve (the warm start is one of them).
         warmup: compile the IK functions in a background thread right away.
@@ -597,12 +594,6 @@ def show(
         workspace_map = dk.workspace.ReachabilityMap.load(workspace_map)
     if isinstance(results, (str, bytes)) or hasattr(results, "__fspath__"):
         results = read_npz(results, "of batch results (q, and optionally success, pos_err, rot_err)")
-    if results is not None:
-        if "q" not in results:
-            raise ValueError(f"results: expected an array 'q' (N, dof), got fields {sorted(results)}")
-        shape = np.shape(results["q"])
-        if len(shape) != 2 or shape[0] == 0 or shape[1] != len(model.joint_names):
-            raise ValueError(f"results q: expected shape (N, {len(model.joint_names)}) with N >= 1, got {shape}")
     viewer = Viewer(
         model,
         source=source,
