@@ -50,22 +50,41 @@ def dh_fk(chain, q) -> np.ndarray:
     return T @ np.asarray(chain.tool, dtype=np.float64)
 
 
+def _screw_exp(S: np.ndarray, kind: str, theta: np.ndarray) -> np.ndarray:
+    """``(..., 4, 4)`` ``exp([S] theta)`` of a unit screw ``S = [v; w]`` by Rodrigues' formula (``theta (...)``)."""
+    v, w, t = S[:3], S[3:], theta[..., None, None]
+    E = np.broadcast_to(np.eye(4), theta.shape + (4, 4)).copy()
+    if kind == "R":
+        K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+        E[..., :3, :3] = np.eye(3) + np.sin(t) * K + (1 - np.cos(t)) * K @ K
+        E[..., :3, 3] = (np.eye(3) * t + (1 - np.cos(t)) * K + (t - np.sin(t)) * K @ K) @ v
+    else:
+        E[..., :3, 3] = v * theta[..., None]
+    return E
+
+
 def poe_fk(chain, q) -> np.ndarray:
     """FK of a ``PoEChain``, ``exp([S1] q1) ... exp([Sn] qn) M`` by Rodrigues' formula: ``(..., dof) -> (..., 4, 4)``
     poses ``T_base_ee``."""
     q = np.asarray(q, dtype=np.float64)
     T = np.broadcast_to(np.eye(4), q.shape[:-1] + (4, 4)).copy()
     for i, S in enumerate(np.asarray(chain.screws, np.float64)):
-        v, w, t = S[:3], S[3:], q[..., i, None, None]
-        E = np.broadcast_to(np.eye(4), q.shape[:-1] + (4, 4)).copy()
-        if chain.joint_types[i] == "R":
-            K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
-            E[..., :3, :3] = np.eye(3) + np.sin(t) * K + (1 - np.cos(t)) * K @ K
-            E[..., :3, 3] = (np.eye(3) * t + (1 - np.cos(t)) * K + (t - np.sin(t)) * K @ K) @ v
-        else:
-            E[..., :3, 3] = v * q[..., i, None]
-        T = T @ E
+        T = T @ _screw_exp(S, chain.joint_types[i], q[..., i])
     return T @ np.asarray(chain.home, np.float64)
+
+
+def robot_poses(robot, q) -> np.ndarray:
+    """``(nf, 4, 4)`` world poses of a fixed-root ``Robot``'s frames at ``q (dof,)``, from its arrays by the
+    tree's definition: ``T_body[j + 1] = T_body[parents[j]] @ joint_poses[j] @ exp([screws[j]] theta_j)``,
+    ``theta_j = multipliers[j] q[sources[j]] + offsets[j]``, each frame at ``frame_poses[f]`` in its body."""
+    q = np.asarray(q, dtype=np.float64)
+    arrays = (robot.joint_poses, robot.screws, robot.multipliers, robot.offsets, robot.frame_poses)
+    joint_poses, screws, multipliers, offsets, frame_poses = (np.asarray(a, np.float64) for a in arrays)
+    bodies = [np.eye(4)]
+    for j, parent in enumerate(robot.parents):
+        theta = np.asarray(multipliers[j] * q[robot.sources[j]] + offsets[j])
+        bodies.append(bodies[parent] @ joint_poses[j] @ _screw_exp(screws[j], robot.joint_types[j], theta))
+    return np.stack([bodies[b] @ frame_poses[f] for f, b in enumerate(robot.frame_bodies)])
 
 
 def fk(chain, q) -> np.ndarray:
