@@ -146,7 +146,10 @@ def test_cli_does_not_import_jax():
 @pytest.mark.parametrize(
     "argv, match",
     [
-        (["info", "nosuchrobot"], "unknown robot 'nosuchrobot'"),
+        (["info", "nosuchrobot"], "unknown robot 'nosuchrobot': expected one of iiwa7, iiwa14"),
+        (["info", "robots/missing.urdf"], "robot file 'robots/missing.urdf' does not exist"),
+        (["fk", "missing.xml", "0"], "robot file 'missing.xml' does not exist"),
+        (["ik", "/", "--position", "0.5", "0", "0.5"], "'/' is a directory"),
         (["info", "iiwa14", "--end-link", "x"], "apply to URDF and MJCF files"),
         (["fk", "iiwa14", "0.1", "0.2"], "7 joint values"),
         (["fk", "iiwa14", "0.1", "zero", "0", "0", "0", "0", "0"], "invalid number: 'zero'"),
@@ -237,7 +240,21 @@ def test_ik_tolerances(capsys):
 
 def test_errors_name_flags_not_parameters(capsys):
     line = assert_user_error(capsys, "info", os.path.join(DATA, "ur5.urdf"), "--end-link", "nolink")
-    assert line.startswith("diffkin: error: --end-link: unknown link 'nolink'") and "'base_link'" in line
+    assert line.startswith("diffkin: error: --end-link: unknown frame 'nolink': the robot has 11 frames"), line
+    assert "closest names are 'ee_link'" in line and "`diffkin info` lists them all" in line
+
+
+def test_unknown_frames_are_named_with_the_closest_ones(capsys):
+    """An unknown frame gets the closest names and the count, not every frame name on one line."""
+    panda = os.path.join(DATA, "panda.urdf")
+    line = assert_user_error(capsys, "fk", panda, "--frame", "hand", *["0"] * 8)
+    assert line == (
+        "diffkin: error: --frame: unknown frame 'hand': the robot has 13 frames, the closest names are "
+        "'panda_hand', 'panda_hand_tcp' (`diffkin info` lists them all)"
+    )
+    line = assert_user_error(capsys, "info", panda, "--base-link", "zzz")
+    assert "13 frames, none named like it (the first: 'panda_link0', 'panda_link1', 'panda_link2', ...)" in line
+    assert len(line) < 200
 
 
 def test_bad_slice_is_reported_before_the_map_is_computed(capsys, tmp_path, monkeypatch):
