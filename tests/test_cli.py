@@ -59,6 +59,9 @@ def test_demo_quick(capsys, tmp_path):
     assert "FK check" in out and ": OK" in out
     assert re.search(r"IK .* success \d+\.\d% \(\d+/50\)", out)
     assert "valid samples" in out and "psi in [" in out
+    # warm timings say what they are: medians of several calls (a single call read 60 ms where the median is 3 ms)
+    assert len(re.findall(r"ms warm, median of 7 calls", out)) == 2, out
+    assert "s (one run: " in out and "reached in" in out and ", one run (compile" in out
     for name in ("reachability_count_y0.png", "reachability_manipulability_y0.png", "self_motion.png"):
         path = tmp_path / "demo" / name
         assert path.is_file() and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
