@@ -46,6 +46,18 @@ def test_help_subprocess():
         assert command in res.stdout
 
 
+def test_version_has_one_source(capsys):
+    """pyproject.toml reads the version from ``diffkin.__version__``, and ``diffkin --version`` prints it."""
+    import tomllib
+
+    with open(os.path.join(os.path.dirname(DATA), "..", "pyproject.toml"), "rb") as fh:
+        meta = tomllib.load(fh)
+    assert "version" not in meta["project"] and meta["project"]["dynamic"] == ["version"]
+    assert meta["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "diffkin.__version__"}
+    code, out, _ = run(capsys, "--version")
+    assert code == 0 and out.strip() == f"diffkin {dk.__version__}" and re.fullmatch(r"\d+\.\d+\.\d+", dk.__version__)
+
+
 @pytest.mark.parametrize("command", ["demo", "info", "fk", "ik", "workspace", "view"])
 def test_subcommand_help(capsys, command):
     code, out, _ = run(capsys, command, "--help")
