@@ -3,12 +3,15 @@ pytorch-kinematics side (optional: ``pk`` and ``torch`` are ``None`` where it is
 
 from __future__ import annotations
 
+import atexit
 import gc
 import importlib.metadata
 import os
 import platform
 import re
+import shutil
 import statistics
+import tempfile
 import time
 
 try:
@@ -20,6 +23,12 @@ import jax
 import numpy as np
 
 import diffkin as dk
+
+if "TORCHINDUCTOR_CACHE_DIR" not in os.environ:
+    # torch.compile keeps what it compiled on disk and reuses it in later processes: a fresh folder per run makes
+    # pytorch-kinematics' compiled first call a cold start, as diffkin's is (no persistent JAX cache here).
+    os.environ["TORCHINDUCTOR_CACHE_DIR"] = tempfile.mkdtemp(prefix="diffkin-bench-inductor-")
+    atexit.register(shutil.rmtree, os.environ["TORCHINDUCTOR_CACHE_DIR"], ignore_errors=True)
 
 try:
     import pytorch_kinematics as pk
@@ -189,10 +198,21 @@ def pk_chain(name: str, end_link: str, dtype: str):
     return chain.to(dtype=getattr(torch, dtype), device=torch_device())  # .to() rebinds this fresh chain
 
 
-def pk_ik_solver(chain, lower, upper, *, iterations: int = 30, retries: int = 10, tol=PK_IK_TOL):
+def first_call_seconds(fn, *args) -> float:
+    """Wall time of one call of ``fn(*args)``, outputs blocked on: the first call, compile included."""
+    start = time.perf_counter()
+    jax.block_until_ready(fn(*args))
+    return time.perf_counter() - start
+
+
+def pk_ik_solver(
+    chain, lower, upper, *, iterations: int = 30, retries: int = 10, tol=PK_IK_TOL, compiled: bool = False
+):
     """pytorch-kinematics' ``PseudoInverseIK`` of ``chain`` within ``[lower, upper]`` (float32).
 
-    Its retries are drawn from torch's global RNG: seed it (``torch.manual_seed``) for a reproducible run.
+    ``compiled``: its ``use_compile=True`` (``torch.compile`` of its FK, Jacobian and step kernels; the
+    first solve compiles them). Its retries are drawn from torch's global RNG: seed it
+    (``torch.manual_seed``) for a reproducible run.
     """
     limits = to_torch(np.stack([lower, upper], -1).astype(np.float32))
     return pk.PseudoInverseIK(
@@ -203,4 +223,5 @@ def pk_ik_solver(chain, lower, upper, *, iterations: int = 30, retries: int = 10
         early_stopping_any_converged=True,
         pos_tolerance=tol[0],
         rot_tolerance=tol[1],
+        use_compile=compiled,
     )

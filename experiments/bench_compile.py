@@ -2,6 +2,8 @@
 
     python experiments/bench_compile.py [--quick] [--only fk,jacobian,ik] [--timeout 300] [--max-gb 4]
 
+``--quick``: one case, the first of the parts asked for (FK of the 7-joint arm by default).
+
 For FK, the world Jacobian (analytic, the default, and autodiff) and the default IK
 (``dk.ik.solve``, 1,000 targets) of synthetic DH chains of 7, 20 and 50 joints (IK: the iiwa14
 and chains of 20 and 50 joints), and for FK and Jacobians of a whole tree (Talos from
@@ -185,16 +187,18 @@ def measure(work: str, model: str, timeout: float, max_gb: float) -> dict:
     return json.loads(out.strip().splitlines()[-1])
 
 
-def cases(parts, sizes) -> list[tuple[str, str]]:
-    """The (work, model) pairs of the parts."""
+def cases(parts, quick: bool = False) -> list[tuple[str, str]]:
+    """The (work, model) pairs of the parts (``quick``: the first of them only, on the 7-joint arm)."""
     out = []
-    for dof in sizes:
+    for dof in QUICK_SIZES if quick else SIZES:
         if "fk" in parts:
             out.append(("FK", str(dof)))
         if "jacobian" in parts:
             out += [("Jacobian (analytic)", str(dof)), ("Jacobian (autodiff)", str(dof))]
         if "ik" in parts:
             out.append(("IK (LM defaults, 1,000 targets)", str(dof)))
+    if quick:
+        return out[:1]
     if talos() is not None:
         out += [
             (w, "talos")
@@ -207,7 +211,7 @@ def cases(parts, sizes) -> list[tuple[str, str]]:
 def rows(parts=("fk", "jacobian", "ik"), quick: bool = False, timeout: float = 300.0, max_gb: float = 4.0):
     """Markdown rows ``[work, model, trace, lower, compile, peak memory]`` of every case."""
     out = []
-    for work, model in cases(parts, QUICK_SIZES if quick else SIZES):
+    for work, model in cases(parts, quick):
         r = measure(work, model, timeout, max_gb)
         name = (
             "Talos (tree, 32 joints)"
@@ -255,7 +259,7 @@ def section(quick: bool = False) -> str:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--case", nargs=2, metavar=("WORK", "MODEL"), help=argparse.SUPPRESS)
-    parser.add_argument("--quick", action="store_true", help="the 7-joint cases (and Talos) only")
+    parser.add_argument("--quick", action="store_true", help="the first case only (FK of the 7-joint arm)")
     parser.add_argument("--only", default="fk,jacobian,ik", help="comma-separated parts: fk,jacobian,ik")
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds per case (default 300)")
     parser.add_argument("--max-gb", type=float, default=4.0, help="resident memory per case (default 4 GB)")
