@@ -206,15 +206,25 @@ def first_call_seconds(fn, *args) -> float:
 
 
 def pk_ik_solver(
-    chain, lower, upper, *, iterations: int = 30, retries: int = 10, tol=PK_IK_TOL, compiled: bool = False
+    chain,
+    lower,
+    upper,
+    *,
+    iterations: int = 30,
+    retries: int = 10,
+    tol=PK_IK_TOL,
+    compiled: bool = False,
+    seed: int = 0,
 ):
     """pytorch-kinematics' ``PseudoInverseIK`` of ``chain`` within ``[lower, upper]`` (float32).
 
     ``compiled``: its ``use_compile=True`` (``torch.compile`` of its FK, Jacobian and step kernels; the
-    first solve compiles them). Its retries are drawn from torch's global RNG: seed it
-    (``torch.manual_seed``) for a reproducible run.
+    first solve compiles them). The solver draws its ``retries`` starting configurations once, when it
+    is built, from torch's global RNG (the same ones for every target and every solve): ``seed`` seeds
+    that RNG just before, so a run is reproducible (seeding before a solve changes nothing).
     """
     limits = to_torch(np.stack([lower, upper], -1).astype(np.float32))
+    torch.manual_seed(seed)
     return pk.PseudoInverseIK(
         chain,
         max_iterations=iterations,

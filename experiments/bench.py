@@ -254,15 +254,15 @@ def ik_rows(sizes: Sizes) -> list[Row]:
     return [row for n in sizes.ik for row in _ik_rows(n, sizes.ik_full)]
 
 
-def _pk_ik(T: np.ndarray, compiled: bool) -> tuple[float, str] | tuple[None, None]:
+def _pk_ik(T: np.ndarray, compiled: bool) -> tuple[float | None, str | None]:
     """pytorch-kinematics' IK of the targets ``T``: median seconds (or :data:`OUT_OF_MEMORY`) and a note with
-    its success (and, compiled, its first call); ``(None, None)`` without pytorch-kinematics."""
+    its success (and, compiled, its first call); ``(None, None)`` without pytorch-kinematics, ``(None, why)``
+    where its solver raised."""
     if pk is None:
         return None, None
     chain = _iiwa14()
     solver = pk_ik_solver(_pk_chain("float32"), chain.lower, chain.upper, compiled=compiled)
     goal, solve = pk.Transform3d(matrix=to_torch(T)), torch_synced(solver.solve)
-    torch.manual_seed(0)
     try:
         first = first_call_seconds(solve, goal) if compiled else None  # torch.compile runs in the first call
         seconds = median_seconds(solve, goal, repeats=3, warmup=1)
@@ -272,6 +272,8 @@ def _pk_ik(T: np.ndarray, compiled: bool) -> tuple[float, str] | tuple[None, Non
         return seconds, note
     except torch.OutOfMemoryError:
         return OUT_OF_MEMORY, "pk out of memory"
+    except torch.linalg.LinAlgError as e:  # its damped least squares met a singular matrix (NaN poses)
+        return None, f"pk raised LinAlgError: {str(e).split(':')[-1].strip()}"
     finally:
         release_torch_memory()
 
