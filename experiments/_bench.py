@@ -4,6 +4,7 @@ pytorch-kinematics side (optional: ``pk`` and ``torch`` are ``None`` where it is
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import gc
 import importlib.metadata
 import os
@@ -235,3 +236,45 @@ def pk_ik_solver(
         rot_tolerance=tol[1],
         use_compile=compiled,
     )
+
+
+@dataclasses.dataclass
+class PkIK:
+    """pytorch-kinematics' IK of a batch of targets: the run that worked, and the draws of retries that raised."""
+
+    first: float | None = None  # seconds of the first call (compile included when compiled); None: every draw raised
+    seconds: float | None = None  # median seconds of the warm calls
+    success: float | None = None  # fraction of targets within its tolerance
+    seed: int | None = None  # the seed of the retries of the run that worked
+    failures: list[tuple[int, float, str]] = dataclasses.field(default_factory=list)  # (seed, seconds, message)
+
+    def note(self) -> str:
+        """What a reader needs besides the time: the draws that raised, and the seed that was timed."""
+        failed = [f"retries from seed {s} raised LinAlgError after {duration(t)} ({m})" for s, t, m in self.failures]
+        timed = [f"timed with the retries of seed {self.seed}"] if self.failures and self.seed is not None else []
+        return "; ".join(failed + timed)
+
+
+def pk_ik_timed(
+    chain, lower, upper, goal, *, compiled: bool, seeds=(0, 1, 2), repeats: int = 3, warmup: int = 1, min_time=0.3
+):
+    """Time ``PseudoInverseIK.solve(goal)`` (:func:`pk_ik_solver`), its first call apart, from the retries of
+    ``seeds[0]``; where a solve raises ``torch.linalg.LinAlgError`` (its damped least squares met a singular
+    matrix), the failure is recorded and the next seed's retries are tried (a later compiled first call then
+    finds torch.compile's caches warm)."""
+    out = PkIK()
+    for seed in seeds:
+        solver = pk_ik_solver(chain, lower, upper, compiled=compiled, seed=seed)
+        solve, start = torch_synced(solver.solve), time.perf_counter()
+        try:
+            first = first_call_seconds(solve, goal)
+            seconds = median_seconds(solve, goal, repeats=repeats, warmup=warmup, min_time=min_time)
+            success = float(solver.solve(goal).converged_any.float().mean())
+        except torch.linalg.LinAlgError as e:
+            out.failures.append((seed, time.perf_counter() - start, str(e).split(":")[-1].strip().rstrip(".")))
+            continue
+        finally:
+            release_torch_memory()
+        out.first, out.seconds, out.success, out.seed = first, seconds, success, seed
+        break
+    return out

@@ -36,14 +36,13 @@ from _bench import (
     PK_IK_TOL,
     busy_note,
     duration,
-    first_call_seconds,
     machine_line,
     machine_slug,
     median_seconds,
     page_faults_per_call,
     pk,
     pk_chain,
-    pk_ik_solver,
+    pk_ik_timed,
     random_configs,
     rate,
     release_torch_memory,
@@ -255,27 +254,25 @@ def ik_rows(sizes: Sizes) -> list[Row]:
 
 
 def _pk_ik(T: np.ndarray, compiled: bool) -> tuple[float | None, str | None]:
-    """pytorch-kinematics' IK of the targets ``T``: median seconds (or :data:`OUT_OF_MEMORY`) and a note with
-    its success (and, compiled, its first call); ``(None, None)`` without pytorch-kinematics, ``(None, why)``
-    where its solver raised."""
+    """pytorch-kinematics' IK of the targets ``T``: median seconds (:data:`OUT_OF_MEMORY` where it ran out of
+    memory, ``None`` where every draw of retries raised) and a note with its success (and, compiled, its first
+    call); ``(None, None)`` without pytorch-kinematics."""
     if pk is None:
         return None, None
     chain = _iiwa14()
-    solver = pk_ik_solver(_pk_chain("float32"), chain.lower, chain.upper, compiled=compiled)
-    goal, solve = pk.Transform3d(matrix=to_torch(T)), torch_synced(solver.solve)
     try:
-        first = first_call_seconds(solve, goal) if compiled else None  # torch.compile runs in the first call
-        seconds = median_seconds(solve, goal, repeats=3, warmup=1)
-        note = f"pk {float(solver.solve(goal).converged_any.float().mean()):.1%} (30 iterations x 10 retries)"
-        if compiled:
-            note += f", pk's first call {duration(first)} (torch.compile, empty on-disk cache)"
-        return seconds, note
+        r = pk_ik_timed(
+            _pk_chain("float32"), chain.lower, chain.upper, pk.Transform3d(matrix=to_torch(T)), compiled=compiled
+        )
     except torch.OutOfMemoryError:
         return OUT_OF_MEMORY, "pk out of memory"
-    except torch.linalg.LinAlgError as e:  # its damped least squares met a singular matrix (NaN poses)
-        return None, f"pk raised LinAlgError: {str(e).split(':')[-1].strip()}"
-    finally:
-        release_torch_memory()
+    if r.seconds is None:
+        return None, r.note()
+    note = f"pk {r.success:.1%} (30 iterations x 10 retries)"
+    if compiled:
+        cache = "caches warm from the draw that raised" if r.failures else "empty on-disk cache"
+        note += f", pk's first call {duration(r.first)} (torch.compile, {cache})"
+    return r.seconds, _notes(note, r.note())
 
 
 def _ik_rows(n: int, full: bool = True) -> list[Row]:
