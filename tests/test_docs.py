@@ -1,9 +1,9 @@
 """Every ```python block of README.md and docs/*.md runs, so that the examples cannot rot.
 
 The blocks of one page run in order in one fresh interpreter (a page reads as one session), with
-the working directory and ``HOME`` in a temporary folder (files the examples write land there) and
-a persistent compilation cache shared by the pages (pages that solve the same problem compile it
-once). A page whose examples need the validation install (example-robot-data, dm_control, viser)
+the working directory and ``HOME`` in a temporary folder (files the examples write land there),
+warnings as errors, and a persistent compilation cache shared by the pages (pages that solve the
+same problem compile it once). A page whose examples need the validation install (example-robot-data, dm_control, viser)
 or compile large solvers is marked slow.
 """
 
@@ -60,6 +60,7 @@ def test_examples_run(page: Path, tmp_path: Path, compilation_cache: str):
         os.environ,
         HOME=str(tmp_path),
         MPLBACKEND="Agg",
+        PYTHONWARNINGS="error",  # as in the tests: an example that warns is a defect
         JAX_COMPILATION_CACHE_DIR=compilation_cache,
         PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
     )
