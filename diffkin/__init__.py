@@ -52,7 +52,7 @@ __all__ = [
     "to_poe",
     "workspace",
 ]
-__version__ = "0.1.0"
+__version__ = "0.1.0"  # the package version (pyproject.toml reads it from here)
 
 
 def __getattr__(name: str):

@@ -3,12 +3,16 @@ pytorch-kinematics side (optional: ``pk`` and ``torch`` are ``None`` where it is
 
 from __future__ import annotations
 
+import atexit
+import dataclasses
 import gc
 import importlib.metadata
 import os
 import platform
 import re
+import shutil
 import statistics
+import tempfile
 import time
 
 try:
@@ -20,6 +24,12 @@ import jax
 import numpy as np
 
 import diffkin as dk
+
+if "TORCHINDUCTOR_CACHE_DIR" not in os.environ:
+    # torch.compile keeps what it compiled on disk and reuses it in later processes: a fresh folder per run makes
+    # pytorch-kinematics' compiled first call a cold start, as diffkin's is (no persistent JAX cache here).
+    os.environ["TORCHINDUCTOR_CACHE_DIR"] = tempfile.mkdtemp(prefix="diffkin-bench-inductor-")
+    atexit.register(shutil.rmtree, os.environ["TORCHINDUCTOR_CACHE_DIR"], ignore_errors=True)
 
 try:
     import pytorch_kinematics as pk
@@ -189,12 +199,33 @@ def pk_chain(name: str, end_link: str, dtype: str):
     return chain.to(dtype=getattr(torch, dtype), device=torch_device())  # .to() rebinds this fresh chain
 
 
-def pk_ik_solver(chain, lower, upper, *, iterations: int = 30, retries: int = 10, tol=PK_IK_TOL):
+def first_call_seconds(fn, *args) -> float:
+    """Wall time of one call of ``fn(*args)``, outputs blocked on: the first call, compile included."""
+    start = time.perf_counter()
+    jax.block_until_ready(fn(*args))
+    return time.perf_counter() - start
+
+
+def pk_ik_solver(
+    chain,
+    lower,
+    upper,
+    *,
+    iterations: int = 30,
+    retries: int = 10,
+    tol=PK_IK_TOL,
+    compiled: bool = False,
+    seed: int = 0,
+):
     """pytorch-kinematics' ``PseudoInverseIK`` of ``chain`` within ``[lower, upper]`` (float32).
 
-    Its retries are drawn from torch's global RNG: seed it (``torch.manual_seed``) for a reproducible run.
+    ``compiled``: its ``use_compile=True`` (``torch.compile`` of its FK, Jacobian and step kernels; the
+    first solve compiles them). The solver draws its ``retries`` starting configurations once, when it
+    is built, from torch's global RNG (the same ones for every target and every solve): ``seed`` seeds
+    that RNG just before, so a run is reproducible (seeding before a solve changes nothing).
     """
     limits = to_torch(np.stack([lower, upper], -1).astype(np.float32))
+    torch.manual_seed(seed)
     return pk.PseudoInverseIK(
         chain,
         max_iterations=iterations,
@@ -203,4 +234,47 @@ def pk_ik_solver(chain, lower, upper, *, iterations: int = 30, retries: int = 10
         early_stopping_any_converged=True,
         pos_tolerance=tol[0],
         rot_tolerance=tol[1],
+        use_compile=compiled,
     )
+
+
+@dataclasses.dataclass
+class PkIK:
+    """pytorch-kinematics' IK of a batch of targets: the run that worked, and the draws of retries that raised."""
+
+    first: float | None = None  # seconds of the first call (compile included when compiled); None: every draw raised
+    seconds: float | None = None  # median seconds of the warm calls
+    success: float | None = None  # fraction of targets within its tolerance
+    seed: int | None = None  # the seed of the retries of the run that worked
+    failures: list[tuple[int, float, str]] = dataclasses.field(default_factory=list)  # (seed, seconds, message)
+
+    def note(self) -> str:
+        """What a reader needs besides the time: the draws that raised, and the seed that was timed."""
+        failed = [f"retries from seed {s} raised LinAlgError after {duration(t)} ({m})" for s, t, m in self.failures]
+        timed = [f"timed with the retries of seed {self.seed}"] if self.failures and self.seed is not None else []
+        return "; ".join(failed + timed)
+
+
+def pk_ik_timed(
+    chain, lower, upper, goal, *, compiled: bool, seeds=(0, 1, 2), repeats: int = 3, warmup: int = 1, min_time=0.3
+):
+    """Time ``PseudoInverseIK.solve(goal)`` (:func:`pk_ik_solver`), its first call apart, from the retries of
+    ``seeds[0]``; where a solve raises ``torch.linalg.LinAlgError`` (its damped least squares met a singular
+    matrix), the failure is recorded and the next seed's retries are tried (a later compiled first call then
+    finds torch.compile's caches warm)."""
+    out = PkIK()
+    for seed in seeds:
+        solver = pk_ik_solver(chain, lower, upper, compiled=compiled, seed=seed)
+        solve, start = torch_synced(solver.solve), time.perf_counter()
+        try:
+            first = first_call_seconds(solve, goal)
+            seconds = median_seconds(solve, goal, repeats=repeats, warmup=warmup, min_time=min_time)
+            success = float(solver.solve(goal).converged_any.float().mean())
+        except torch.linalg.LinAlgError as e:
+            out.failures.append((seed, time.perf_counter() - start, str(e).split(":")[-1].strip().rstrip(".")))
+            continue
+        finally:
+            release_torch_memory()
+        out.first, out.seconds, out.success, out.seed = first, seconds, success, seed
+        break
+    return out

@@ -10,9 +10,12 @@ runs and 0.3 s of runs). On a GPU machine both libraries run there (JAX's defaul
 CUDA) with larger batches (FK up to 10^8 configurations, IK up to 10^5 targets: :data:`GPU`); a
 pytorch-kinematics call that runs out of GPU memory is noted as such. The ``compile`` part adds a
 second table, what the first call costs (``experiments/bench_compile.py``: trace, lower and compile
-times and peak memory of FK, Jacobians and IK for 7, 20 and 50 joints and a humanoid tree; with
-``--quick`` the 7-joint arm and the tree). ``--write`` saves the tables as
-``experiments/results/<machine>.md``.
+times and peak memory of FK, Jacobians and IK for 7, 20 and 50 joints and a humanoid tree).
+pytorch-kinematics' IK is timed eager and compiled (``PseudoInverseIK(..., use_compile=True)``, its
+first call, which runs ``torch.compile``, in the note). ``--quick`` is a smoke run of about a minute
+(:data:`QUICK`: small batches, IK at pk's tolerance against pk eager only, the closed form in float32,
+one row of the compile table: FK of the 7-joint arm); the full run's figures do not depend on it.
+``--write`` saves the tables as ``experiments/results/<machine>.md``.
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ from _bench import (
     page_faults_per_call,
     pk,
     pk_chain,
-    pk_ik_solver,
+    pk_ik_timed,
     random_configs,
     rate,
     release_torch_memory,
@@ -62,10 +65,12 @@ class Sizes:
     fk: tuple[int, ...]  # FK batches, each in float32 and (up to fk_float64_max) float64
     jacobian: tuple[tuple[int, str], ...]  # (batch, dtype) of the Jacobian rows
     ik: tuple[int, ...]  # IK target counts
-    srs: int  # closed-form solutions, in float32 and float64
+    srs: int  # closed-form solutions, in each of srs_dtypes (float32 among them: its first pose is self-motion's)
     self_motion: int  # self-motion samples of one pose
     workspace: int  # reachability-map samples
     fk_float64_max: int | None = None  # largest float64 FK batch (None: all)
+    ik_full: bool = True  # IK also at diffkin's own tolerances, and pk's compiled solver (its first call: ~10-60 s)
+    srs_dtypes: tuple[str, ...] = DTYPES
 
 
 FULL = Sizes(
@@ -85,7 +90,17 @@ GPU = Sizes(
     workspace=20_000_000,
     fk_float64_max=10_000_000,
 )  # float64 FK at 10^8 needs 18 GB beside pytorch-kinematics' cache
-QUICK = Sizes(fk=(1, 1000), jacobian=((1000, "float32"),), ik=(100,), srs=10_000, self_motion=200, workspace=200_000)
+# A smoke run in about a minute: every part once, the fewest compiles (each costs seconds).
+QUICK = Sizes(
+    fk=(1, 1000),
+    jacobian=((1000, "float32"),),
+    ik=(100,),
+    srs=10_000,
+    self_motion=200,
+    workspace=200_000,
+    ik_full=False,
+    srs_dtypes=("float32",),
+)
 
 
 def sizes_for(quick: bool) -> Sizes:
@@ -231,36 +246,54 @@ def jacobian_rows(sizes: Sizes) -> list[Row]:
 
 def ik_rows(sizes: Sizes) -> list[Row]:
     """``dk.ik.solve`` (LM, jitted) vs ``PseudoInverseIK``, 30 iterations x 10 retries, on reachable float32 pose
-    targets, for each target count: diffkin with its defaults (1e-5 m / 1e-4 rad) and at pk's own 1 mm / 0.01 rad;
-    the notes give each library's success rate at its tolerances."""
-    return [row for n in sizes.ik for row in _ik_rows(n)]
+    targets, for each target count: diffkin with its defaults (1e-5 m / 1e-4 rad) and at pk's own 1 mm / 0.01 rad
+    against pk eager, and again at pk's tolerance against pk compiled (``use_compile=True``, its first call in the
+    note); the notes give each library's success rate at its tolerances. :data:`QUICK`: pk's tolerance and pk eager
+    only."""
+    return [row for n in sizes.ik for row in _ik_rows(n, sizes.ik_full)]
 
 
-def _ik_rows(n: int) -> list[Row]:
-    """The IK rows of ``n`` targets."""
+def _pk_ik(T: np.ndarray, compiled: bool) -> tuple[float | None, str | None]:
+    """pytorch-kinematics' IK of the targets ``T``: median seconds (:data:`OUT_OF_MEMORY` where it ran out of
+    memory, ``None`` where every draw of retries raised) and a note with its success (and, compiled, its first
+    call); ``(None, None)`` without pytorch-kinematics."""
+    if pk is None:
+        return None, None
+    chain = _iiwa14()
+    try:
+        r = pk_ik_timed(
+            _pk_chain("float32"), chain.lower, chain.upper, pk.Transform3d(matrix=to_torch(T)), compiled=compiled
+        )
+    except torch.OutOfMemoryError:
+        return OUT_OF_MEMORY, "pk out of memory"
+    if r.seconds is None:
+        return None, r.note()
+    note = f"pk {r.success:.1%} (30 iterations x 10 retries)"
+    if compiled:
+        cache = "caches warm from the draw that raised" if r.failures else "empty on-disk cache"
+        note += f", pk's first call {duration(r.first)} (torch.compile, {cache})"
+    return r.seconds, _notes(note, r.note())
+
+
+def _ik_rows(n: int, full: bool = True) -> list[Row]:
+    """The IK rows of ``n`` targets (``full=False``: only at pk's tolerance, against pk eager)."""
     chain = _iiwa14()
     T = np.asarray(dk.fk(chain, random_configs(chain, n, "float64", seed=1)), np.float32)
     args = (jnp.asarray(T), jax.random.key(1))
-    t_pk = note_pk = None
-    if pk is not None:
-        solver, goal = pk_ik_solver(_pk_chain("float32"), chain.lower, chain.upper), pk.Transform3d(matrix=to_torch(T))
-        torch.manual_seed(0)
-        try:
-            t_pk = median_seconds(torch_synced(solver.solve), goal, repeats=3, warmup=1)
-            note_pk = f"pk {float(solver.solve(goal).converged_any.float().mean()):.1%} (30 iterations x 10 retries)"
-        except torch.OutOfMemoryError:
-            t_pk = OUT_OF_MEMORY
-        finally:
-            release_torch_memory()
+    t_pk, note_pk = _pk_ik(T, compiled=False)
     defaults = inspect.signature(dk.ik.solve).parameters
     rows = []
     tight = (defaults["pos_tol"].default, defaults["rot_tol"].default)
-    for label, tol in (("defaults", tight), ("pk's tolerance", PK_IK_TOL)):
+    for label, tol in (("defaults", tight), ("pk's tolerance", PK_IK_TOL))[0 if full else 1 :]:
         solve = jax.jit(lambda T, key, tol=tol: dk.ik.solve(chain, T, key=key, pos_tol=tol[0], rot_tol=tol[1]))
         t_dk = median_seconds(solve, *args, repeats=15, warmup=1)
         note = f"success at {_sci(tol[0])} m / {_sci(tol[1])} rad: diffkin {float(np.mean(solve(*args).success)):.1%}"
         pk_note = None if label == "defaults" else note_pk
         rows.append(Row(f"IK (LM, {label})", n, "float32", t_dk, t_pk, _notes(note, pk_note)))
+    if full and pk is not None:
+        t_compiled, note_compiled = _pk_ik(T, compiled=True)
+        work = "IK (LM, pk's tolerance), pk compiled"
+        rows.append(replace(rows[-1], work=work, pk=t_compiled, note=_notes(note, note_compiled)))
     return rows
 
 
@@ -268,10 +301,13 @@ def srs_rows(sizes: Sizes) -> list[Row]:
     """``dk.srs.ik`` (the iiwa closed form) on a batch, and ``dk.srs.sample_self_motion`` of one pose (jitted)."""
     arm = dk.srs.iiwa14()
     solve = jax.jit(lambda T, psi, gc: dk.srs.ik(arm, T, psi, gc))
+    # The inputs in one jitted call (op by op, each of their operations would compile on its own).
+    problems = jax.jit(lambda q: (dk.fk(arm.chain(), q), *dk.srs.arm_angle(arm, q)))
     rows = []
-    for dtype in DTYPES:
-        q = jnp.asarray(random_configs(arm.chain(), sizes.srs, dtype))
-        T, (psi, gc) = dk.fk(arm.chain(), q), dk.srs.arm_angle(arm, q)
+    for dtype in sizes.srs_dtypes:
+        T, psi, gc = problems(jnp.asarray(random_configs(arm.chain(), sizes.srs, dtype)))
+        if dtype == "float32":
+            T_one = T[0]  # the pose of the first configuration (its draw does not depend on the batch size)
         rows.append(
             _diffkin_row(
                 "SRS closed-form IK (`dk.srs.ik`)", sizes.srs, dtype, solve, T, psi, gc, note="no closed form in pk"
@@ -279,7 +315,7 @@ def srs_rows(sizes: Sizes) -> list[Row]:
         )
     n = sizes.self_motion
     sample = jax.jit(lambda T, key: dk.srs.sample_self_motion(arm, T, n, key=key))
-    args = (dk.fk(arm.chain(), jnp.asarray(random_configs(arm.chain(), 1, "float32")[0])), jax.random.key(0))
+    args = (T_one, jax.random.key(0))
     valid = int(sample(*args)[1].sum())
     rows.append(
         Row(

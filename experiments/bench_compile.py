@@ -2,16 +2,23 @@
 
     python experiments/bench_compile.py [--quick] [--only fk,jacobian,ik] [--timeout 300] [--max-gb 4]
 
+``--quick``: one case, the first of the parts asked for (FK of the 7-joint arm by default).
+
 For FK, the world Jacobian (analytic, the default, and autodiff) and the default IK
 (``dk.ik.solve``, 1,000 targets) of synthetic DH chains of 7, 20 and 50 joints (IK: the iiwa14
 and chains of 20 and 50 joints), and for FK and Jacobians of a whole tree (Talos from
 example-robot-data, 32 joints, 60 frames, where installed): ``jax.jit(f).trace(x)``,
 ``.lower()`` and ``.compile()`` timed separately, float32 (the IK with the compiler options
-``dk.ik.solve`` gives its own ``jit``). Each case runs in a fresh subprocess
-(so nothing is cached between cases) whose peak resident memory (``ru_maxrss``) is reported,
-with the same process's resident memory just before tracing (JAX and the model loaded) for
-reference; a case is stopped after ``--timeout`` seconds or above ``--max-gb`` GB and reported
-as such. The batch (1,000 configurations) does not change what is compiled.
+``dk.ik.solve`` gives its own ``jit``). Each case runs in a fresh subprocess (so nothing is
+cached between cases). Its memory is the subprocess's own: its resident memory just before tracing
+(JAX and the model loaded, ``VmRSS``) and its peak resident memory while tracing, lowering and
+compiling (``VmHWM`` of ``/proc/self/status``, reset to the current resident memory by writing
+``5`` to ``/proc/self/clear_refs`` just before tracing). Not ``getrusage``'s ``ru_maxrss``: on
+Linux a process started by ``subprocess`` starts with its parent's peak there, so every case
+would read at least the parent's memory. Where ``/proc`` is missing (not Linux) the table says
+``ru_maxrss`` and is an upper bound. A case is stopped after ``--timeout`` seconds or above
+``--max-gb`` GB of resident memory and reported as such. The batch (1,000 configurations) does not
+change what is compiled.
 """
 
 from __future__ import annotations
@@ -19,7 +26,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -92,14 +98,34 @@ def case_function(work: str, model: str):
     return (lambda T, key: dk.ik.solve(m, T, key=key)), (T, jax.random.key(1))
 
 
+def _status_gb(field: str) -> float | None:
+    """A memory field of ``/proc/self/status`` (``VmRSS``, ``VmHWM``) in GB; ``None`` without ``/proc``."""
+    try:
+        with open("/proc/self/status") as fh:
+            return next(int(line.split()[1]) for line in fh if line.startswith(field + ":")) / 1e6  # kB -> GB
+    except (OSError, StopIteration):
+        return None
+
+
+def _reset_peak() -> bool:
+    """Reset this process's ``VmHWM`` to its current resident memory (Linux ``clear_refs``); whether it worked."""
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+        return True
+    except OSError:
+        return False
+
+
 def run_case(work: str, model: str) -> dict:
-    """Time trace, lower and compile of one case in this process (the subprocess side)."""
+    """Time trace, lower and compile of one case in this process (the subprocess side), and its own memory."""
     import jax
 
     from diffkin._xla import SOLVER_COMPILE
 
     f, args = case_function(work, model)
-    rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB -> GB
+    rss_before = _status_gb("VmRSS")
+    own = rss_before is not None and _reset_peak()
     t0 = time.perf_counter()
     # The IK compiles with the options dk.ik.solve gives its own jit (diffkin._xla.SOLVER_COMPILE).
     options = SOLVER_COMPILE if work.startswith("IK") else None
@@ -109,8 +135,20 @@ def run_case(work: str, model: str) -> dict:
     t2 = time.perf_counter()
     lowered.compile()
     t3 = time.perf_counter()
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
-    return {"trace": t1 - t0, "lower": t2 - t1, "compile": t3 - t2, "rss_before_gb": rss_before, "peak_gb": peak}
+    if own:
+        peak, source = _status_gb("VmHWM"), "VmHWM"
+    else:  # no /proc: getrusage, which includes what the parent held when it started this process
+        import resource
+
+        peak, source = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6, "ru_maxrss"
+    return {
+        "trace": t1 - t0,
+        "lower": t2 - t1,
+        "compile": t3 - t2,
+        "rss_before_gb": rss_before,
+        "peak_gb": peak,
+        "peak_source": source,
+    }
 
 
 def measure(work: str, model: str, timeout: float, max_gb: float) -> dict:
@@ -149,16 +187,18 @@ def measure(work: str, model: str, timeout: float, max_gb: float) -> dict:
     return json.loads(out.strip().splitlines()[-1])
 
 
-def cases(parts, sizes) -> list[tuple[str, str]]:
-    """The (work, model) pairs of the parts."""
+def cases(parts, quick: bool = False) -> list[tuple[str, str]]:
+    """The (work, model) pairs of the parts (``quick``: the first of them only, on the 7-joint arm)."""
     out = []
-    for dof in sizes:
+    for dof in QUICK_SIZES if quick else SIZES:
         if "fk" in parts:
             out.append(("FK", str(dof)))
         if "jacobian" in parts:
             out += [("Jacobian (analytic)", str(dof)), ("Jacobian (autodiff)", str(dof))]
         if "ik" in parts:
             out.append(("IK (LM defaults, 1,000 targets)", str(dof)))
+    if quick:
+        return out[:1]
     if talos() is not None:
         out += [
             (w, "talos")
@@ -171,7 +211,7 @@ def cases(parts, sizes) -> list[tuple[str, str]]:
 def rows(parts=("fk", "jacobian", "ik"), quick: bool = False, timeout: float = 300.0, max_gb: float = 4.0):
     """Markdown rows ``[work, model, trace, lower, compile, peak memory]`` of every case."""
     out = []
-    for work, model in cases(parts, QUICK_SIZES if quick else SIZES):
+    for work, model in cases(parts, quick):
         r = measure(work, model, timeout, max_gb)
         name = (
             "Talos (tree, 32 joints)"
@@ -181,6 +221,8 @@ def rows(parts=("fk", "jacobian", "ik"), quick: bool = False, timeout: float = 3
         if "stopped" in r:
             out.append([work, name, r["stopped"], "", "", ""])
         else:
+            before = "" if r["rss_before_gb"] is None else f" (before tracing {r['rss_before_gb']:.2f} GB)"
+            upper = "" if r["peak_source"] == "VmHWM" else " (ru_maxrss: an upper bound)"
             out.append(
                 [
                     work,
@@ -188,14 +230,19 @@ def rows(parts=("fk", "jacobian", "ik"), quick: bool = False, timeout: float = 3
                     f"{r['trace']:.2f} s",
                     f"{r['lower']:.2f} s",
                     f"{r['compile']:.2f} s",
-                    f"{r['peak_gb']:.2f} GB (before tracing {r['rss_before_gb']:.2f} GB)",
+                    f"{r['peak_gb']:.2f} GB{before}{upper}",
                 ]
             )
         print(" | ".join(out[-1]), file=sys.stderr, flush=True)
     return out
 
 
-HEADER = ["work", "model", "trace", "lower", "compile", "peak memory of the process"]
+HEADER = ["work", "model", "trace", "lower", "compile", "peak resident memory of the case's own process"]
+MEMORY = (
+    "Memory: each case's own subprocess, its peak resident memory while tracing, lowering and compiling "
+    "(`VmHWM` of `/proc/self/status`, reset just before tracing), and its resident memory just before tracing "
+    "(JAX, numpy and the model loaded); not `getrusage`, which in a subprocess starts from the parent's peak."
+)
 
 
 def section(quick: bool = False) -> str:
@@ -204,16 +251,15 @@ def section(quick: bool = False) -> str:
 
     about = (
         f"`jax.jit(f).trace(x)`, `.lower()`, `.compile()` timed apart, float32, batch {BATCH:,}, each case "
-        "in a fresh subprocess (peak resident memory, and the same process just before tracing); cases "
-        "stopped after 300 s or above 4 GB say so."
+        "in a fresh subprocess; cases stopped after 300 s or above 4 GB say so."
     )
-    return "\n\n".join(["## Compile cost (the first call)", about, table(HEADER, rows(quick=quick))])
+    return "\n\n".join(["## Compile cost (the first call)", about, MEMORY, table(HEADER, rows(quick=quick))])
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--case", nargs=2, metavar=("WORK", "MODEL"), help=argparse.SUPPRESS)
-    parser.add_argument("--quick", action="store_true", help="the 7-joint cases (and Talos) only")
+    parser.add_argument("--quick", action="store_true", help="the first case only (FK of the 7-joint arm)")
     parser.add_argument("--only", default="fk,jacobian,ik", help="comma-separated parts: fk,jacobian,ik")
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds per case (default 300)")
     parser.add_argument("--max-gb", type=float, default=4.0, help="resident memory per case (default 4 GB)")
@@ -224,7 +270,8 @@ def main() -> int:
     from _bench import busy_note, machine_line, table
 
     body = rows(tuple(args.only.split(",")), args.quick, args.timeout, args.max_gb)
-    print("\n\n".join(p for p in ["# diffkin compile cost", machine_line(), busy_note(), table(HEADER, body)] if p))
+    paragraphs = ["# diffkin compile cost", machine_line(), busy_note(), MEMORY, table(HEADER, body)]
+    print("\n\n".join(p for p in paragraphs if p))
     return 0
 
 

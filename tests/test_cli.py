@@ -46,6 +46,18 @@ def test_help_subprocess():
         assert command in res.stdout
 
 
+def test_version_has_one_source(capsys):
+    """pyproject.toml reads the version from ``diffkin.__version__``, and ``diffkin --version`` prints it."""
+    import tomllib
+
+    with open(os.path.join(os.path.dirname(DATA), "..", "pyproject.toml"), "rb") as fh:
+        meta = tomllib.load(fh)
+    assert "version" not in meta["project"] and meta["project"]["dynamic"] == ["version"]
+    assert meta["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "diffkin.__version__"}
+    code, out, _ = run(capsys, "--version")
+    assert code == 0 and out.strip() == f"diffkin {dk.__version__}" and re.fullmatch(r"\d+\.\d+\.\d+", dk.__version__)
+
+
 @pytest.mark.parametrize("command", ["demo", "info", "fk", "ik", "workspace", "view"])
 def test_subcommand_help(capsys, command):
     code, out, _ = run(capsys, command, "--help")
@@ -59,6 +71,9 @@ def test_demo_quick(capsys, tmp_path):
     assert "FK check" in out and ": OK" in out
     assert re.search(r"IK .* success \d+\.\d% \(\d+/50\)", out)
     assert "valid samples" in out and "psi in [" in out
+    # warm timings say what they are: medians of several calls (a single call read 60 ms where the median is 3 ms)
+    assert len(re.findall(r"ms warm, median of 7 calls", out)) == 2, out
+    assert "s (one run: " in out and "reached in" in out and ", one run (compile" in out
     for name in ("reachability_count_y0.png", "reachability_manipulability_y0.png", "self_motion.png"):
         path = tmp_path / "demo" / name
         assert path.is_file() and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -146,7 +161,10 @@ def test_cli_does_not_import_jax():
 @pytest.mark.parametrize(
     "argv, match",
     [
-        (["info", "nosuchrobot"], "unknown robot 'nosuchrobot'"),
+        (["info", "nosuchrobot"], "unknown robot 'nosuchrobot': expected one of iiwa7, iiwa14"),
+        (["info", "robots/missing.urdf"], "robot file 'robots/missing.urdf' does not exist"),
+        (["fk", "missing.xml", "0"], "robot file 'missing.xml' does not exist"),
+        (["ik", "/", "--position", "0.5", "0", "0.5"], "'/' is a directory"),
         (["info", "iiwa14", "--end-link", "x"], "apply to URDF and MJCF files"),
         (["fk", "iiwa14", "0.1", "0.2"], "7 joint values"),
         (["fk", "iiwa14", "0.1", "zero", "0", "0", "0", "0", "0"], "invalid number: 'zero'"),
@@ -237,7 +255,21 @@ def test_ik_tolerances(capsys):
 
 def test_errors_name_flags_not_parameters(capsys):
     line = assert_user_error(capsys, "info", os.path.join(DATA, "ur5.urdf"), "--end-link", "nolink")
-    assert line.startswith("diffkin: error: --end-link: unknown link 'nolink'") and "'base_link'" in line
+    assert line.startswith("diffkin: error: --end-link: unknown frame 'nolink': the robot has 11 frames"), line
+    assert "closest names are 'ee_link'" in line and "`diffkin info` lists them all" in line
+
+
+def test_unknown_frames_are_named_with_the_closest_ones(capsys):
+    """An unknown frame gets the closest names and the count, not every frame name on one line."""
+    panda = os.path.join(DATA, "panda.urdf")
+    line = assert_user_error(capsys, "fk", panda, "--frame", "hand", *["0"] * 8)
+    assert line == (
+        "diffkin: error: --frame: unknown frame 'hand': the robot has 13 frames, the closest names are "
+        "'panda_hand', 'panda_hand_tcp' (`diffkin info` lists them all)"
+    )
+    line = assert_user_error(capsys, "info", panda, "--base-link", "zzz")
+    assert "13 frames, none named like it (the first: 'panda_link0', 'panda_link1', 'panda_link2', ...)" in line
+    assert len(line) < 200
 
 
 def test_bad_slice_is_reported_before_the_map_is_computed(capsys, tmp_path, monkeypatch):

@@ -325,8 +325,15 @@ def test_bad_trees_are_rejected(xml, match):
 
 def test_bad_calls_are_rejected(panda):
     q = np.zeros(8)
-    with pytest.raises(ValueError, match=r"unknown frame 'hand'; the robot's frames are \['panda_link0'"):
+    with pytest.raises(
+        ValueError,
+        match=r"^unknown frame 'hand': the robot has 13 frames, the closest names are 'panda_hand', 'panda_hand_tcp'$",
+    ):
         dk.fk(panda, q, "hand")
+    with pytest.raises(ValueError, match=r"^unknown frame 'panda_hnd': .* closest names are 'panda_hand', "):
+        dk.jacobian(panda, q, "panda_hnd")  # a typo: the most similar name first
+    with pytest.raises(ValueError, match=r"13 frames, none named like it \(the first: 'panda_link0', 'panda_link1', "):
+        dk.fk(panda, q, ["panda_hand", "qqq"])  # one unknown name in a list
     with pytest.raises(ValueError, match=r"q: expected shape \(\.\.\., 8\) for a 8-joint robot, got \(7,\)"):
         dk.fk(panda, np.zeros(7), "panda_hand")
     with pytest.raises(ValueError, match="frames: name the frame"):

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from diffkin.cli._errors import CLIError
-from diffkin.cli._robots import jax_x64, load_robot, tree
+from diffkin.cli._robots import frame_of, jax_x64, load_robot, tree
 from diffkin.cli._text import clean, fmt, indent, quaternions
 
 
@@ -46,9 +46,7 @@ def cmd_fk(args) -> int:
         robot = tree(args.robot)
         if robot is None:
             raise CLIError(f"--frame: applies to URDF and MJCF files, not to the built-in robot {args.robot!r}")
-        if args.frame not in robot.frame_names:
-            raise CLIError(f"--frame: unknown frame {args.frame!r}; the robot's frames are {list(robot.frame_names)}")
-        model, pose = robot, functools.partial(dk.fk, robot, frames=args.frame)
+        model, pose = robot, functools.partial(dk.fk, robot, frames=frame_of(robot, args.frame, "--frame"))
     else:
         model = load_robot(args.robot, args.end_link, args.base_link)
         pose = functools.partial(dk.fk, model)

@@ -26,12 +26,36 @@ def robot_key(spec: str, end_link: str | None, base_link: str | None) -> tuple:
         if end_link is not None or base_link is not None:
             raise CLIError(f"--end-link/--base-link apply to URDF and MJCF files, not to the built-in robot {spec!r}")
         return (spec,)
+    path = robot_file(spec)
+    return (str(path.resolve()), path.stat().st_mtime_ns, end_link, base_link)
+
+
+def robot_file(spec: str) -> Path:
+    """The readable URDF or MJCF file ``spec`` names (not a built-in robot's name).
+
+    Raises:
+        CLIError: a path that does not exist, a directory, an unreadable file, or a name that is neither
+            a built-in robot nor a file.
+    """
     path = Path(spec)
-    if not path.is_file():
+    if path.is_dir():
+        raise CLIError(f"{spec!r} is a directory: expected a URDF or MJCF file or one of {', '.join(ROBOTS)}")
+    if not path.exists():
+        if os.sep in spec or "/" in spec or path.suffix.lower() in (".urdf", ".xml", ".mjcf"):
+            raise CLIError(f"robot file {spec!r} does not exist")
         raise CLIError(f"unknown robot {spec!r}: expected one of {', '.join(ROBOTS)} or a URDF or MJCF file path")
     if not os.access(path, os.R_OK):
         raise CLIError(f"cannot read {spec!r}")
-    return (str(path.resolve()), path.stat().st_mtime_ns, end_link, base_link)
+    return path
+
+
+def frame_of(robot, name: str, flag: str) -> str:
+    """``name`` if it is a frame of ``robot``, else a :class:`CLIError` for ``flag`` naming the closest frames."""
+    try:
+        robot.frame_index(name)
+    except ValueError as e:
+        raise CLIError(f"{flag}: {e} (`diffkin info` lists them all)") from None
+    return name
 
 
 @functools.lru_cache(maxsize=16)
@@ -52,8 +76,8 @@ def chain_for(key: tuple):
     path, mtime, end_link, base_link = key
     robot = _tree_for(path, mtime)
     for flag, name in (("--end-link", end_link), ("--base-link", base_link)):
-        if name is not None and name not in robot.frame_names:
-            raise CLIError(f"{flag}: unknown link {name!r}; the robot's links and frames are {list(robot.frame_names)}")
+        if name is not None:
+            frame_of(robot, name, flag)
     return robot.chain(end_link or single_end(robot), base_link)
 
 

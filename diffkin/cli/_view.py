@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from diffkin.cli._errors import CLIError
-from diffkin.cli._robots import ROBOTS, jax_x64
+from diffkin.cli._robots import ROBOTS, jax_x64, robot_file
 
 
 def cmd_view(args) -> int:
@@ -15,8 +15,8 @@ def cmd_view(args) -> int:
         from diffkin import viewer
     except ImportError as e:
         raise CLIError(str(e)) from None
-    if args.robot not in ROBOTS and not Path(args.robot).is_file():
-        raise CLIError(f"unknown robot {args.robot!r}: expected one of {', '.join(ROBOTS)} or a URDF/MJCF file")
+    if args.robot not in ROBOTS:
+        robot_file(args.robot)
     for flag, path in (("--map", args.map), ("--ik-results", args.ik_results)):
         if path is not None and not Path(path).is_file():
             raise CLIError(f"{flag}: no such file {path!r}")

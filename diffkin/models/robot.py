@@ -137,13 +137,24 @@ class Robot:
         }
 
     def frame_index(self, name: str) -> int:
-        """Index of the frame ``name`` in :attr:`frame_names`; a ValueError lists the frames."""
+        """Index of the frame ``name`` in :attr:`frame_names`; a ValueError names the closest frames."""
         if not isinstance(name, str):
             raise TypeError(f"frame name: expected a string, got {type(name).__name__}")
         try:
             return self.frame_names.index(name)
         except ValueError:
-            raise ValueError(f"unknown frame {name!r}; the robot's frames are {list(self.frame_names)}") from None
+            import difflib  # only on this error path
+
+            names = self.frame_names
+            similar = difflib.get_close_matches(name, names, n=5, cutoff=0.6)
+            containing = [n for n in names if name.lower() in n.lower()]
+            close = list(dict.fromkeys(similar + containing))[:5]
+            hint = (
+                f"the closest names are {', '.join(map(repr, close))}"
+                if close
+                else f"none named like it (the first: {', '.join(map(repr, names[:3]))}, ...)"
+            )
+            raise ValueError(f"unknown frame {name!r}: the robot has {len(names)} frames, {hint}") from None
 
     def ancestors(self, body: int) -> list[int]:
         """The joints between the root and ``body``, root first."""
