@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffkin._xla import is_concrete
+from diffkin._static import is_concrete
 
 
 def rigid_tol(dtype) -> float:

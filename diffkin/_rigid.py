@@ -22,8 +22,9 @@ import numpy as np
 from jax.custom_derivatives import SymbolicZero
 
 from diffkin import _trig
+from diffkin._static import is_concrete
 from diffkin._trig import atan2
-from diffkin._xla import is_concrete, materialize
+from diffkin._xla import materialize
 
 Entry = jax.Array | float
 # Three entries, and three rows of three. Variable-length tuple types: the entries are built by
@@ -362,18 +363,17 @@ def leaves(A: Rigid) -> list[Entry]:
     return [e for row in A.R for e in row] + list(A.p)
 
 
-class Frames(NamedTuple):
-    """One forward pass of a chain, as computed by each model's ``_frames``.
+def world_from_space(columns: Sequence[tuple[Vec3, Vec3]], p: Vec3) -> list[tuple[Vec3, Vec3]]:
+    """Space twists ``(v, w)`` as ``(v + w x p, w)``: the velocity of the point ``p`` and the angular velocity."""
+    return [(vadd(v, cross(w, p)), w) for v, w in columns]
 
-    Attributes:
-        links: ``dof + 1`` poses in the base (world) frame: the base, then each moving link.
-        ee: end-effector pose in the base frame (tool included).
-        screws: per joint, its current screw axis ``(v, w)`` in the base frame (space twist).
-    """
 
-    links: list[Rigid]
-    ee: Rigid
-    screws: list[tuple[Vec3, Vec3]]
+def root_screws(B: Rigid) -> list[tuple[Vec3, Vec3]]:
+    """Space twists of a root pose ``B = T_world_root`` moved by its body twist ``[v; w]`` (unit steps):
+    ``Ad(B) e_k``, ``k = 0 .. 5``."""
+    axes = [column(B.R, k) for k in range(3)]
+    zero = (0.0, 0.0, 0.0)
+    return [(a, zero) for a in axes] + [(cross(B.p, a), a) for a in axes]
 
 
 def sincos(x: Entry) -> tuple[Entry, Entry]:

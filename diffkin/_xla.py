@@ -7,9 +7,8 @@ ratios are what counts), jax 0.10.2, float32 unless noted, medians of 15 warm ji
 fresh processes, each variant run twice, 2026-11-23 (issue 17), with the trick switched off by
 monkeypatching its name.
 
-- :func:`is_concrete` and :func:`traced_only`: model numbers known at trace time are folded into
-  the program as Python floats (exact zeros and ones of a DH table vanish, see
-  :mod:`diffkin._rigid`); only traced numbers become program inputs.
+- Model numbers known at trace time are folded into the program as Python floats (the
+  static/traced rule: :mod:`diffkin._static`); only traced numbers become program inputs.
 - :func:`materialize`: values that many later kernels read are computed once, behind an
   optimization barrier, instead of being recomputed inside each consumer.
 - :func:`opaque_index`: an index that feeds several scatters is computed once.
@@ -57,34 +56,28 @@ def solver_jit(fn: Callable, **kwargs) -> Callable:
 
     @functools.wraps(fn)
     def call(*args, **kw):
-        return (top if _top_level() else plain)(*args, **kw)
+        return (top if _top_level(args, kw) else plain)(*args, **kw)
 
     return call
 
 
-def _top_level() -> bool:
-    """Whether no transformation is tracing (``False`` where this JAX does not say)."""
-    clean = getattr(jax._src.core, "trace_state_clean", None)
-    return bool(clean()) if clean is not None else False
+def _top_level(*args) -> bool:
+    """Whether no transformation traces a call with the arguments ``args``.
 
-
-def is_concrete(x) -> bool:
-    """Whether ``x`` holds known values at trace time (not a tracer): then it can be folded as constants.
-
-    Folding: iiwa14 FK of 100,000 configurations took 2.5-2.9 ms with the chain closed over by
-    ``jit`` against 7.2-8.1 ms with the chain passed as a traced argument (2.5-3x); the numbers are
-    the same either way (``tests/test_xla.py``).
+    JAX has no public query for it (checked on jax 0.10.2): JAX's own ``trace_state_clean`` where
+    it exists (0.4 us); elsewhere :func:`_top_level_public`.
     """
-    return not isinstance(x, jax.core.Tracer)
+    core = getattr(getattr(jax, "_src", None), "core", None)
+    clean = getattr(core, "trace_state_clean", None)
+    return bool(clean()) if clean is not None else _top_level_public(*args)
 
 
-def traced_only(fn: Callable[[jax.Array], jax.Array], tree):
-    """``fn`` applied to the traced leaves of ``tree``; concrete leaves are kept as they are (still foldable).
-
-    For example ``traced_only(jax.lax.stop_gradient, chain)`` detaches a traced chain without
-    turning a concrete one into traced values (which would lose :func:`is_concrete`'s folding).
-    """
-    return jax.tree.map(lambda x: x if is_concrete(x) else fn(x), tree)
+def _top_level_public(*args) -> bool:
+    """:func:`_top_level` through public API only (30 us): no argument is a tracer (``vmap``, ``grad``
+    or ``jit`` of the call) and a fresh constant is not staged out as one (a ``jit`` around it)."""
+    if any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(args)):
+        return False
+    return not isinstance(jnp.zeros((), jnp.int8), jax.core.Tracer)
 
 
 def materialize(values: list) -> jax.Array:

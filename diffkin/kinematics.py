@@ -29,13 +29,14 @@ def _base(model: Model, base) -> rg.Rigid:
     return rg.from_matrix(base)
 
 
-def _pass(model: Model, q, frame: int | None = None, base=None, *, every: bool = False):
-    """Check ``q`` and run the model's forward pass; returns the frames, batch shape and dtype."""
+def _pass(model: Model, q, base=None):
+    """Check ``q`` and run the model's forward pass; returns the pass, its batch shape and its dtype."""
     q = forward.joint_values(model, q)
-    frames = forward.frames(model, [q[..., i] for i in range(model.dof)], frame, _base(model, base), every=every)
-    arrays = [e for T in (frames.ee, *frames.links) for e in rg.leaves(T) if not isinstance(e, float)]
+    B = _base(model, base)
+    kin = model.forward([q[..., i] for i in range(model.dof)], B)
+    arrays = [e for e in rg.leaves(B) if not isinstance(e, float)]
     shape = jnp.broadcast_shapes(q.shape[:-1], *(jnp.shape(e) for e in arrays))
-    return frames, shape, jnp.result_type(q, *arrays)
+    return kin, shape, jnp.result_type(q, *arrays)
 
 
 def _frame_indices(robot: Robot, frames) -> tuple[list[int], bool]:
@@ -66,15 +67,15 @@ def fk(model: Model, q: ArrayLike, frames: str | Sequence[str] | None = None, *,
     if not isinstance(model, Robot):
         if frames is not None:
             raise ValueError("frames: a chain has one end effector; name frames only for a Robot")
-        frames_, shape, dtype = _pass(model, q, base=base)
-        return rg.to_matrix(frames_.ee, shape, dtype)
+        kin, shape, dtype = _pass(model, q, base)
+        return rg.to_matrix(kin.pose(), shape, dtype)
     if frames is None:
         raise ValueError(f"frames: name the frame(s) of the robot, one of {list(model.frame_names)}")
     indices, single = _frame_indices(model, frames)
-    frames_, shape, dtype = _pass(model, q, indices[0], base, every=not single)
+    kin, shape, dtype = _pass(model, q, base)
     if single:
-        return rg.to_matrix(frames_.ee, shape, dtype)
-    return rg.to_matrices([frames_.links[f] for f in indices], shape, dtype)
+        return rg.to_matrix(kin.pose(indices[0]), shape, dtype)
+    return rg.to_matrices([kin.pose(f) for f in indices], shape, dtype)
 
 
 def link_poses(model: Model, q: ArrayLike, *, base=None) -> jax.Array:
@@ -91,31 +92,20 @@ def link_poses(model: Model, q: ArrayLike, *, base=None) -> jax.Array:
         child link of joint ``i``), all in the base frame.
         A robot: ``(..., len(robot.frame_names), 4, 4)`` in ``robot.frame_names`` order, in the world.
     """
-    frames, shape, dtype = _pass(model, q, base=base, every=True)
-    return rg.to_matrices(frames.links, shape, dtype)
-
-
-def _world_from_space(screws, p_ee):
-    """Columns ``[v + w x p; w]``: the velocity of the point ``p_ee`` and the angular velocity."""
-    return [(rg.vadd(v, rg.cross(w, p_ee)), w) for v, w in screws]
-
-
-def _root_screws(B: rg.Rigid) -> list[tuple[rg.Vec3, rg.Vec3]]:
-    """Space twists of the root's body twist ``[v; w]`` (unit steps): ``Ad(T_world_root) e_k``."""
-    axes = [rg.column(B.R, k) for k in range(3)]
-    zero = (0.0, 0.0, 0.0)
-    return [(a, zero) for a in axes] + [(rg.cross(B.p, a), a) for a in axes]
+    kin, shape, dtype = _pass(model, q, base)
+    return rg.to_matrices(kin.poses(), shape, dtype)
 
 
 def _analytic(model: Model, q, frame: str, f: int | None, base, include_base: bool) -> jax.Array:
-    frames, shape, dtype = _pass(model, q, f, base)
-    columns = frames.screws
+    kin, shape, dtype = _pass(model, q, base)
+    T = kin.pose(f)
+    columns = kin.columns(f)
     if include_base:
-        columns = _root_screws(_base(model, base)) + columns
+        columns = rg.root_screws(_base(model, base)) + columns
     if frame != "space":
-        columns = _world_from_space(columns, frames.ee.p)
+        columns = rg.world_from_space(columns, T.p)
     if frame == "body":
-        Rt = tuple(rg.column(frames.ee.R, j) for j in range(3))
+        Rt = tuple(rg.column(T.R, j) for j in range(3))
         columns = [(rg.rotate(Rt, v), rg.rotate(Rt, w)) for v, w in columns]
     return _stack_columns(columns, shape, dtype)
 
@@ -128,8 +118,7 @@ def _autodiff(model: Model, q, frame: str, f: int | None, base, include_base: bo
     shape = jnp.broadcast_shapes(q.shape[:-1], jnp.shape(base)[:-2] if base is not None else ())
 
     def pose(qs_, B_):
-        ee = forward.frames(model, qs_, f, B_).ee
-        return tuple(jnp.asarray(e, q.dtype) for e in rg.leaves(ee))
+        return tuple(jnp.asarray(e, q.dtype) for e in rg.leaves(model.forward(qs_, B_).pose(f)))
 
     moves: list[tuple[Callable[..., tuple], jax.Array]] = []  # (pose as a function of one scalar, its value)
     if include_base:  # the root moved by exp(t e_k) in its own frame

@@ -39,13 +39,14 @@ from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from diffkin import _rigid as rg
-from diffkin import kinematics
 from diffkin._checks import instance, positive_int
 from diffkin._npz import read_npz
+from diffkin._static import ModelKey, partition
 from diffkin._trig import atan2, sincos
 from diffkin._xla import opaque_index
 from diffkin.models import forward
 from diffkin.models.dh import DHChain
+from diffkin.models.forward import Pass
 from diffkin.models.poe import PoEChain, to_poe
 from diffkin.models.robot import Robot
 
@@ -245,7 +246,7 @@ def _orientation_bin(R: rg.Mat3, n_roll: int) -> jax.Array:
     return (2 * a + (z_a < 0)) * n_roll + sector
 
 
-def _manipulability(frames: rg.Frames, dof: int) -> jax.Array:
+def _manipulability(kin: Pass, dof: int) -> jax.Array:
     """Yoshikawa's measure from one forward pass, by the Cauchy-Binet formula.
 
     ``det(J J^T)`` (or ``det(J^T J)`` for fewer than 6 joints) is the sum of the squares of the
@@ -254,7 +255,7 @@ def _manipulability(frames: rg.Frames, dof: int) -> jax.Array:
     singularity, and a single fused XLA kernel (a division with several users would make XLA
     materialise it and recompute the forward kinematics in a kernel of its own).
     """
-    columns = kinematics._world_from_space(frames.screws, frames.ee.p)
+    columns = rg.world_from_space(kin.columns(), kin.pose().p)
     J = [[columns[i][r // 3][r % 3] for i in range(dof)] for r in range(6)]  # J[row][column]
     rows = J if dof >= 6 else [[J[r][i] for r in range(6)] for i in range(dof)]  # short side first
     minors: dict[tuple[int, ...], rg.Entry] = {(): 1.0}  # column subset -> minor over the first len(subset) rows
@@ -289,30 +290,15 @@ def _flat_index(p: rg.Vec3, origin, inv_voxel, shape) -> tuple[jax.Array | int, 
     return flat, inside
 
 
-class _ChainKey:
-    """A chain hashed by its structure and numbers, so that compiled steps are reused across calls."""
-
-    def __init__(self, chain):
-        leaves, treedef = jax.tree_util.tree_flatten(chain)
-        self.chain = chain
-        self._key = (treedef, tuple((np.asarray(x).dtype.str, np.shape(x), np.asarray(x).tobytes()) for x in leaves))
-
-    def __hash__(self):
-        return hash(self._key)
-
-    def __eq__(self, other):
-        return isinstance(other, _ChainKey) and self._key == other._key
-
-
 @functools.lru_cache(maxsize=16)
-def _compiled(chain_key: _ChainKey, shape: tuple[int, int, int], n_bins: int, chunk: int, dtype, mesh: Mesh):
+def _compiled(chain_key: ModelKey, shape: tuple[int, int, int], n_bins: int, chunk: int, dtype, mesh: Mesh):
     """Jitted ``(zeros, step, reduce)`` of one map: compiled once per chain, grid shape, chunk and mesh.
 
     The state is, per device, ``counts (nvox,)`` int32, ``best (nvox,)`` manipulability and
     ``seen (nvox * n_bins,)`` uint8 flags of the orientation bins reached, stacked on a leading
     device axis sharded over the mesh. Step ``s`` runs chunk ``s * n_devices + d`` on device ``d``.
     """
-    chain = chain_key.chain
+    chain = chain_key.model
     lo, hi = _joint_ranges(chain)
     n_dev, nvox = mesh.devices.size, math.prod(shape)
     sharded, replicated = NamedSharding(mesh, P(_AXIS)), NamedSharding(mesh, P())
@@ -328,15 +314,16 @@ def _compiled(chain_key: _ChainKey, shape: tuple[int, int, int], n_bins: int, ch
         c = chunk_index[0]  # this device's chunk: no axis_index, so one per-device program for any device count
         n_valid = jnp.where(c < n_full, chunk, jnp.where(c == n_full, n_last, 0))
         q = _uniform(jax.random.fold_in(key, c), lo, hi, chunk, dtype)
-        frames = chain._frames(list(q))
-        p = [jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in frames.ee.p]
-        R = tuple(tuple(jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in row) for row in frames.ee.R)
+        kin = chain.forward(list(q))
+        ee = kin.pose()
+        p = [jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in ee.p]
+        R = tuple(tuple(jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in row) for row in ee.R)
         flat, inside = _flat_index(p, origin, inv_voxel, shape)
         slot = jnp.where(
             inside & (jnp.arange(chunk) < n_valid), flat * n_bins + _orientation_bin(R, n_bins // 6), n_slots
         )  # out of range: dropped by the scatters
         slot = opaque_index(slot, n_slots + 1)  # one forward pass for the three scatters, not one per scatter
-        m = _manipulability(frames, chain.dof).astype(dtype)
+        m = _manipulability(kin, chain.dof).astype(dtype)
         counts = counts.reshape(-1).at[slot // n_bins].add(1, mode="drop").reshape(counts.shape)
         best = best.reshape(-1).at[slot // n_bins].max(m, mode="drop").reshape(best.shape)
         seen = seen.reshape(-1).at[slot].set(1, mode="drop").reshape(seen.shape)
@@ -464,7 +451,7 @@ def reachability(
             f"voxel_size, smaller bounds or fewer orientation_bins"
         )
     mesh = Mesh(np.array(devices), (_AXIS,))
-    zeros, step, reduce = _compiled(_ChainKey(chain), shape, orientation_bins, chunk, dtype, mesh)
+    zeros, step, reduce = _compiled(partition(chain)[0], shape, orientation_bins, chunk, dtype, mesh)
 
     n_full, n_last = divmod(n_samples, chunk)
     n_steps = -(-(n_full + (n_last > 0)) // len(devices))

@@ -6,8 +6,9 @@
 
 For FK, the world Jacobian (analytic, the default, and autodiff) and the default IK
 (``dk.ik.solve``, 1,000 targets) of synthetic DH chains of 7, 20 and 50 joints (IK: the iiwa14
-and chains of 20 and 50 joints), and for FK and Jacobians of a whole tree (Talos from
-example-robot-data, 32 joints, 60 frames, where installed): ``jax.jit(f).trace(x)``,
+and chains of 20 and 50 joints), for FK and Jacobians of a whole tree (Talos from
+example-robot-data, 32 joints, 60 frames, where installed), and for whole-robot IK (``--only
+ik-robots``: Baxter's two grippers, Talos' two soles and two grippers with the root solved): ``jax.jit(f).trace(x)``,
 ``.lower()`` and ``.compile()`` timed separately, float32 (the IK with the compiler options
 ``dk.ik.solve`` gives its own ``jit``). Each case runs in a fresh subprocess (so nothing is
 cached between cases). Its memory is the subprocess's own: its resident memory just before tracing
@@ -57,8 +58,8 @@ def chain(dof: int):
     return dk.DHChain.from_table(table, lower=-np.pi * np.ones(dof), upper=np.pi * np.ones(dof), name=f"dh{dof}")
 
 
-def talos():
-    """Talos (example-robot-data, ``talos_full_v2.urdf``) as a :class:`dk.Robot`; ``None`` if not installed."""
+def erd_robot(relative: str, floating: bool = False):
+    """A robot of example-robot-data (a path below its ``robots`` folder); ``None`` if not installed."""
     from importlib import metadata
 
     import diffkin as dk
@@ -67,9 +68,24 @@ def talos():
         dist = metadata.distribution("example-robot-data")
     except metadata.PackageNotFoundError:
         return None
-    path = Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")))
-    path = path / "talos_data" / "robots" / "talos_full_v2.urdf"
-    return dk.load_robot(str(path)) if path.is_file() else None
+    path = Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))) / relative
+    return dk.load_robot(str(path), floating=floating) if path.is_file() else None
+
+
+def talos():
+    """Talos (``talos_full_v2.urdf``, 60 frames) as a :class:`dk.Robot`; ``None`` if not installed."""
+    return erd_robot("talos_data/robots/talos_full_v2.urdf")
+
+
+# Whole-robot IK (as experiments/bench_ik_robots.py solves it): robot, its targets, floating root solved.
+ROBOT_IK = {
+    "baxter": ("baxter_description/urdf/baxter.urdf", ["left_gripper", "right_gripper"], False),
+    "talos-contacts": (
+        "talos_data/robots/talos_reduced.urdf",
+        ["left_sole_link", "right_sole_link", "gripper_left_base_link", "gripper_right_base_link"],
+        True,
+    ),
+}
 
 
 def case_function(work: str, model: str):
@@ -80,6 +96,15 @@ def case_function(work: str, model: str):
 
     import diffkin as dk
 
+    if model in ROBOT_IK:
+        path, frames, floating = ROBOT_IK[model]
+        m = erd_robot(path, floating)
+        lo = np.where(np.isfinite(m.lower), m.lower, -np.pi)
+        hi = np.where(np.isfinite(m.upper), m.upper, np.pi)
+        q = np.random.default_rng(0).uniform(lo, hi, (BATCH, m.dof))
+        T = jnp.asarray(dk.fk(m, q, frames), jnp.float32)
+        targets = {f: T[:, k] for k, f in enumerate(frames)}
+        return (lambda t, key: dk.ik.solve(m, t, key=key, solve_base=floating)), (targets, jax.random.key(1))
     if model == "talos":
         m = talos()
         frame = "gripper_left_base_link"
@@ -199,6 +224,8 @@ def cases(parts, quick: bool = False) -> list[tuple[str, str]]:
             out.append(("IK (LM defaults, 1,000 targets)", str(dof)))
     if quick:
         return out[:1]
+    if "ik" in parts or "ik-robots" in parts:
+        out += [("IK (LM defaults, 1,000 targets)", model) for model in ROBOT_IK if erd_robot(ROBOT_IK[model][0])]
     if talos() is not None:
         out += [
             (w, "talos")
@@ -213,11 +240,12 @@ def rows(parts=("fk", "jacobian", "ik"), quick: bool = False, timeout: float = 3
     out = []
     for work, model in cases(parts, quick):
         r = measure(work, model, timeout, max_gb)
-        name = (
-            "Talos (tree, 32 joints)"
-            if model == "talos"
-            else ("iiwa14 (7 joints)" if model == "7" else f"DH chain, {model} joints")
-        )
+        name = {
+            "talos": "Talos (tree, 32 joints)",
+            "7": "iiwa14 (7 joints)",
+            "baxter": "Baxter, two grippers (2 poses)",
+            "talos-contacts": "Talos, 2 soles + 2 grippers (4 poses), root solved",
+        }.get(model, f"DH chain, {model} joints")
         if "stopped" in r:
             out.append([work, name, r["stopped"], "", "", ""])
         else:
@@ -260,7 +288,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--case", nargs=2, metavar=("WORK", "MODEL"), help=argparse.SUPPRESS)
     parser.add_argument("--quick", action="store_true", help="the first case only (FK of the 7-joint arm)")
-    parser.add_argument("--only", default="fk,jacobian,ik", help="comma-separated parts: fk,jacobian,ik")
+    parser.add_argument(
+        "--only", default="fk,jacobian,ik", help="comma-separated parts: fk,jacobian,ik (ik includes ik-robots)"
+    )
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds per case (default 300)")
     parser.add_argument("--max-gb", type=float, default=4.0, help="resident memory per case (default 4 GB)")
     args = parser.parse_args()

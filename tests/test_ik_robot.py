@@ -239,7 +239,9 @@ def test_rest_objective_lowers_its_cost_and_keeps_the_targets(iiwa, iiwa_solve):
 
 
 def test_implicit_gradient_with_respect_to_two_targets(iiwa):
-    """``dq/dtarget`` of a two-frame problem against finite differences of re-solved float64 problems."""
+    """``dq/dtarget`` of an over-constrained two-frame problem against finite differences of re-solved
+    float64 problems. (The weighted least squares the solver solves: its rotation rows weigh
+    ``ROT_WEIGHT``; the unweighted pseudo-inverse, which the gradient was before, is 5e-3 off.)"""
     with jax.enable_x64(True):
         robot = dk.load_robot(dk.robots.urdf_path("iiwa14"))
         q_star = np.asarray([0.3, 0.6, -0.2, -1.1, 0.4, 0.7, 0.5])
@@ -247,18 +249,29 @@ def test_implicit_gradient_with_respect_to_two_targets(iiwa):
         T = np.asarray(dk.fk(robot, q_star, names))
 
         # The elbow (link 4) by position, the flange by pose: 3 + 6 = 9 rows, 7 joints (least squares).
+        @jax.jit
         def solved(p4, T_ee):
             return dk.ik.solve(
-                robot, {names[0]: p4, names[1]: T_ee}, q0=q_star, num_seeds=1, pos_tol=1e-12, rot_tol=1e-12
+                robot,
+                {names[0]: p4, names[1]: T_ee},
+                q0=q_star,
+                num_seeds=1,
+                pos_tol=1e-12,
+                rot_tol=1e-12,
+                max_iters=100,
             ).q
 
-        dp = np.asarray([0.01, -0.02, 0.005])
+        dp, eps = np.asarray([0.01, -0.02, 0.005]), 1e-4
         _, dq = jax.jvp(solved, (jnp.asarray(T[0, :3, 3]), jnp.asarray(T[1])), (jnp.asarray(dp), jnp.zeros((4, 4))))
-        # Least squares of J dq = [dp; 0]: the same as the pseudo-inverse of the stacked Jacobian.
+        moved = [np.asarray(solved(T[0, :3, 3] + s * eps * dp, T[1])) for s in (1.0, -1.0)]
+        fd = (moved[0] - moved[1]) / (2 * eps)
+        assert np.abs(np.asarray(dq) - fd).max() < 1e-8
+        # The same derivative, by the weighted normal equations of the stacked Jacobian.
         J = np.concatenate(
             [np.asarray(dk.jacobian(robot, q_star, names[0]))[:3], np.asarray(dk.jacobian(robot, q_star, names[1]))]
         )
-        expected = np.linalg.lstsq(J, np.concatenate([dp, np.zeros(6)]), rcond=None)[0]
+        w = np.asarray([1.0] * 6 + [0.2] * 3)  # ROT_WEIGHT on the flange's rotation rows
+        expected = np.linalg.lstsq(J * w[:, None], np.concatenate([dp, np.zeros(6)]) * w, rcond=None)[0]
         assert np.abs(np.asarray(dq) - expected).max() < 1e-8
 
 

@@ -15,6 +15,7 @@ from conftest import DATA
 
 import diffkin as dk
 from diffkin import workspace as ws
+from diffkin._static import partition
 
 KEY = jax.random.key(7)
 
@@ -55,7 +56,7 @@ def test_sample_configs_within_limits_and_uniform():
 def test_manipulability_matches_core():
     for chain in (dk.robots.iiwa14(), dk.robots.ur5(), dk.robots.planar([1.0, 0.5, 0.3])):  # 7, 6 and 3 joints
         q = ws.sample_configs(chain, 500, KEY)
-        ours = jax.jit(lambda q, chain=chain: ws._manipulability(chain._frames(list(q.T)), chain.dof))(q)
+        ours = jax.jit(lambda q, chain=chain: ws._manipulability(chain.forward(list(q.T)), chain.dof))(q)
         np.testing.assert_allclose(ours, dk.manipulability(chain, q), rtol=1e-9, atol=1e-12)
 
 
@@ -151,7 +152,7 @@ def test_compiled_once_per_chain_grid_and_chunk():
     assert (ws._compiled.cache_info().hits, ws._compiled.cache_info().misses) == (1, 1)
     mesh = jax.sharding.Mesh(np.array(jax.devices()), ("devices",))
     _, step, _ = ws._compiled(
-        ws._ChainKey(dk.robots.planar([1.0, 0.5])), (13, 13, 13), 48, 512, jnp.dtype(jnp.float64), mesh
+        partition(dk.robots.planar([1.0, 0.5]))[0], (13, 13, 13), 48, 512, jnp.dtype(jnp.float64), mesh
     )
     assert step._cache_size() == 1  # 2 + 10 steps, one compilation
 

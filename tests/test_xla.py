@@ -1,4 +1,4 @@
-"""A model closed over by ``jit`` (its numbers folded as constants, :func:`diffkin._xla.is_concrete`)
+"""A model closed over by ``jit`` (its numbers folded as constants, :mod:`diffkin._static`)
 and the same model passed as a ``jit`` argument (traced: the general path) give the same numbers, in
 every public function. One compiled function per path and model kind, small batches."""
 
@@ -107,15 +107,22 @@ def test_materialize_keeps_values_and_a_single_value_stays_an_array_of_one():
     np.testing.assert_array_equal(np.asarray(two), np.stack([x, np.full(5, 1.5)]))
 
 
-def test_solver_jit_gives_its_options_to_top_level_calls_only():
-    """Compiler options are allowed on a top-level jit only: inside a user's jit (or vmap) the plain one is used."""
-    from diffkin._xla import SOLVER_COMPILE, _top_level, solver_jit
+@pytest.mark.parametrize("public", [False, True], ids=["jax-internal", "public-api"])
+def test_solver_jit_gives_its_options_to_top_level_calls_only(public, monkeypatch):
+    """Compiler options are allowed on a top-level jit only: inside a user's jit (or vmap, grad) the plain
+    one is used; by JAX's internal trace state and by the public-API fallback alike."""
+    from diffkin import _xla
+    from diffkin._xla import SOLVER_COMPILE, solver_jit
 
+    if public:
+        monkeypatch.setattr(_xla, "_top_level", _xla._top_level_public)
     inside = []
-    jax.jit(lambda x: inside.append(_top_level()) or x)(0.0)
-    jax.vmap(lambda x: inside.append(_top_level()) or x)(np.zeros(2))
-    assert _top_level() and inside == [False, False]
+    jax.jit(lambda x: inside.append(_xla._top_level(x)) or x)(0.0)
+    jax.vmap(lambda x: inside.append(_xla._top_level(x)) or x)(np.zeros(2))
+    jax.grad(lambda x: inside.append(_xla._top_level(x)) or x)(0.0)
+    assert _xla._top_level(np.zeros(2)) and inside == [False, False, False]
     g = solver_jit(lambda x: x + 1.0)
+    np.testing.assert_array_equal(np.asarray(jax.grad(lambda x: g(x).sum())(np.zeros(3))), np.ones(3))
     np.testing.assert_array_equal(np.asarray(g(np.zeros(3))), np.ones(3))
     np.testing.assert_array_equal(np.asarray(jax.jit(g)(np.zeros(3))), np.ones(3))  # would raise with the options
     np.testing.assert_array_equal(np.asarray(jax.vmap(g)(np.zeros((2, 3)))), np.ones((2, 3)))

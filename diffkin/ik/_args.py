@@ -1,23 +1,24 @@
-"""Host-side checks of :func:`diffkin.ik.solve`'s arguments, and the model as a static argument."""
+"""Host-side checks of :func:`diffkin.ik.solve`'s arguments, before anything is traced."""
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from diffkin._checks import real_array, rigid_poses, rigid_tol
-from diffkin._xla import is_concrete
-
-METHODS = ("lm", "optax")
+from diffkin._static import is_concrete
+from diffkin.ik import _secondary
+from diffkin.ik._methods import METHODS, optax_module
 
 
 def check_settings(num_seeds, method, max_iters, pos_tol, rot_tol, optimizer) -> None:
     """The solver's settings: a known method, positive counts, non-negative tolerances, an optax optimizer."""
     if method not in METHODS:
-        raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
+        raise ValueError(f"method: expected one of {tuple(METHODS)}, got {method!r}")
     for name, value, low in (("num_seeds", num_seeds, 1), ("max_iters", max_iters, 0)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
             raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
@@ -29,8 +30,6 @@ def check_settings(num_seeds, method, max_iters, pos_tol, rot_tol, optimizer) ->
         if not isinstance(value, (int, float, np.floating, np.integer)) or not value >= 0:
             raise ValueError(f"{name}: expected a non-negative number, got {value!r}")
     if method == "optax":
-        from diffkin.ik._prepare import optax_module
-
         optax_module()  # ImportError with the extra to install, before tracing
     if optimizer is not None:
         if method != "optax":
@@ -101,49 +100,45 @@ def _key_zero(impl: str) -> jax.Array:
         return jax.random.key(0, impl=impl)
 
 
-class KnownLeaves:
-    """The concrete leaves of a model (and its structure), hashed and compared by value.
-
-    It is a static argument of the jitted solvers: equal models (by structure and numbers) share
-    one compilation, and their numbers stay trace-time constants that the forward pass folds (as
-    for a model closed over by ``jit``).
-    """
-
-    def __init__(self, treedef, leaves: tuple):
-        self.treedef, self.leaves = treedef, leaves
-        self._key = (
-            treedef,
-            tuple(
-                None
-                if x is None
-                else (
-                    np.asarray(x).dtype.str,
-                    np.shape(x),
-                    bool(getattr(x, "weak_type", False)),
-                    np.asarray(x).tobytes(),
-                )
-                for x in leaves
-            ),
-        )
-        self._hash = hash(self._key)
-
-    def __hash__(self):
-        return self._hash
-
-    def __eq__(self, other):
-        return isinstance(other, KnownLeaves) and self._key == other._key
+def secondary_spec(secondary, rest) -> tuple[tuple[str, float], ...]:
+    """Objectives and weights from ``None``, a name, names, or a mapping name -> weight."""
+    if secondary is None:
+        secondary = ("rest",) if rest is not None else ()
+    if isinstance(secondary, str):
+        secondary = (secondary,)
+    items = secondary.items() if isinstance(secondary, Mapping) else [(s, 1.0) for s in secondary]
+    spec = []
+    for name, weight in items:
+        if name not in _secondary.OBJECTIVES:
+            raise ValueError(f"secondary: expected names from {_secondary.OBJECTIVES}, got {name!r}")
+        if not isinstance(weight, (int, float, np.floating, np.integer)) or not np.isfinite(weight) or weight <= 0:
+            raise ValueError(f"secondary[{name!r}]: expected a positive weight, got {weight!r}")
+        spec.append((name, float(weight)))
+    if any(name == "rest" for name, _ in spec) and rest is None:
+        raise ValueError("rest: the 'rest' objective needs a rest configuration (rest=...)")
+    return tuple(spec)
 
 
-def split_model(model) -> tuple[KnownLeaves, tuple]:
-    """``(concrete leaves, traced leaves)`` of ``model``, each with ``None`` in the other's slots."""
-    leaves, treedef = jax.tree_util.tree_flatten(model)
-    known = tuple(x if is_concrete(x) else None for x in leaves)
-    traced = tuple(None if is_concrete(x) else x for x in leaves)
-    return KnownLeaves(treedef, known), traced
-
-
-def join(known: KnownLeaves, traced: tuple):
-    """The model again, inside the trace: concrete leaves from ``known``, the others from ``traced``."""
-    return jax.tree_util.tree_unflatten(
-        known.treedef, [t if k is None else k for k, t in zip(known.leaves, traced, strict=True)]
-    )
+def locked_joints(robot, locked, q0, batch) -> tuple[tuple[bool, ...], jax.Array | None]:
+    """Per joint, locked or not, and the locked values ``(..., dof)`` (``None`` if nothing is locked)."""
+    if locked is None:
+        return (False,) * robot.dof, None
+    if isinstance(locked, str) or not isinstance(locked, Mapping | Sequence):
+        raise TypeError(f"locked: expected a mapping joint name -> value or a sequence of joint names, got {locked!r}")
+    for name in locked:
+        if name not in robot.joint_names:
+            raise ValueError(f"locked: {name!r} is not an actuated joint; expected one of {list(robot.joint_names)}")
+    mask = tuple(name in locked for name in robot.joint_names)
+    if isinstance(locked, Mapping):
+        values = []
+        for name in robot.joint_names:
+            if name in locked:
+                v = real_array(locked[name], f"locked[{name!r}]", "a joint value")
+                check_batched(v, f"locked[{name!r}]", (), batch, "(a value per target, or one)")
+                values.append(jnp.broadcast_to(v, batch))
+            else:
+                values.append(jnp.zeros(batch))
+        return mask, jnp.stack(values, axis=-1)
+    if q0 is None:
+        raise ValueError("locked: a sequence of joint names takes their values from q0; pass q0 (or a mapping)")
+    return mask, jnp.broadcast_to(jnp.asarray(q0), batch + (robot.dof,))

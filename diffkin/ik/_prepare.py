@@ -1,19 +1,13 @@
 """What a solve prepares inside ``jit``: the model and targets in the solver's dtype, safe targets,
-limits rounded inwards, and the method's iteration."""
+limits rounded inwards."""
 
 from __future__ import annotations
-
-import functools
-import importlib
-from collections.abc import Callable
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from diffkin._checks import rigid_poses
-from diffkin._xla import traced_only
-from diffkin.ik import _lm
+from diffkin._static import traced_only
 
 
 def detach(tree):
@@ -32,32 +26,6 @@ def inward(limit, dtype, side: int) -> jax.Array:
     rounded = limit.astype(dtype)
     outside = side * (rounded.astype(limit.dtype) - limit) > 0
     return jnp.where(outside, jnp.nextafter(rounded, jnp.asarray(-side * jnp.inf, dtype)), rounded)
-
-
-class Method(NamedTuple):
-    """An iterative method: ``init(x) -> aux``, ``propose(problem, x, ev, aux) -> (x_try, aux)`` and
-    ``judge(cost, cost_try, aux) -> (accepted, aux, stalled)`` (see :func:`diffkin.ik._rounds.search`)."""
-
-    init: Callable
-    propose: Callable
-    judge: Callable
-
-
-def method_steps(method: str, optimizer) -> Method:
-    """The :class:`Method` of ``method`` (``"lm"`` or ``"optax"`` with ``optimizer``)."""
-    if method == "lm":
-        return Method(_lm.init, _lm.propose, _lm.judge)
-    _optax = optax_module()
-    opt = _optax.default_optimizer() if optimizer is None else optimizer
-    return Method(functools.partial(_optax.init, opt), functools.partial(_optax.propose, opt), _optax.judge)
-
-
-def optax_module():
-    """``diffkin.ik._optax`` (which needs optax), or an ImportError naming the extra to install."""
-    try:
-        return importlib.import_module("diffkin.ik._optax")
-    except ImportError as e:
-        raise ImportError("method='optax' needs optax: pip install 'diffkin[ik]' (or pip install optax)") from e
 
 
 def valid_targets(flat: jax.Array, position_only: bool) -> tuple[jax.Array, jax.Array]:

@@ -1,4 +1,5 @@
-"""The IK residual, its Jacobian and the joint-limit projection, from one forward pass.
+"""An IK problem: a model, its terms, the state's projection and retraction, and the residual of
+every term from one forward pass.
 
 All arrays here are flat over ``P = seeds x targets`` problems, with that axis last: ``q`` is
 ``(dof, P)`` and vectors and matrices are stacks of per-entry arrays (structure of arrays, as in
@@ -7,33 +8,28 @@ All arrays here are flat over ``P = seeds x targets`` problems, with that axis l
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from diffkin import _rigid as rg
-from diffkin import kinematics
 from diffkin._xla import materialize
-from diffkin.models.dh import DHChain
-from diffkin.models.poe import PoEChain
 
-#: Metres per radian in the residual: the rotation error enters as ``ROT_WEIGHT * angle``, so a
-#: 1e-4 rad rotation error counts like a 2e-5 m position error (about a tenth of an arm's reach).
-ROT_WEIGHT = 0.2
+BASE_ROWS = 12  # state rows of a solved root pose: p (3), then R row by row (9)
 
 
 class Eval(NamedTuple):
-    """The residual at configurations ``q``: ``r = [p_t - p; ROT_WEIGHT log(R_t R^T)]``.
+    """The residual of a problem's terms at states ``x``, stacked.
 
     Attributes:
-        r: ``(m, P)`` (``m = 6`` for poses, 3 for positions).
-        J: ``(m, dof, P)`` ``d(-r)/dq``: the world Jacobian, rotation rows weighted (``(m, 0, P)``
-            where only the cost is needed).
+        r: ``(m, P)`` every term's rows.
+        J: ``(m, n, P)`` ``d(-r)/dx``, ``n`` columns of the state (``(0, 0, P)`` where only the
+            cost is needed).
         cost: ``(P,)`` ``|r|^2``.
-        pos_err: ``(P,)`` metres.
-        rot_err: ``(P,)`` radians.
+        pos_err: ``(k, P)`` metres, per term.
+        rot_err: ``(k, P)`` radians, per term.
     """
 
     r: jax.Array
@@ -46,61 +42,121 @@ class Eval(NamedTuple):
 class Entries(NamedTuple):
     """The fields of an :class:`Eval` before they are computed into arrays: one entry (an array of
     the problem shape, or a folded Python float) per value, ``J`` row by row; ``pos_err`` and
-    ``rot_err`` one entry, or a list of one per target of a tree (see :func:`settle`)."""
+    ``rot_err`` one entry per term (see :func:`settle`)."""
 
     r: list
     J: list
     cost: rg.Entry
-    pos_err: rg.Entry | list
-    rot_err: rg.Entry | list
+    pos_err: list
+    rot_err: list
+
+
+class Kinematics:
+    """The kinematics of a problem's state, as its terms read them.
+
+    ``pose(frame)``: the frame's world pose; ``columns(frame)``: per column of the state, the
+    space twist of the frame's motion: one per joint (zero for a locked joint), then, when the
+    root is solved, the six of the root's body twist. ``dtype``: the solver's dtype.
+    """
+
+    def __init__(self, problem: Problem, x: jax.Array):
+        root = problem.root(x)
+        self.kin = problem.model.forward(list(problem.joints(x)), root)
+        self.locked = problem.locked
+        self.root_columns = rg.root_screws(root) if problem.solve_base else []
+        self.dtype = x.dtype
+
+    def pose(self, frame: int | None) -> rg.Rigid:
+        return self.kin.pose(frame)
+
+    def columns(self, frame: int | None) -> list:
+        zero = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        joints = [zero if lock else c for lock, c in zip(self.locked, self.kin.columns(frame), strict=True)]
+        return joints + self.root_columns
 
 
 class Problem(NamedTuple):
-    """A flat batch of targets with the chain and its limits, all in one dtype.
+    """A flat batch of ``P`` problems of one model: its terms, limits, locked joints and root, in one dtype.
+
+    The state ``x`` is ``(n, P)``: the ``dof`` joint values, then, when the root is solved, its pose
+    ``[p; R row by row]`` (:data:`BASE_ROWS` rows), moved by ``T_world_root exp([dv; dw])``.
 
     Attributes:
-        chain: the chain model.
-        p: target position entries, each ``(P,)``.
-        R: target rotation entries ``3 x 3``, each ``(P,)``, or ``None`` for position targets.
-        lower, upper: ``(dof,)`` limits used for the projection (``-inf``/``inf`` if unlimited).
-        wrap: ``(dof,)`` bool, unlimited revolute joints (wrapped to ``[-pi, pi)``).
-        respect_limits: static; clip every iterate to ``[lower, upper]``.
+        model: the model (any kind: :mod:`diffkin.models.forward`).
+        terms: static, the terms (:mod:`diffkin.ik._terms`); ``bound``: per term, its target entries.
+        lower, upper: ``(dof,)`` limits; ``wrap``: ``(dof,)`` unlimited revolute joints.
+        respect_limits: static; clip the joints to the limits.
+        locked: static, per joint, whether it is locked; ``locked_q``: ``(dof, P)`` its values.
+        base: the root pose ``T_world_root`` (entries ``(P,)`` or constants) when not solved.
+        solve_base: static; the root pose is part of the state.
     """
 
-    chain: DHChain | PoEChain
-    p: tuple
-    R: tuple | None
+    model: Any
+    terms: tuple
+    bound: tuple
     lower: jax.Array
     upper: jax.Array
     wrap: jax.Array
     respect_limits: bool
+    locked: tuple[bool, ...]
+    locked_q: jax.Array
+    base: rg.Rigid
+    solve_base: bool
 
-    def project(self, q: jax.Array) -> jax.Array:
-        """Wrap unlimited revolute joints and (with ``respect_limits``) clip to the limits."""
-        return project(q, self.lower, self.upper, self.wrap, self.respect_limits)
+    @property
+    def dof(self) -> int:
+        return self.model.dof
 
-    def retract(self, q: jax.Array, dq: jax.Array) -> jax.Array:
-        """``q + dq``, projected."""
-        return self.project(q + dq)
+    def joints(self, x: jax.Array) -> jax.Array:
+        """The joint rows of the state."""
+        return x[: self.dof] if self.solve_base else x
 
-    def evaluate(self, q: jax.Array) -> Eval:
-        return evaluate(self, q)
+    def project(self, x: jax.Array) -> jax.Array:
+        """Unlimited revolute joints wrapped to ``[-pi, pi)``, joints clipped (``respect_limits``), locked
+        joints at their values; the root pose unchanged."""
+        q = project(self.joints(x), self.lower, self.upper, self.wrap, self.respect_limits)
+        if any(self.locked):
+            q = jnp.where(jnp.asarray(self.locked)[:, None], self.locked_q, q)
+        return jnp.concatenate([q, x[self.dof :]]) if self.solve_base else q
 
-    def residual(self, q: jax.Array) -> Entries:
-        return residual(self, q)
+    def retract(self, x: jax.Array, dx: jax.Array) -> jax.Array:
+        """``q + dq``, and the root pose moved by ``exp`` of the body twist ``dx[dof:]``, projected."""
+        if not self.solve_base:
+            return self.project(x + dx)
+        q = x[: self.dof] + dx[: self.dof]
+        T = rg.compose(
+            self.root(x),
+            rg.screw_exp(tuple(dx[self.dof : self.dof + 3]), tuple(dx[self.dof + 3 :]), jnp.ones((), x.dtype)),
+        )
+        return self.project(jnp.concatenate([q, jnp.stack(list(T.p) + [e for row in T.R for e in row])]))
 
-    def screen_cost(self, q: jax.Array) -> jax.Array:
-        """``(P,)`` cheap cost for choosing seeds: ``|p_t - p|^2 + ROT_WEIGHT^2 (3 - trace(R_t^T R))``.
+    def root(self, x: jax.Array) -> rg.Rigid:
+        """``T_world_root`` at the state ``x``."""
+        if not self.solve_base:
+            return self.base
+        b = x[self.dof :]
+        return rg.Rigid(tuple(tuple(b[3 + 3 * i + j] for j in range(3)) for i in range(3)), tuple(b[:3]))
 
-        One forward pass without Jacobian; the rotation term is ``2 (1 - cos angle)``, the
-        squared angle near 0.
-        """
-        ee = self.chain._frames(list(q)).ee
-        terms = [rg.add(self.p[i], -ee.p[i]) ** 2 for i in range(3)]
-        if self.R is not None:
-            trace = rg.add(*(rg.mul(ee.R[i][j], self.R[i][j]) for i in range(3) for j in range(3)))
-            terms.append(ROT_WEIGHT**2 * (3.0 - trace))
-        return jnp.asarray(rg.add(*terms))
+    def residual(self, x: jax.Array, jacobian: bool = True) -> Entries:
+        """The entries of every term's residual, Jacobian and errors at ``x``, from one forward pass."""
+        kin = Kinematics(self, x)
+        r, J, pos_err, rot_err = [], [], [], []
+        for term, bound in zip(self.terms, self.bound, strict=True):
+            rows = term.rows(kin, bound, jacobian)
+            r += rows.r
+            J += rows.J
+            pos_err.append(rows.pos_err)
+            rot_err.append(rows.rot_err)
+        return Entries(r, J, rg.add(*(rg.mul(e, e) for e in r)), pos_err, rot_err)
+
+    def evaluate(self, x: jax.Array, jacobian: bool = True) -> Eval:
+        """Residual, Jacobian and per-term errors ``(k, P)`` at ``x``, from one forward pass."""
+        return settle(self.residual(x, jacobian))
+
+    def screen_cost(self, x: jax.Array) -> jax.Array:
+        """``(P,)`` the terms' cheap costs for choosing seeds (one forward pass without Jacobian)."""
+        kin = Kinematics(self, x)
+        return jnp.asarray(rg.add(*(t.screen(kin, b) for t, b in zip(self.terms, self.bound, strict=True))))
 
 
 def project(q: jax.Array, lower, upper, wrap, respect_limits: bool) -> jax.Array:
@@ -110,53 +166,16 @@ def project(q: jax.Array, lower, upper, wrap, respect_limits: bool) -> jax.Array
     return jnp.clip(wrapped, lower[:, None], upper[:, None]) if respect_limits else wrapped
 
 
-def residual(problem: Problem, q: jax.Array) -> Entries:
-    """The entries of the residual, weighted Jacobian and errors at ``q`` ``(dof, P)``, from one forward pass."""
-    frames = problem.chain._frames(list(q))
-    shape, dtype = q.shape[1:], q.dtype
-    ee = frames.ee
-    columns = kinematics._world_from_space(frames.screws, ee.p)
-    e_p = [rg.add(problem.p[i], -ee.p[i]) for i in range(3)]
-    J = [[v[i] for v, _ in columns] for i in range(3)]
-    # Capped at the largest float: a target ~1e154 m away would square to inf (issue 18: outputs stay finite).
-    pos_err = jnp.minimum(jnp.sqrt(rg.add(*(rg.mul(e, e) for e in e_p))), jnp.finfo(dtype).max)
-    if problem.R is None:
-        r, rot_err = e_p, jnp.zeros(shape, dtype)
-    else:
-        w, rot_err = rg.so3_log(rg.matmul(problem.R, tuple(rg.column(ee.R, j) for j in range(3))))
-        r = e_p + [rg.mul(ROT_WEIGHT, e) for e in w]
-        J = J + [[rg.mul(ROT_WEIGHT, c[1][i]) for c in columns] for i in range(3)]
-    return Entries(r, J, rg.add(*(rg.mul(e, e) for e in r)), pos_err, rot_err)
-
-
-def evaluate(problem: Problem, q: jax.Array) -> Eval:
-    """Residual, weighted Jacobian and errors at ``q`` ``(dof, P)``, from one forward pass."""
-    return settle(residual(problem, q))
-
-
-def _errors(e) -> list:
-    """Error entries: one (a chain) or a list of one per target (a tree)."""
-    return e if isinstance(e, list) else [e]
-
-
 def _head(entries: Entries) -> list:
     """The residual, cost and error entries, in the order :func:`_arrays` reads them."""
-    return [*entries.r, entries.cost, *_errors(entries.pos_err), *_errors(entries.rot_err)]
+    return [*entries.r, entries.cost, *entries.pos_err, *entries.rot_err]
 
 
 def _arrays(entries: Entries, head, J) -> Eval:
     """An :class:`Eval` of arrays from ``head`` (:func:`_head`, stacked) and ``J`` ``(m * n, P)``."""
     m, n = len(entries.r), len(entries.J[0]) if len(entries.J) else 0
-    shape = head.shape[1:]
-    errors = (len(entries.pos_err),) if isinstance(entries.pos_err, list) else ()
-    k = len(_errors(entries.pos_err))
-    return Eval(
-        head[:m],
-        J.reshape((m, n) + shape),
-        head[m],
-        head[m + 1 : m + 1 + k].reshape(errors + shape),
-        head[m + 1 + k :].reshape(errors + shape),
-    )
+    k = len(entries.pos_err)
+    return Eval(head[:m], J.reshape((m, n) + head.shape[1:]), head[m], head[m + 1 : m + 1 + k], head[m + 1 + k :])
 
 
 def settle(entries: Entries) -> Eval:
@@ -176,7 +195,7 @@ def settle_choosing(entries: Entries, old: Eval, choose) -> tuple[Eval, jax.Arra
     computed first (``choose`` reads the cost); the Jacobian's entries are then computed and
     chosen inside the same kernels. That saves writing the new Jacobian and then a pass that reads
     it with the old one and writes one, the largest memory traffic of an LM iteration
-    (:func:`diffkin.ik._rounds._iterate`).
+    (:func:`diffkin.ik._search._iterate`).
     """
     head_try = materialize(_head(entries))
     take, extra = choose(head_try[len(entries.r)])

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 
 from diffkin.ik._linalg import damped_step
-from diffkin.ik._rounds import succeeded
+from diffkin.ik._search import succeeded
 
 OBJECTIVES = ("rest", "limits")
 _REFINE_ITERS = 20

@@ -1,30 +1,41 @@
-"""``solve``: the front door (argument checks) and the solver of one chain's end effector.
-
-A :class:`~diffkin.Robot` with a mapping of targets goes to :mod:`diffkin.ik._tree`.
+"""``solve``: the front door. Checks the arguments on the host, turns them into one problem (a model,
+its terms, locked joints, a root), and runs the one compiled solver of every problem.
 """
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping
+from typing import Any, NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
 
+from diffkin import _rigid as rg
+from diffkin._checks import instance
 from diffkin._sharding import automatic_axes
+from diffkin._static import ModelKey, combine, partition
 from diffkin._xla import solver_jit
-from diffkin.ik import _args, _rounds, _tree
-from diffkin.ik._implicit import implicit_q
-from diffkin.ik._prepare import cast, detach, inward, method_steps, valid_targets
-from diffkin.ik._problem import Problem
+from diffkin.ik import _args, _search, _secondary
+from diffkin.ik._implicit import implicit
+from diffkin.ik._methods import METHODS
+from diffkin.ik._prepare import cast, detach, inward, valid_targets
+from diffkin.ik._problem import BASE_ROWS, Problem
 from diffkin.ik._result import IKResult
+from diffkin.ik._terms import pose, relative
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain
 from diffkin.models.robot import Robot
 
-_DEFAULT_ITERS = {"lm": 10, "optax": 1000}
-# Several targets (and a floating base) converge in more LM steps: 10 solved 94 % of Talos'
-# four-contact problems, 20 solved 98 %, 40 solved 100 % (50 problems, float32).
-_TREE_ITERS = {"lm": 30, "optax": 1000}
+
+class Spec(NamedTuple):
+    """The static part of a problem: its terms, locked joints, secondary objectives, solved root."""
+
+    terms: tuple
+    locked: tuple[bool, ...]
+    secondary: tuple[tuple[str, float], ...]
+    solve_base: bool
+    errors_per_term: bool  # IKResult errors (..., k) (a robot) or (...) (a chain)
 
 
 def solve(
@@ -46,6 +57,7 @@ def solve(
     secondary=None,
     solve_base: bool = False,
     base=None,
+    relative=None,
 ) -> IKResult:
     """Inverse kinematics for a batch of targets, from random seeds (and an optional warm start).
 
@@ -71,14 +83,14 @@ def solve(
     clipped to ``[lower, upper]``.
 
     The returned ``q`` is differentiable with respect to ``target`` and the chain's parameters
-    through the implicit function theorem (``dq = J^+ dx``, see :func:`implicit_q`), not through
+    through the implicit function theorem (``dq = J^+ dr``, see :mod:`diffkin.ik._implicit`), not through
     the iterations; the derivative is that of a successful, non-singular solution off the limits.
 
-    A :class:`~diffkin.Robot` takes a mapping ``{frame_name: target}`` instead: every target is
-    solved at once (success means all within tolerance), with per-axis ``weights``, ``locked``
-    joints, secondary objectives and a solved floating base (see :mod:`diffkin.ik._tree`; the
-    residual stacks one such residual per target, dense linear algebra above 6 rows and columns,
-    30 LM iterations per seed by default).
+    A :class:`~diffkin.Robot` takes a mapping ``{frame_name: target}`` instead, and targets between
+    two of its frames (``relative``): every target is solved at once (success means all within
+    tolerance), with per-axis ``weights``, ``locked`` joints, secondary objectives and a solved
+    floating base (the residual stacks one such residual per target, dense linear algebra above 6
+    rows and columns, 30 LM iterations per seed by default).
 
     Args:
         chain: a :class:`~diffkin.DHChain` or :class:`~diffkin.PoEChain`, or a :class:`~diffkin.Robot`.
@@ -101,8 +113,13 @@ def solve(
         respect_limits: keep every iterate (and the result) within ``[chain.lower, chain.upper]``.
         optimizer: an ``optax.GradientTransformation`` for ``method="optax"``; default
             ``optax.adam(1e-2)``.
-        weights: robots: ``{frame_name: w}``, ``w`` six non-negative weights of the ``[v; w]``
-            error in the target frame (world axes for a position target) or a pair
+        relative: robots: ``{(a, b): T_a_b}``, the pose ``(..., 4, 4)`` of frame ``b`` in frame ``a``
+            (or the position ``(..., 3)`` of ``b``'s origin in ``a``), the batch shape of ``target``
+            (which may then be empty): two hands holding one object, a tool held against a part.
+            Their errors follow the targets' in ``IKResult.pos_err``/``rot_err``.
+        weights: robots: ``{frame_name: w}`` (``{(a, b): w}`` for a relative target), ``w`` six
+            non-negative weights of the ``[v; w]`` error in the target frame (world axes for a
+            position target) or a pair
             ``(w_pos, w_rot)``; a zero frees that axis (errors and success ignore it). Default 1.
         locked: robots: ``{joint_name: value}`` (a number or one per target) or a sequence of
             joint names whose values come from ``q0``; those joints do not move.
@@ -128,137 +145,272 @@ def solve(
         TypeError: a chain that is not a chain model, an optimizer that is not an optax
             ``GradientTransformation``, a bool, complex or float16 target.
     """
-    if isinstance(chain, Robot):
-        max_iters = _TREE_ITERS.get(method, 0) if max_iters is None else max_iters
-        return _tree.solve(
-            chain,
-            target,
-            weights=weights,
-            locked=locked,
-            q0=q0,
-            rest=rest,
-            secondary=secondary,
-            solve_base=solve_base,
-            base=base,
-            key=key,
-            num_seeds=num_seeds,
-            method=method,
-            max_iters=max_iters,
-            pos_tol=pos_tol,
-            rot_tol=rot_tol,
-            respect_limits=respect_limits,
-            optimizer=optimizer,
-        )
-    max_iters = _DEFAULT_ITERS.get(method, 0) if max_iters is None else max_iters  # (an unknown method raises)
-    if not isinstance(chain, (DHChain, PoEChain)):
-        raise TypeError(f"chain: expected a DHChain, PoEChain or Robot, got {type(chain).__name__}")
-    for name, value in (
-        ("weights", weights),
-        ("locked", locked),
-        ("rest", rest),
-        ("secondary", secondary),
-        ("base", base),
-    ):
+    instance(chain, (DHChain, PoEChain, Robot), "chain", "a DHChain, PoEChain or Robot")
+    is_robot = isinstance(chain, Robot)
+    facts = METHODS.get(method)
+    if max_iters is None and facts is not None:
+        max_iters = facts.iters_robot if is_robot else facts.iters_chain
+    _args.check_settings(num_seeds, method, 0 if max_iters is None else max_iters, pos_tol, rot_tol, optimizer)
+    if is_robot:
+        terms, arrays, batch = _robot_terms(chain, target, relative, weights)
+    else:
+        for name, value in (
+            ("weights", weights),
+            ("locked", locked),
+            ("rest", rest),
+            ("secondary", secondary),
+            ("base", base),
+            ("relative", relative),
+        ):
+            if value is not None:
+                raise ValueError(f"{name}: only for a Robot (solve dk.load_robot(...) with a mapping of targets)")
+        if solve_base:
+            raise ValueError("solve_base: only for a floating Robot")
+        array, position_only, batch = _args.check_target(target)
+        terms, arrays = (pose.PoseTarget(None, position_only),), [array]
+    dtype = jnp.result_type(*arrays)
+    what = f"for a {chain.dof}-joint {'robot' if is_robot else 'chain'}"
+    for name, value in (("q0", q0), ("rest", rest)):
         if value is not None:
-            raise ValueError(f"{name}: only for a Robot (solve dk.load_robot(...) with a mapping of targets)")
-    if solve_base:
-        raise ValueError("solve_base: only for a floating Robot")
-    _args.check_settings(num_seeds, method, max_iters, pos_tol, rot_tol, optimizer)
-    target, position_only, batch = _args.check_target(target)
-    if q0 is not None:
-        _args.check_batched(q0, "q0", (chain.dof,), batch, f"for a {chain.dof}-joint chain")
+            _args.check_batched(value, name, (chain.dof,), batch, what)
+    if base is not None:
+        _args.check_target(base, "base")
+        _args.check_batched(base, "base", (4, 4), batch, "(T_world_root)")
+    if solve_base and not chain.floating:
+        raise ValueError(f"solve_base: robot {chain.name!r} has a fixed root (load it with floating=True)")
+    if solve_base and not METHODS[method].solves_base:
+        raise ValueError(f"solve_base: needs method='lm', got method={method!r}")
+    mask, locked_q = _args.locked_joints(chain, locked, q0, batch) if is_robot else ((False,) * chain.dof, None)
+    if chain.dof == 0 and not solve_base:
+        raise ValueError(f"robot: {chain.name!r} has no joints to solve")
+    assert max_iters is not None  # (checked by check_settings)
+    spec = Spec(terms, mask, _args.secondary_spec(secondary, rest), bool(solve_base), is_robot)
     if 0 in batch:  # no targets: empty results of the batch's shape
-        empty = lambda *shape, dtype=target.dtype: jnp.zeros(batch + shape, dtype)  # noqa: E731
-        return IKResult(empty(chain.dof), empty(dtype=bool), empty(), empty(), empty(dtype=jnp.int32))
-    known, traced = _args.split_model(chain)
-    return automatic_axes(_solve, target, len(batch))(
+        empty = lambda *shape, dt=dtype: jnp.zeros(batch + shape, dt)  # noqa: E731
+        errors = (len(terms),) if is_robot else ()
+        return IKResult(
+            empty(chain.dof),
+            empty(dt=bool),
+            empty(*errors),
+            empty(*errors),
+            empty(dt=jnp.int32),
+            empty(4, 4) if solve_base else None,
+        )
+    static, traced = partition(chain)
+    as_dtype = lambda x: None if x is None else jnp.asarray(x, dtype)  # noqa: E731
+    return automatic_axes(_solve, arrays[0], len(batch))(
         traced,
-        target,
+        tuple(jnp.asarray(a, dtype) for a in arrays),
         _args.default_key() if key is None else key,
-        None if q0 is None else jnp.asarray(q0),
-        _args.tolerance(pos_tol, target.dtype),
-        _args.tolerance(rot_tol, target.dtype),
-        known=known,
+        as_dtype(q0),
+        as_dtype(rest),
+        as_dtype(base),
+        as_dtype(locked_q),
+        _args.tolerance(pos_tol, dtype),
+        _args.tolerance(rot_tol, dtype),
+        static=static,
+        spec=spec,
         num_seeds=int(num_seeds),
         method=method,
         max_iters=int(max_iters),
         respect_limits=bool(respect_limits),
         optimizer=optimizer,
-        position_only=position_only,
         batch=batch,
     )
 
 
+def _robot_terms(robot: Robot, targets, relative_targets, weights) -> tuple[tuple, list, tuple[int, ...]]:
+    """The terms of a robot's targets (world, then relative), their arrays and their batch shape."""
+    if weights is not None and not isinstance(weights, Mapping):
+        raise TypeError(f"weights: expected a mapping from target frame names to weights, got {type(weights).__name__}")
+    weights = {} if weights is None else weights
+    found: list[tuple[Any, Any, str]] = list(pose.from_mapping(robot, targets, weights))
+    if relative_targets is not None:
+        found += relative.from_mapping(robot, relative_targets, weights)
+    if not found:
+        raise TypeError(f"target: for a Robot, expected a non-empty mapping frame name -> target, got {targets!r}")
+    keys = set(targets) | set(relative_targets or ())
+    for name in weights:
+        if name not in keys:
+            raise ValueError(f"weights: {name!r} is not one of the targets {list(keys)}")
+    batch = None
+    for term, array, label in found:
+        b = tuple(array.shape[:-1] if term.position_only else array.shape[:-2])
+        if batch is not None and b != batch:
+            raise ValueError(f"target[{label}]: batch shape {b} differs from target[{found[0][2]}]'s {batch}")
+        batch = b
+    assert batch is not None
+    return tuple(t for t, _, _ in found), [a for _, a, _ in found], batch
+
+
+def _moves(model, terms: tuple) -> np.ndarray:
+    """``(dof, k)`` bool: whether ``q_i`` drives a joint that moves a frame of term ``k``."""
+    out = np.zeros((model.dof, len(terms)), bool)
+    for k, term in enumerate(terms):
+        for f in term.frames:
+            if f is None:  # a chain's end effector: every joint
+                out[:, k] = True
+                continue
+            for j in model.ancestors(model.frame_bodies[f]):
+                out[model.sources[j], k] = True
+    return out
+
+
+def _flat(x, batch, tail, n, dtype):
+    """``x`` broadcast to ``batch + tail``, flattened to ``(n,) + tail``, detached, non-finite entries 0."""
+    if x is None:
+        return None
+    x = jnp.broadcast_to(x, batch + tail).reshape((n,) + tail).astype(dtype)
+    return detach(jnp.where(jnp.isfinite(x), x, 0.0))
+
+
 @functools.partial(
     solver_jit,
-    static_argnames=(
-        "known",
-        "num_seeds",
-        "method",
-        "max_iters",
-        "respect_limits",
-        "optimizer",
-        "position_only",
-        "batch",
-    ),
+    static_argnames=("static", "spec", "num_seeds", "method", "max_iters", "respect_limits", "optimizer", "batch"),
 )
 def _solve(
     traced: tuple,
-    target,
+    targets: tuple,
     key,
     q0,
+    rest,
+    base,
+    locked_q,
     pos_tol,
     rot_tol,
     *,
-    known: _args.KnownLeaves,
+    static: ModelKey,
+    spec: Spec,
     num_seeds,
     method,
     max_iters,
     respect_limits,
     optimizer,
-    position_only,
     batch,
 ) -> IKResult:
-    """The solver, compiled once per chain (by value), shapes and static settings.
+    """The solver, compiled once per model (by value), spec, shapes and settings.
 
     Every closure (problems, ranks) is built here, inside the trace, so that repeated eager
     calls of :func:`solve` hit jit's cache instead of retracing and recompiling.
     """
-    chain = _args.join(known, traced)
-    dtype = target.dtype
-    dof = chain.dof
+    model_in = combine(static, traced)
+    dtype, dof, k = targets[0].dtype, model_in.dof, len(spec.terms)
     n = int(np.prod(batch, dtype=np.int64))
-    valid, safe = valid_targets(target.reshape((n,) + target.shape[len(batch) :]), position_only)
-    model = cast(detach(chain), dtype)
-    lower, upper = inward(detach(chain.lower), dtype, -1), inward(detach(chain.upper), dtype, 1)
-    wrap = jnp.asarray([t == "R" for t in chain.joint_types]) & ~jnp.isfinite(lower) & ~jnp.isfinite(upper)
-    fixed = detach(safe)
-    q0_flat = None
-    if q0 is not None:
-        q0_flat = jnp.broadcast_to(jnp.asarray(q0, dtype), batch + (dof,)).reshape(n, dof)
-        q0_flat = jnp.where(jnp.isfinite(q0_flat), detach(q0_flat), 0.0)
+    checked = [
+        valid_targets(t.reshape((n,) + t.shape[len(batch) :]), term.position_only)
+        for t, term in zip(targets, spec.terms, strict=True)
+    ]
+    valid = checked[0][0] if k == 1 else jnp.all(jnp.stack([v for v, _ in checked]), axis=0)
+    safe = tuple(s for _, s in checked)
+    fixed = [detach(s) for s in safe]
+    model = cast(detach(model_in), dtype)
+    lower, upper = inward(detach(model_in.lower), dtype, -1), inward(detach(model_in.upper), dtype, 1)
+    wrap = jnp.asarray([t == "R" for t in model_in.actuated_types]) & ~jnp.isfinite(lower) & ~jnp.isfinite(upper)
+    q0_flat = _flat(q0, batch, (dof,), n, dtype)
+    rest_flat = _flat(rest, batch, (dof,), n, dtype)
+    locked_flat = _flat(locked_q, batch, (dof,), n, dtype)
+    base_in, base_ok = None, None
+    if base is not None or spec.solve_base:
+        eye = jnp.eye(4, dtype=dtype)
+        base_in = jnp.broadcast_to(eye if base is None else base, batch + (4, 4)).reshape(n, 4, 4)
+        base_ok = jnp.all(jnp.isfinite(base_in.reshape(n, -1)), axis=-1)
+        base_in = jnp.where(base_ok[:, None, None], base_in, eye)
+    base_flat = None if base_in is None else detach(base_in)
 
     def build(idx, copies: int) -> Problem:
-        T = jnp.broadcast_to(fixed[idx], (copies,) + fixed[idx].shape).reshape(
-            (copies * idx.shape[0],) + fixed.shape[1:]
+        def tile(x):  # (n, ...) -> (copies * m, ...)
+            x = x[idx]
+            return jnp.broadcast_to(x, (copies,) + x.shape).reshape((copies * idx.shape[0],) + x.shape[1:])
+
+        bound = tuple(term.bind(tile(T)) for term, T in zip(spec.terms, fixed, strict=True))
+        root = rg.IDENTITY if base_flat is None else rg.from_matrix(tile(base_flat))
+        locked_values = tile(locked_flat).T if locked_flat is not None else jnp.zeros((dof, 1), dtype)
+        return Problem(
+            model,
+            spec.terms,
+            bound,
+            lower,
+            upper,
+            wrap,
+            respect_limits,
+            spec.locked,
+            locked_values,
+            root,
+            spec.solve_base,
         )
-        p = tuple(T[:, i] if position_only else T[:, i, 3] for i in range(3))
-        R = None if position_only else tuple(tuple(T[:, i, j] for j in range(3)) for i in range(3))
-        return Problem(model, p, R, lower, upper, wrap, respect_limits)
 
-    def rank(idx, q):  # among successes: nearest the warm start
-        return None if q0_flat is None else jnp.sum((q - q0_flat[idx].T[:, None, :]) ** 2, axis=0)
+    moves = _moves(model_in, spec.terms)
+    still = ~np.any(moves, axis=1)  # joints that move no target
 
-    settings = _rounds.Settings(num_seeds, max_iters, _rounds.POLISH if method == "lm" else 0, pos_tol, rot_tol)
-    best = _rounds.search(
-        build, lambda idx, q: q, rank, key, n, lower, upper, q0_flat, method_steps(method, optimizer), settings
+    def lift(idx, q):  # joint seeds (copies, m, dof) -> states: joints that move nothing at q0, the root at its guess
+        if q0_flat is not None and np.any(still):
+            q = jnp.where(jnp.asarray(still), q0_flat[idx], q)
+        if not spec.solve_base:
+            return q
+        rows = jnp.concatenate([base_flat[:, :3, 3], base_flat[:, :3, :3].reshape(n, 9)], axis=-1)  # (n, 12)
+        return jnp.concatenate([q, jnp.broadcast_to(rows[idx], q.shape[:2] + (BASE_ROWS,))], axis=-1)
+
+    free = jnp.asarray([not lock for lock in spec.locked])
+
+    def h_of(idx):
+        def h(x):  # x (n_state, ...) -> (h, Newton step)
+            r = None if rest_flat is None else rest_flat[idx].T.reshape((dof,) + (1,) * (x.ndim - 2) + (-1,))
+            return _secondary.cost_and_step(spec.secondary, x[:dof], r, lower, upper, free)
+
+        return h
+
+    def rank(idx, x):  # among successes: least secondary cost, else nearest the warm start
+        if spec.secondary:
+            return h_of(idx)(x)[0]
+        return None if q0_flat is None else jnp.sum((x[:dof] - q0_flat[idx].T[:, None, :]) ** 2, axis=0)
+
+    first = None
+    if q0_flat is not None:
+        first = q0_flat if not spec.solve_base else lift(jnp.arange(n), q0_flat[None])[0]
+    facts = METHODS[method]
+    settings = _search.Settings(num_seeds, max_iters, facts.polish, pos_tol, rot_tol)
+    best = _search.search(
+        build,
+        lift,
+        rank,
+        key,
+        n,
+        lower,
+        upper,
+        first,
+        facts.steps(optimizer),
+        settings,
+        moves=jnp.asarray(moves) if k > 1 else None,
     )
+    x, ev = best.x, best.ev
+    if spec.secondary:
+        everything = jnp.arange(n)
+        x, ev = _secondary.refine(build(everything, 1), x, ev, best.success, h_of(everything), pos_tol, rot_tol)
+    solved_root = base_in if base is not None and not spec.solve_base else None
+    x = implicit(spec, cast(model_in, dtype), safe, solved_root, x)
     big = jnp.finfo(dtype).max
-    q_best = implicit_q(chain, safe, best.x.T)
+    success = best.success & valid if base_ok is None else best.success & valid & base_ok
+    pos_err, rot_err = (jnp.where(valid, e, big).T for e in (ev.pos_err, ev.rot_err))  # (n, k)
+    if not spec.errors_per_term:
+        pos_err, rot_err = pos_err[:, 0], rot_err[:, 0]
+    T_world_root = None
+    if spec.solve_base:
+        b = x[dof:].T
+        T_world_root = (
+            jnp.zeros((n, 4, 4), dtype)
+            .at[:, :3, :3]
+            .set(b[:, 3:].reshape(n, 3, 3))
+            .at[:, :3, 3]
+            .set(b[:, :3])
+            .at[:, 3, 3]
+            .set(1.0)
+        )
+    tail = (k,) if spec.errors_per_term else ()
     return IKResult(
-        q=q_best.reshape(batch + (dof,)),
-        success=(best.success & valid).reshape(batch),
-        pos_err=jnp.where(valid, best.ev.pos_err, big).reshape(batch),
-        rot_err=jnp.where(valid, best.ev.rot_err, big).reshape(batch),
+        q=x[:dof].T.reshape(batch + (dof,)),
+        success=success.reshape(batch),
+        pos_err=pos_err.reshape(batch + tail),
+        rot_err=rot_err.reshape(batch + tail),
         iters=best.iters.reshape(batch),
+        base=None if T_world_root is None else T_world_root.reshape(batch + (4, 4)),
     )

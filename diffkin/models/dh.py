@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -9,6 +11,7 @@ import numpy as np
 from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
 from diffkin.models import _validate as check
+from diffkin.models.forward import ChainPass
 
 
 @pytree_dataclass
@@ -128,10 +131,15 @@ class DHChain:
             name=name,
         )
 
-    def _frames(self, q: list[jax.Array]) -> rg.Frames:
-        """Forward pass over the joint values ``q`` (one array per joint, any batch shape)."""
+    @property
+    def actuated_types(self) -> str:
+        """``"R"``/``"P"`` of each entry of ``q`` (:attr:`joint_types`)."""
+        return self.joint_types
+
+    def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> ChainPass:
+        """The forward pass (:mod:`diffkin.models.forward`): the DH product, frame ``i`` after joint ``i``."""
         a, alpha, d, offset = (rg.per_joint(x) for x in (self.a, self.alpha, self.d, self.theta_offset))
-        T = rg.from_matrix(self.base)
+        T = rg.compose(base, rg.from_matrix(self.base))
         links, screws = [T], []
         thetas = [rg.add(q[i], offset[i]) if kind == "R" else offset[i] for i, kind in enumerate(self.joint_types)]
         trig_theta, trig_alpha = rg.sincos_each(thetas), rg.sincos_each(alpha)
@@ -158,4 +166,4 @@ class DHChain:
             if rg.segment_end(i, self.dof):
                 T = rg.checkpoint(T)
             links.append(T)
-        return rg.Frames(links, rg.compose(T, rg.from_matrix(self.tool)), screws)
+        return ChainPass(links, rg.compose(T, rg.from_matrix(self.tool)), screws)

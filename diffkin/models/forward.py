@@ -1,43 +1,92 @@
-"""The one forward pass that every model provides, and the one host-side model check.
+"""The forward pass: the one interface that every model kind implements.
 
-A model is a :class:`DHChain`, a :class:`PoEChain` or a :class:`Robot`. Each provides
-``model._frames(q, ...) -> Frames`` over its joint values ``q`` (a list of ``dof`` arrays of one
-batch shape, or Python floats), with every pose in the world frame (the chain's base frame, or
-the world in which a robot's root sits at ``base``):
+A model (:class:`~diffkin.DHChain`, :class:`~diffkin.PoEChain`, :class:`~diffkin.Robot`, or a
+new kind in a file of its own) provides one method::
 
-- ``Frames.ee``: the pose of the frame of interest: a chain's end effector (tool included), or
-  the robot frame ``frame`` (an index into ``robot.frame_names``).
-- ``Frames.screws``: per entry of ``q``, the space twist ``(v, w)`` of that frame's motion per
-  unit ``q_i`` (the current screw axis of joint ``i``; for a robot the sum over the joints that
-  ``q_i`` drives on the frame's path, zero if none): the columns of the space Jacobian.
-- ``Frames.links``: a chain's base and moving links (``dof + 1``), or every robot frame in
-  ``frame_names`` order when asked for (``every=True``).
+    model.forward(q, base=rg.IDENTITY) -> Pass
 
-Structure (joint types, counts, names, parents) is static; concrete numbers fold at trace time
-(see :mod:`diffkin._rigid`).
+``q`` holds the ``dof`` joint values, each an array of one batch shape or a Python float (a
+folded constant); ``base`` is ``T_world_root``, the pose of the model's root in the world. The
+:class:`Pass` it returns is the kinematics at ``q``, every pose and twist in the world frame:
+
+- ``pass_.pose(frame)``: the pose ``T_world_frame`` of a frame.
+- ``pass_.columns(frame)``: per entry of ``q``, the space twist ``(v, w)`` (world frame, about
+  the world origin) of that frame's motion per unit ``q_i``: the columns of its space Jacobian.
+  A joint that does not move the frame gives a zero column; a mimic joint adds its motion times
+  its multiplier to the column of its source.
+- ``pass_.poses()``: every frame, in the model's frame order.
+
+A frame is an index: for a robot into ``robot.frame_names``; for a chain ``None`` is the end
+effector (tool included) and ``i`` the link frame ``i`` (``0``: the base, ``1 .. dof``: the
+moving links). Poses are :class:`diffkin._rigid.Rigid` (entries, so that constants fold: see
+:mod:`diffkin._static`).
+
+Besides ``forward``, a model has ``dof``, ``joint_names``, ``lower``, ``upper`` (of ``q``) and
+``actuated_types`` (``"R"``/``"P"`` per entry of ``q``).
 """
 
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
+from typing import Protocol, runtime_checkable
 
 import jax
 import jax.numpy as jnp
 
 from diffkin import _rigid as rg
-from diffkin._checks import instance, real_array
-from diffkin._xla import is_concrete
-from diffkin.models.dh import DHChain
-from diffkin.models.poe import PoEChain
-from diffkin.models.robot import Robot
+from diffkin._checks import real_array
+from diffkin._static import is_concrete
 
-Model = DHChain | PoEChain | Robot
-CHAINS = (DHChain, PoEChain)
+Twist = tuple[rg.Vec3, rg.Vec3]
+
+
+class Pass(Protocol):
+    """The kinematics of a model at one ``q`` (see the module docstring)."""
+
+    def pose(self, frame: int | None = None) -> rg.Rigid: ...
+
+    def columns(self, frame: int | None = None) -> list[Twist]: ...
+
+    def poses(self) -> list[rg.Rigid]: ...
+
+
+@runtime_checkable
+class Model(Protocol):
+    """What every model provides: :meth:`forward` and the joint space of ``q``."""
+
+    @property
+    def dof(self) -> int: ...
+
+    @property
+    def actuated_types(self) -> str: ...
+
+    def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> Pass: ...
+
+
+class ChainPass:
+    """The :class:`Pass` of a serial chain: its link poses, end-effector pose and joint screws."""
+
+    def __init__(self, links: list[rg.Rigid], ee: rg.Rigid, screws: list[Twist]):
+        self.links, self.ee, self.screws = links, ee, screws
+
+    def pose(self, frame: int | None = None) -> rg.Rigid:
+        return self.ee if frame is None else self.links[frame]
+
+    def columns(self, frame: int | None = None) -> list[Twist]:
+        if frame is None:
+            return self.screws
+        zero = (0.0, 0.0, 0.0)
+        return self.screws[:frame] + [(zero, zero)] * (len(self.screws) - frame)
+
+    def poses(self) -> list[rg.Rigid]:
+        return self.links
 
 
 def check(model, name: str = "chain") -> None:
-    """Raise a TypeError unless ``model`` is a model of diffkin."""
-    instance(model, (DHChain, PoEChain, Robot), name, "a DHChain, PoEChain or Robot")
+    """Raise a TypeError unless ``model`` is a model (it implements :class:`Model`)."""
+    if not isinstance(model, Model):
+        raise TypeError(f"{name}: expected a DHChain, PoEChain or Robot, got {type(model).__name__}")
 
 
 def joint_values(model: Model, q) -> jax.Array:
@@ -45,7 +94,7 @@ def joint_values(model: Model, q) -> jax.Array:
     check(model)
     q = real_array(q, "q", "joint values (radians or metres)")
     if q.ndim == 0 or q.shape[-1] != model.dof:
-        kind = "robot" if isinstance(model, Robot) else "chain"
+        kind = "robot" if hasattr(model, "frame_names") else "chain"
         raise ValueError(f"q: expected shape (..., {model.dof}) for a {model.dof}-joint {kind}, got {q.shape}")
     if q.dtype == jnp.float64 and any(is_concrete(x) and x.dtype == jnp.float32 for x in jax.tree.leaves(model)):
         warnings.warn(
@@ -54,12 +103,3 @@ def joint_values(model: Model, q) -> jax.Array:
             stacklevel=3,
         )
     return q
-
-
-def frames(
-    model: Model, q: list, frame: int | None = None, base: rg.Rigid = rg.IDENTITY, *, every: bool = False
-) -> rg.Frames:
-    """The forward pass of ``model`` (see the module docstring); ``frame``/``base``/``every`` are for robots."""
-    if isinstance(model, Robot):
-        return model._frames(q, 0 if frame is None else frame, base, every=every)
-    return model._frames(q)

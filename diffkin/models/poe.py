@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -9,9 +11,10 @@ import numpy as np
 from diffkin import _rigid as rg
 from diffkin._checks import instance
 from diffkin._pytree import pytree_dataclass, static
-from diffkin._xla import is_concrete
+from diffkin._static import host
 from diffkin.models import _validate as check
 from diffkin.models.dh import DHChain
+from diffkin.models.forward import ChainPass
 
 
 @pytree_dataclass
@@ -136,16 +139,15 @@ class PoEChain:
             name=name,
         )
 
-    def _frames(self, q: list[jax.Array]) -> rg.Frames:
-        """Forward pass over the joint values ``q`` (one array per joint, any batch shape)."""
-        S: np.ndarray | jax.Array
-        L: np.ndarray | jax.Array
-        if is_concrete(self.screws):
-            S = np.asarray(self.screws, dtype=np.float64)
-            L = np.asarray(self.link_homes, dtype=np.float64)
-        else:
-            S, L = self.screws, self.link_homes
-        T = rg.IDENTITY
+    @property
+    def actuated_types(self) -> str:
+        """``"R"``/``"P"`` of each entry of ``q`` (:attr:`joint_types`)."""
+        return self.joint_types
+
+    def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> ChainPass:
+        """The forward pass (:mod:`diffkin.models.forward`): the product of exponentials."""
+        S, L = host(self.screws), host(self.link_homes)
+        T = base
         links, screws = [T], []
         axes = [(rg.vector(S[i, :3]), rg.vector(S[i, 3:])) for i in range(self.dof)]
         exps = rg.screw_exps(axes, q)
@@ -156,7 +158,7 @@ class PoEChain:
             if rg.segment_end(i, self.dof):
                 T = rg.checkpoint(T)
             links.append(rg.compose(T, rg.from_matrix(L[i])))
-        return rg.Frames(links, rg.compose(T, rg.from_matrix(self.home)), screws)
+        return ChainPass(links, rg.compose(T, rg.from_matrix(self.home)), screws)
 
 
 def _screw_types(S: np.ndarray, tol: float) -> list[str]:
@@ -195,12 +197,12 @@ def to_poe(chain: DHChain) -> PoEChain:
     """
     instance(chain, DHChain, "chain", "a DHChain")
     dtype = jnp.result_type(chain.a)
-    frames = chain._frames([jnp.zeros((), dtype) for _ in range(chain.dof)])
-    screws = jnp.stack([rg.stack([*v, *w], (), dtype) for v, w in frames.screws])
+    at_zero = chain.forward([jnp.zeros((), dtype) for _ in range(chain.dof)])
+    screws = jnp.stack([rg.stack([*v, *w], (), dtype) for v, w in at_zero.columns()])
     return PoEChain(
         screws=screws,
-        home=rg.to_matrix(frames.ee, (), dtype),
-        link_homes=jnp.stack([rg.to_matrix(T, (), dtype) for T in frames.links[1:]]),
+        home=rg.to_matrix(at_zero.pose(), (), dtype),
+        link_homes=jnp.stack([rg.to_matrix(T, (), dtype) for T in at_zero.poses()[1:]]),
         lower=chain.lower,
         upper=chain.upper,
         joint_types=chain.joint_types,

@@ -27,7 +27,7 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
-from diffkin._xla import is_concrete
+from diffkin._static import host, is_concrete
 from diffkin.models import _validate as check
 from diffkin.models.poe import PoEChain, _screw_types
 
@@ -164,14 +164,14 @@ class Robot:
             body = self.parents[body - 1]
         return path[::-1]
 
-    def _bodies(self, q: list, base: rg.Rigid) -> tuple[list[rg.Rigid], list[tuple[rg.Vec3, rg.Vec3]]]:
-        """Forward pass: every body's pose in the world, and every joint's current screw (world frame).
+    def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> RobotPass:
+        """The forward pass (:mod:`diffkin.models.forward`): every body's pose and every joint's screw.
 
         Args:
             q: ``dof`` joint values (arrays of any batch shape, or Python floats).
             base: ``T_world_root``.
         """
-        P, S, m, o = (_host(x) for x in (self.joint_poses, self.screws, self.multipliers, self.offsets))
+        P, S, m, o = (host(x) for x in (self.joint_poses, self.screws, self.multipliers, self.offsets))
         m, o = rg.per_joint(m), rg.per_joint(o)
         axes = [(rg.vector(S[j, :3]), rg.vector(S[j, 3:])) for j in range(len(self.parents))]
         thetas = [rg.add(rg.mul(m[j], q[self.sources[j]]), o[j]) for j in range(len(self.parents))]
@@ -183,37 +183,7 @@ class Robot:
             w_world = rg.rotate(T.R, w)
             screws.append((rg.vadd(rg.rotate(T.R, v), rg.cross(T.p, w_world)), w_world))
             bodies.append(rg.compose(T, exps[j]))
-        return bodies, screws
-
-    def _frame(self, bodies: list[rg.Rigid], f: int) -> rg.Rigid:
-        """World pose of frame ``f`` from the body poses."""
-        return rg.compose(bodies[self.frame_bodies[f]], rg.from_matrix(_host(self.frame_poses)[f]))
-
-    def _frames(self, q: list, frame: int, base: rg.Rigid = rg.IDENTITY, *, every: bool = False) -> rg.Frames:
-        """One forward pass for frame ``frame``: its pose (``ee``) and the columns of its space Jacobian.
-
-        ``screws[i]`` is the space twist per unit ``q[i]``: the sum over the joints that ``q[i]``
-        drives between the root and the frame of ``multiplier * screw`` (zero if none).
-        ``links`` holds every frame (in :attr:`frame_names` order) if ``every``, else is empty.
-        """
-        bodies, screws = self._bodies(q, base)
-        links = [self._frame(bodies, f) for f in range(len(self.frame_names))] if every else []
-        return rg.Frames(links, self._frame(bodies, frame), self._columns(screws, frame))
-
-    def _columns(self, screws: list[tuple[rg.Vec3, rg.Vec3]], frame: int) -> list[tuple[rg.Vec3, rg.Vec3]]:
-        """Per entry of ``q``, the space twist of frame ``frame`` per unit ``q_i``, from the joints' screws.
-
-        The sum over the joints on the frame's path that ``q_i`` drives of ``multiplier * screw``
-        (zero if none): the columns of the frame's space Jacobian.
-        """
-        zero = (0.0, 0.0, 0.0)
-        columns: list = [(zero, zero)] * self.dof
-        m = rg.per_joint(_host(self.multipliers))
-        for j in self.ancestors(self.frame_bodies[frame]):
-            v, w = screws[j]
-            i = self.sources[j]
-            columns[i] = (rg.vadd(columns[i][0], rg.scale(m[j], v)), rg.vadd(columns[i][1], rg.scale(m[j], w)))
-        return columns
+        return RobotPass(self, bodies, screws, m)
 
     def chain(self, end: str, base: str | None = None) -> PoEChain:
         """The exact :class:`PoEChain` of the path from frame ``base`` (default the root) to frame ``end``.
@@ -277,9 +247,38 @@ class Robot:
         )
 
 
-def _host(x):
-    """A concrete model array as float64 numpy (so entries fold at trace time); a traced one as is."""
-    return np.asarray(x, dtype=np.float64) if is_concrete(x) else x
+class RobotPass:
+    """The :class:`~diffkin.models.forward.Pass` of a robot: body poses and joint screws, frames on demand."""
+
+    def __init__(self, robot: Robot, bodies: list[rg.Rigid], screws: list, multipliers: list):
+        self.robot, self.bodies, self.screws, self.multipliers = robot, bodies, screws, multipliers
+        self._poses: dict[int, rg.Rigid] = {}
+
+    def pose(self, frame: int | None = None) -> rg.Rigid:
+        """World pose of frame ``frame`` (an index into ``robot.frame_names``)."""
+        if frame is None:
+            raise TypeError("frame: a robot has no single end effector; give a frame index")
+        if frame not in self._poses:
+            T_body_frame = rg.from_matrix(host(self.robot.frame_poses)[frame])
+            self._poses[frame] = rg.compose(self.bodies[self.robot.frame_bodies[frame]], T_body_frame)
+        return self._poses[frame]
+
+    def columns(self, frame: int | None = None) -> list[tuple[rg.Vec3, rg.Vec3]]:
+        """Per entry of ``q``, the space twist of frame ``frame`` per unit ``q_i``: the sum over the joints
+        on the frame's path that ``q_i`` drives of ``multiplier * screw`` (zero if none)."""
+        if frame is None:
+            raise TypeError("frame: a robot has no single end effector; give a frame index")
+        robot, zero = self.robot, (0.0, 0.0, 0.0)
+        columns: list = [(zero, zero)] * robot.dof
+        for j in robot.ancestors(robot.frame_bodies[frame]):
+            v, w = self.screws[j]
+            i, m = robot.sources[j], self.multipliers[j]
+            columns[i] = (rg.vadd(columns[i][0], rg.scale(m, v)), rg.vadd(columns[i][1], rg.scale(m, w)))
+        return columns
+
+    def poses(self) -> list[rg.Rigid]:
+        """Every frame, in ``robot.frame_names`` order."""
+        return [self.pose(f) for f in range(len(self.robot.frame_names))]
 
 
 # --------------------------------------------------------------------------------------------- building

@@ -32,7 +32,6 @@ from diffkin import _rigid as rg
 from diffkin._checks import broadcast_batch, instance, pose_array, real_array, rigid_poses, sign_array
 from diffkin._trig import atan2, sincos
 from diffkin._xla import in_steps, materialize
-from diffkin.models import forward
 from diffkin.srs._arm import AN_ARM, SRSArm
 
 POSE_TOL = {False: 1e-4, True: 1e-9}
@@ -356,7 +355,7 @@ def _checked(arm: SRSArm, target, psi, gc, q: list) -> jax.Array:
     forward pass: no pose matrices are formed.
     """
     ok = jnp.all(jnp.abs(gc) == 1.0, axis=-1) & rigid_poses(target) & jnp.isfinite(psi)
-    ee = forward.frames(arm.chain(), q).ee
+    ee = arm.chain().forward(q).pose()
     errors = [jnp.abs(ee.R[i][j] - target[..., i, j]) for i in range(3) for j in range(3)]
     errors += [jnp.abs(ee.p[i] - target[..., i, 3]) for i in range(3)]
     err = functools.reduce(jnp.maximum, errors)

@@ -5,10 +5,9 @@ problems with that axis last. The state ``x`` is ``(n, P)``: the ``dof`` joint v
 a floating base is solved) the 12 entries of the root pose ``[p; R row by row]``. Seeds are drawn
 as ``(copies, targets, dof)`` and enter the flat layout in :func:`_run_from` only.
 
-A *problem* (:class:`diffkin.ik._problem.Problem` for a chain,
-:class:`diffkin.ik._targets.TreeProblem` for a robot) provides ``project(x)``,
-``retract(x, dx)``, ``evaluate(x) -> Eval``, ``residual(x) -> Entries`` (the same, not yet computed
-into arrays) and ``screen_cost(x)``. The search builds one with
+A *problem* (:class:`diffkin.ik._problem.Problem`) provides ``project(x)``, ``retract(x, dx)``,
+``evaluate(x) -> Eval``, ``residual(x) -> Entries`` (the same, not yet computed into arrays) and
+``screen_cost(x)``. The search builds one with
 ``build(idx, copies)`` for the targets ``idx``, each repeated ``copies`` times.
 """
 
@@ -31,8 +30,7 @@ GROUP = 4  # seeds per target in a round
 # iterations cheap).
 _CHUNK_DIV, _MIN_CHUNK = 32, 8
 _SCREEN = 8  # each random seed is the best (least screening cost) of this many uniform draws
-POLISH = 3  # LM: final rounds go on from the best seed so far and perturbations of it ...
-_JITTER = 0.05  # ... each a step of this fraction towards a random seed
+_JITTER = 0.05  # a polishing round's perturbations: each a step of this fraction towards a random seed
 
 
 class Seeds(NamedTuple):
@@ -199,7 +197,7 @@ def search(
         key: PRNG key of the random seeds.
         lower, upper: ``(dof,)`` limits the seeds are drawn within.
         first: ``(n, n_state)`` warm-start states (seed 0 of the first round), or ``None``.
-        method: the iteration (:class:`diffkin.ik._prepare.Method`).
+        method: the iteration (:class:`diffkin.ik._methods.Steps`).
         settings: seeds, iterations, polishing rounds and tolerances.
         moves: ``(dof, k)`` bool, which joints move which of ``k`` targets (several targets), or
             ``None``. Then the random seeds of later rounds keep the best state's joints that
