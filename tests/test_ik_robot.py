@@ -317,3 +317,38 @@ def test_panda_tree_with_mimic_finger_and_position_target():
     ok = np.asarray(res.success)
     pos, rot = _errors(got, T)
     assert np.all(pos[ok] <= POS_TOL + SLACK_POS) and np.all(rot[ok, 0] <= ROT_TOL + SLACK_ROT)
+
+
+def test_non_finite_locked_values_and_rest_are_rejected_or_fail(iiwa):
+    """A locked value is a hard constraint: NaN or inf is a ValueError on the host, success=False when traced;
+    a non-finite rest posture is rejected too (it was silently 0)."""
+    T = np.asarray(dk.fk(iiwa, np.zeros(7), "iiwa14_link_ee"))
+    for bad in (np.nan, np.inf):
+        with pytest.raises(ValueError, match=r"locked\['iiwa14_joint_1'\]: expected a finite joint value"):
+            dk.ik.solve(iiwa, {"iiwa14_link_ee": T}, locked={"iiwa14_joint_1": bad})
+        with pytest.raises(ValueError, match="rest: expected a finite rest configuration"):
+            dk.ik.solve(iiwa, {"iiwa14_link_ee": T}, rest=np.full(7, bad))
+    solve = jax.jit(lambda v: dk.ik.solve(iiwa, {"iiwa14_link_ee": T[None]}, locked={"iiwa14_joint_1": v}))
+    res = solve(jnp.asarray([np.nan]))
+    assert not np.any(np.asarray(res.success)) and np.all(np.isfinite(np.asarray(res.q)))
+    assert bool(solve(jnp.asarray([0.0])).success[0])
+
+
+def test_targets_of_different_dtypes_are_rejected(iiwa):
+    """A float32 pose beside a float64 one was cast to float64 and failed the float64 rigidity check:
+    nothing solved and no error."""
+    T = np.asarray(dk.fk(iiwa, np.zeros(7), ["iiwa14_link_4", "iiwa14_link_ee"]))
+    with pytest.raises(TypeError, match="every target needs one dtype"):
+        dk.ik.solve(iiwa, {"iiwa14_link_4": T[0].astype(np.float32), "iiwa14_link_ee": T[1]})
+
+
+def test_only_the_ratios_of_the_weights_matter(iiwa, iiwa_solve):
+    """Uniformly small weights (1e-5) solve what weights of 1 solve, to the bit: the weights are scaled so that
+    the largest is 1 (LM's damping floor is absolute; 1e-5 solved 0 of 64 reachable poses before)."""
+    T = jnp.asarray(_iiwa_targets(iiwa, 32, seed=9), jnp.float32)
+    small = {f: tuple(1e-5 * w for w in ws) for f, ws in FREE_Z.items()}
+    res = jax.jit(lambda t: dk.ik.solve(iiwa, {"iiwa14_link_ee": t}, weights=small, key=jax.random.key(2)))(T)
+    ref = iiwa_solve(T)
+    assert _rate(res.success) >= 0.99
+    assert np.array_equal(np.asarray(res.q), np.asarray(ref.q))
+    assert np.array_equal(np.asarray(res.success), np.asarray(ref.success))

@@ -83,6 +83,13 @@ def check_batched(value, name: str, tail: tuple[int, ...], batch: tuple[int, ...
         raise ValueError(f"{name}: batch shape {head} does not broadcast to the targets' {batch}")
 
 
+def finite(value, name: str, what: str) -> None:
+    """A concrete ``value`` has only finite entries (a traced one is checked inside the solver: success=False)."""
+    if is_concrete(value) and not np.all(np.isfinite(np.asarray(value))):
+        bad = np.argwhere(~np.isfinite(np.atleast_1d(np.asarray(value))))[0]
+        raise ValueError(f"{name}: expected {what}, got a non-finite value at index {tuple(int(i) for i in bad)}")
+
+
 def tolerance(value, dtype):
     """A checked tolerance as a solver argument of ``dtype``: a NumPy scalar when known (no device dispatch)."""
     return np.asarray(value, dtype) if is_concrete(value) else jnp.asarray(value, dtype)
@@ -135,6 +142,7 @@ def locked_joints(robot, locked, q0, batch) -> tuple[tuple[bool, ...], jax.Array
             if name in locked:
                 v = real_array(locked[name], f"locked[{name!r}]", "a joint value")
                 check_batched(v, f"locked[{name!r}]", (), batch, "(a value per target, or one)")
+                finite(v, f"locked[{name!r}]", "a finite joint value (a locked joint is a hard constraint)")
                 values.append(jnp.broadcast_to(v, batch))
             else:
                 values.append(jnp.zeros(batch))

@@ -4,6 +4,7 @@ its terms, locked joints, a root), and runs the one compiled solver of every pro
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Mapping
 from typing import Any, NamedTuple
@@ -168,11 +169,19 @@ def solve(
             raise ValueError("solve_base: only for a floating Robot")
         array, position_only, batch = _args.check_target(target)
         terms, arrays = (pose.PoseTarget(None, position_only),), [array]
+    dtypes = {jnp.dtype(a.dtype) for a in arrays}
+    if len(dtypes) > 1:
+        raise TypeError(
+            "target: every target needs one dtype (the solver and its tolerances follow it), "
+            f"got {sorted(map(str, dtypes))}"
+        )
     dtype = jnp.result_type(*arrays)
     what = f"for a {chain.dof}-joint {'robot' if is_robot else 'chain'}"
     for name, value in (("q0", q0), ("rest", rest)):
         if value is not None:
             _args.check_batched(value, name, (chain.dof,), batch, what)
+    if rest is not None:
+        _args.finite(rest, "rest", "a finite rest configuration")
     if base is not None:
         _args.check_target(base, "base")
         _args.check_batched(base, "base", (4, 4), batch, "(T_world_root)")
@@ -240,7 +249,13 @@ def _robot_terms(robot: Robot, targets, relative_targets, weights) -> tuple[tupl
             raise ValueError(f"target[{label}]: batch shape {b} differs from target[{found[0][2]}]'s {batch}")
         batch = b
     assert batch is not None
-    return tuple(t for t, _, _ in found), [a for _, a, _ in found], batch
+    # Only the weights' ratios matter: scaled so that the largest is 1 (LM's damping floor and stall
+    # test are absolute; weights of 1e-5 would otherwise stall every seed).
+    scale = max(max(t.weights[: 3 if t.position_only else 6]) for t, _, _ in found)
+    terms = tuple(
+        t if scale == 1.0 else dataclasses.replace(t, weights=tuple(w / scale for w in t.weights)) for t, _, _ in found
+    )
+    return terms, [a for _, a, _ in found], batch
 
 
 def _moves(model, terms: tuple) -> np.ndarray:
@@ -309,6 +324,10 @@ def _solve(
     q0_flat = _flat(q0, batch, (dof,), n, dtype)
     rest_flat = _flat(rest, batch, (dof,), n, dtype)
     locked_flat = _flat(locked_q, batch, (dof,), n, dtype)
+    for given in (rest, None if locked_q is None else jnp.where(jnp.asarray(spec.locked), locked_q, 0.0)):
+        if given is not None:  # traced non-finite values (the host rejects concrete ones): no success
+            finite = jnp.all(jnp.isfinite(jnp.broadcast_to(given, batch + (dof,)).reshape(n, dof)), axis=-1)
+            valid = valid & finite
     base_in, base_ok = None, None
     if base is not None or spec.solve_base:
         eye = jnp.eye(4, dtype=dtype)

@@ -177,12 +177,17 @@ class Robot:
         thetas = [rg.add(rg.mul(m[j], q[self.sources[j]]), o[j]) for j in range(len(self.parents))]
         exps = rg.screw_exps(axes, thetas)
         bodies, screws = [base], []
+        depth, inner = [0], {parent for parent in self.parents}  # joints from the root; bodies with children
         for j, parent in enumerate(self.parents):
             T = rg.compose(bodies[parent], rg.from_matrix(P[j]))
             v, w = axes[j]
             w_world = rg.rotate(T.R, w)
             screws.append((rg.vadd(rg.rotate(T.R, v), rg.cross(T.p, w_world)), w_world))
-            bodies.append(rg.compose(T, exps[j]))
+            T = rg.compose(T, exps[j])
+            depth.append(depth[parent] + 1)
+            if depth[-1] % rg.SEGMENT == 0 and j + 1 in inner:  # a long serial path: see rg.segment_end
+                T = rg.checkpoint(T)
+            bodies.append(T)
         return RobotPass(self, bodies, screws, m)
 
     def chain(self, end: str, base: str | None = None) -> PoEChain:
