@@ -169,13 +169,13 @@ def solve(
             raise ValueError("solve_base: only for a floating Robot")
         array, position_only, batch = _args.check_target(target)
         terms, arrays = (pose.PoseTarget(None, position_only),), [array]
-    dtypes = {jnp.dtype(a.dtype) for a in arrays}
+    dtypes = {a.dtype for a in arrays}
     if len(dtypes) > 1:
         raise TypeError(
             "target: every target needs one dtype (the solver and its tolerances follow it), "
             f"got {sorted(map(str, dtypes))}"
         )
-    dtype = jnp.result_type(*arrays)
+    dtype = arrays[0].dtype
     what = f"for a {chain.dof}-joint {'robot' if is_robot else 'chain'}"
     for name, value in (("q0", q0), ("rest", rest)):
         if value is not None:
@@ -209,7 +209,7 @@ def solve(
     as_dtype = lambda x: None if x is None else jnp.asarray(x, dtype)  # noqa: E731
     return automatic_axes(_solve, arrays[0], len(batch))(
         traced,
-        tuple(jnp.asarray(a, dtype) for a in arrays),
+        tuple(arrays),
         _args.default_key() if key is None else key,
         as_dtype(q0),
         as_dtype(rest),
