@@ -10,13 +10,15 @@ they are concrete: under ``jit``/``vmap``/``grad`` only the shapes are checked a
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypeVar
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from diffkin._pytree import pytree_dataclass
+
+T = TypeVar("T")
 
 
 def _tolerance(value) -> float:
@@ -166,6 +168,15 @@ class Plane:
             if np.any(err > _tolerance(self.normal)):
                 bad = tuple(int(i) for i in np.argwhere(err > _tolerance(self.normal))[0])
                 raise ValueError(f"Plane.normal: expected unit vectors, got norm {1 + err[bad]:.6g} at index {bad}")
+
+
+def unchecked(cls: type[T], **fields) -> T:
+    """A shape of derived values (e.g. moved by a pose), built without the constructor's checks:
+    they already hold, and a host check of every batch entry at every call would cost time."""
+    obj = object.__new__(cls)
+    for name, value in fields.items():
+        object.__setattr__(obj, name, value)
+    return obj
 
 
 Shape = Sphere | Capsule | Box | Plane
