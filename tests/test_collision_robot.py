@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import diffkin as dk
-from diffkin.collision import Box, Capsule, Plane, Sphere, World
+from diffkin.collision import Box, Plane, Sphere, World
 
 URDF = """<robot name="toy">
   <link name="base"><collision><geometry><box size="0.4 0.4 0.1"/></geometry></collision></link>
@@ -53,7 +53,7 @@ def test_urdf_shapes_and_pairs(toy):
     srdf = dk.collision.load(URDF, robot, srdf=SRDF)
     assert [geom.shape_names[i] for i in srdf.pairs.ravel()] == ["lower_0", "base_0"]
     # the cylinder's capsule contains it, and the overhead is reported for its link
-    (name, source, volume, fitted), = geom.fits
+    ((name, source, volume, fitted),) = geom.fits
     assert (name, source) == ("upper_0", "cylinder") and fitted >= volume
     assert set(geom.volume_overhead()) == {"upper"}
 
@@ -66,7 +66,9 @@ def test_distances_closed_form(toy):
     hand = dict(zip(map(tuple, geom.pairs), d, strict=True))[(1, 4)]
     # hand centre: elbow (0.55) - 0.4 = 0.15; box top at 0.05; sphere radius 0.06
     np.testing.assert_allclose(hand, 0.15 - 0.05 - 0.06, atol=1e-12)
-    world = World(Plane(jnp.array([0.0, 0, 1]), -1.0), Sphere(jnp.array([[0.0, 0, 2], [5, 5, 5]]), jnp.array([0.1, 0.1])))
+    world = World(
+        Plane(jnp.array([0.0, 0, 1]), -1.0), Sphere(jnp.array([[0.0, 0, 2], [5, 5, 5]]), jnp.array([0.1, 0.1]))
+    )
     w = jax.jit(dk.collision.world_distances)(robot, geom, q, world)
     assert w.shape == (5, 3) and world.size == 3
     # obstacles by kind: the two spheres, then the half-space
@@ -81,14 +83,14 @@ def test_batches_base_jit_and_gradients(toy):
     robot, geom = toy
     q = jnp.asarray(np.random.default_rng(0).uniform(-3, 3, (6, 2)))
     world = World(Box(jnp.eye(4).at[2, 3].set(-1.0), jnp.ones(3)))
-    w = jax.jit(dk.collision.world_distances)(robot, geom, q, world)
+    w = jax.jit(lambda q: dk.collision.world_distances(robot, geom, q, world))(q)
     assert w.shape == (6, 5, 1)
     up = jnp.eye(4).at[2, 3].set(0.3)
     np.testing.assert_allclose(dk.collision.world_distances(robot, geom, q, world, base=up), w + 0.3, atol=1e-12)
     assert dk.collision.self_distances(robot, geom, q[0], base=jnp.stack([up, up])).shape == (2, 2)
-    g = jax.grad(lambda q: dk.collision.clearance(robot, geom, q, world))(q[0])
+    g = jax.jit(jax.grad(lambda q: dk.collision.clearance(robot, geom, q, world)))(q[0])
     assert np.all(np.isfinite(g))
-    g32 = jax.grad(lambda q: dk.collision.clearance(robot, geom, q, world).sum())(q.astype(jnp.float32))
+    g32 = jax.jit(jax.grad(lambda q: dk.collision.clearance(robot, geom, q, world).sum()))(q.astype(jnp.float32))
     assert np.all(np.isfinite(g32))
 
 
@@ -232,7 +234,9 @@ def test_humanoids_against_mujoco(model):
     ours = {tuple(sorted((names[i], names[j]))) for i, j in geom.pairs}
     assert ours == _mujoco_pairs(m, mujoco)
     q, base, qpos = _mujoco_configs(robot, m, mujoco, 200, seed=3)
-    d = np.asarray(jax.jit(dk.collision.self_distances)(robot, geom, q, base))
+    # robot and geometry closed over: their numbers fold into the program (a traced 56-joint robot's
+    # forward pass compiles ~15x slower)
+    d = np.asarray(jax.jit(lambda q, base: dk.collision.self_distances(robot, geom, q, base))(q, base))
     fitted = {name for name, *_ in geom.fits}
     ref = np.empty_like(d)
     ids = [(m.geom(names[i]).id, m.geom(names[j]).id) for i, j in geom.pairs]
@@ -244,3 +248,127 @@ def test_humanoids_against_mujoco(model):
     assert exact.sum() > 50 and np.mean(ref[:, exact] < 0) > 0.001
     np.testing.assert_allclose(d[:, exact], ref[:, exact], rtol=0, atol=1e-9)
     assert np.all(d[:, ~exact] <= ref[:, ~exact] + 1e-9)
+
+
+# -------------------------------------------------------------------------------- against Pinocchio, coal
+
+
+def _erd(*parts: str) -> str:
+    from test_robot import ERD
+
+    path = os.path.join(ERD, *parts) if ERD else ""
+    if not os.path.isfile(path):
+        pytest.skip(f"example-robot-data lacks {parts}")
+    return path
+
+
+@pytest.mark.slow
+def test_primitive_urdf_against_pinocchio():
+    """panda_collision.urdf (spheres, cylinders, meshes): every self pair of two exact shapes against
+    pin.computeDistances to 1e-9 at 50 configurations; pairs with a fitted shape never farther."""
+    pin = pytest.importorskip("pinocchio")
+    path = _erd("panda_description", "urdf", "panda_collision.urdf")
+    share = os.path.abspath(os.path.join(path, *[".."] * 5))  # the folder holding example-robot-data/
+    model = pin.buildModelFromUrdf(path)
+    cmodel = pin.buildGeomFromUrdf(model, path, pin.GeometryType.COLLISION, package_dirs=[share])
+    robot = dk.load_robot(path)
+    geom = dk.collision.load(path, robot)
+    names = [g.name for g in cmodel.geometryObjects]
+    ids = [names.index(n) for n in geom.shape_names]
+    for i, j in geom.pairs:
+        cmodel.addCollisionPair(pin.CollisionPair(ids[i], ids[j]))
+    data, cdata = model.createData(), pin.GeometryData(cmodel)
+    rng = np.random.default_rng(5)
+    lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
+    q = rng.uniform(lo, hi, (50, robot.dof))
+    d = np.asarray(jax.jit(lambda q: dk.collision.self_distances(robot, geom, q))(q))
+    ref = np.empty_like(d)
+    for k in range(len(q)):
+        qp = pin.neutral(model)
+        for n, name in enumerate(robot.joint_names):
+            qp[model.joints[model.getJointId(name)].idx_q] = q[k, n]
+        for name, (source, multiplier, offset) in robot.mimic.items():  # pinocchio: an independent joint
+            qp[model.joints[model.getJointId(name)].idx_q] = multiplier * q[k, robot.joint_names.index(source)] + offset
+        pin.computeDistances(model, data, cmodel, cdata, qp)
+        ref[k] = [r.min_distance for r in cdata.distanceResults]
+    fitted = {name for name, *_ in geom.fits}
+    exact = np.array([geom.shape_names[i] not in fitted and geom.shape_names[j] not in fitted for i, j in geom.pairs])
+    assert exact.sum() >= 20
+    np.testing.assert_allclose(d[:, exact], ref[:, exact], rtol=0, atol=1e-9)
+    assert np.all(d[:, ~exact] <= ref[:, ~exact] + 1e-9)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "parts", [("panda_description", "urdf", "panda.urdf"), ("ur_description", "urdf", "ur5_robot.urdf")]
+)
+def test_mesh_fits_contain_every_vertex(parts):
+    """Every vertex of every collision mesh is inside its capsule; where coal finds the real meshes
+    of a self pair in collision, diffkin's distance is not positive (100 configurations)."""
+    trimesh = pytest.importorskip("trimesh")
+    coal = pytest.importorskip("coal")
+    from diffkin._meshfiles import resolve_mesh
+    from diffkin.collision import _sources
+
+    path = _erd(*parts)
+    robot = dk.load_robot(path)
+    geom = dk.collision.load(path, robot)
+    import xml.etree.ElementTree as ET
+
+    meshes = {}
+    for link in ET.parse(path).getroot().findall("link"):
+        for k, c in enumerate(link.findall("collision")):
+            mesh = c.find("geometry/mesh")
+            if mesh is not None:
+                T = np.eye(4)
+                origin = c.find("origin")
+                if origin is not None:
+                    T[:3, :3] = _sources._rpy(np.array([float(x) for x in origin.get("rpy", "0 0 0").split()]))
+                    T[:3, 3] = [float(x) for x in origin.get("xyz", "0 0 0").split()]
+                v = trimesh.load(resolve_mesh(mesh.get("filename"), os.path.dirname(path)), force="mesh")
+                meshes[f"{link.get('name')}_{k}"] = (np.asarray(v.vertices) @ T[:3, :3].T + T[:3, 3], v)
+    assert len(meshes) >= 6
+    ns = geom.counts[0]
+    for name, (vertices, _) in meshes.items():
+        i = geom.shape_names.index(name) - ns
+        a, b, r = (np.asarray(x[i]) for x in (geom.capsules.a, geom.capsules.b, geom.capsules.radius))
+        t = np.clip((vertices - a) @ (b - a) / max((b - a) @ (b - a), 1e-300), 0, 1)
+        outside = np.linalg.norm(vertices - a - t[:, None] * (b - a), axis=1) - r
+        assert np.all(outside <= 0), (name, outside.max())
+    overhead = geom.volume_overhead()
+    assert all(v >= 0 for v in overhead.values())
+    # coal on the real meshes: in collision means diffkin is not separated
+    rng = np.random.default_rng(9)
+    lo = np.where(np.isfinite(robot.lower), robot.lower, -np.pi)
+    hi = np.where(np.isfinite(robot.upper), robot.upper, np.pi)
+    q = rng.uniform(lo, hi, (100, robot.dof))
+    d = np.asarray(jax.jit(lambda q: dk.collision.self_distances(robot, geom, q))(q))
+    T = np.asarray(jax.jit(lambda q: dk.link_poses(robot, q))(q))
+    bvh = {}
+    for name, (vertices, mesh) in meshes.items():
+        model = coal.BVHModelOBBRSS()
+        model.beginModel(len(mesh.faces), len(vertices))
+        model.addVertices(np.ascontiguousarray(vertices))
+        model.addTriangles(np.asarray(mesh.faces, dtype=np.int64))
+        model.endModel()
+        bvh[name] = model
+    colliding = 0
+    for p, (i, j) in enumerate(geom.pairs):
+        ni, nj = geom.shape_names[i], geom.shape_names[j]
+        if ni not in bvh or nj not in bvh:
+            continue
+        for k in range(len(q)):
+            Ti, Tj = T[k, geom.shape_frames[i]], T[k, geom.shape_frames[j]]
+            result = coal.CollisionResult()
+            coal.collide(
+                bvh[ni],
+                coal.Transform3s(Ti[:3, :3], Ti[:3, 3]),
+                bvh[nj],
+                coal.Transform3s(Tj[:3, :3], Tj[:3, 3]),
+                coal.CollisionRequest(),
+                result,
+            )
+            if result.isCollision():
+                colliding += 1
+                assert d[k, p] <= 0, (ni, nj, k, d[k, p])
+    assert colliding > 0

@@ -129,7 +129,7 @@ def box_box(a: Box, b: Box) -> jax.Array:
     return jnp.where(sat > 0, apart, sat)
 
 
-_TABLE: dict[tuple[type, type], Callable[[Any, Any], jax.Array]] = {
+_PAIRS: dict[tuple[type, type], Callable[[Any, Any], jax.Array]] = {
     (Sphere, Sphere): sphere_sphere,
     (Sphere, Capsule): sphere_capsule,
     (Sphere, Box): sphere_box,
@@ -141,6 +141,11 @@ _TABLE: dict[tuple[type, type], Callable[[Any, Any], jax.Array]] = {
     (Box, Plane): box_plane,
     (Plane, Plane): plane_plane,
 }
+
+#: Each pair function compiled once per shape and dtype (``jax.jit``; inlined when the caller is
+#: itself jitted). Measured (2 shared cores, float64, 6 configurations of a 5-shape robot against a
+#: box): ``jax.grad`` of :func:`diffkin.collision.clearance` outside ``jit`` took 32 s op by op.
+_TABLE = {kinds: jax.jit(fn) for kinds, fn in _PAIRS.items()}
 
 
 def distance(shape_a, shape_b) -> jax.Array:

@@ -11,6 +11,7 @@ Bodies are the robot's moving bodies (fixed links merged onto the body they are 
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable
@@ -83,7 +84,9 @@ class Geometry:
 
     def replace_pairs(self, pairs: Iterable[tuple[int, int]]) -> Geometry:
         """A copy with other self-collision pairs (e.g. after :func:`diffkin.collision.sample_pairs`)."""
-        return self.replace(pair_list=tuple(sorted((min(int(i), int(j)), max(int(i), int(j))) for i, j in pairs)))
+        return dataclasses.replace(
+            self, pair_list=tuple(sorted((min(int(i), int(j)), max(int(i), int(j))) for i, j in pairs))
+        )
 
 
 def _stack(specs: list[_sources.Spec], kind: str, dtype):
@@ -159,7 +162,7 @@ def load(source, robot: Robot, *, meshes: str = "capsules", srdf=None, dtype=Non
     specs = [specs[i] for i in order]
     frames = [robot.frame_index(s.frame) for s in specs]
     bodies = [robot.frame_bodies[f] for f in frames]
-    body_names = {}
+    body_names: dict[int, str] = {}
     for name, b in zip(robot.frame_names, robot.frame_bodies, strict=True):
         body_names.setdefault(b, name)
     parent = _parent_bodies(robot)
@@ -209,8 +212,9 @@ def placed(robot: Robot, geom: Geometry, q, base=None) -> tuple[Sphere, Capsule,
         return jnp.einsum("...ij,...j->...i", T[..., :3, :3], p) + T[..., :3, 3]
 
     s, c, b = geom.spheres, geom.capsules, geom.boxes
+    moved = (move(Ts, s.center), move(Tc, c.a), move(Tc, c.b), Tb @ b.pose)
     return (
-        unchecked(Sphere, center=move(Ts, s.center), radius=s.radius),
-        unchecked(Capsule, a=move(Tc, c.a), b=move(Tc, c.b), radius=c.radius),
-        unchecked(Box, pose=Tb @ b.pose, half_extents=b.half_extents),
+        unchecked(Sphere, center=moved[0], radius=s.radius),
+        unchecked(Capsule, a=moved[1], b=moved[2], radius=c.radius),
+        unchecked(Box, pose=moved[3], half_extents=b.half_extents),
     )

@@ -130,8 +130,8 @@ def self_distances(robot: Robot, geom: Geometry, q, base=None) -> jax.Array:
     pieces, order = [], []
     for ka in range(3):
         for kb in range(ka, 3):
-            rows = np.flatnonzero((kind_of[pairs[:, 0]] == ka) & (kind_of[pairs[:, 1]] == kb)) if len(pairs) else []
-            if len(rows) == 0:
+            rows = np.flatnonzero((kind_of[pairs[:, 0]] == ka) & (kind_of[pairs[:, 1]] == kb)) if len(pairs) else None
+            if rows is None or len(rows) == 0:
                 continue
             ia, ib = pairs[rows, 0] - starts[ka], pairs[rows, 1] - starts[kb]
             pick = lambda s, idx: _map(s, lambda v, r, idx=idx: jnp.take(v, idx, axis=jnp.ndim(v) - r - 1))  # noqa: E731
@@ -161,7 +161,7 @@ def world_distances(robot: Robot, geom: Geometry, q, world: World, base=None) ->
     if not isinstance(world, World):
         raise TypeError(f"world: expected a diffkin.collision.World, got {type(world).__name__}")
     shapes = placed(robot, geom, q, base)
-    rows = []
+    rows: list[jax.Array] = []
     for shape in shapes:
         expanded = _map(shape, lambda v, r: jnp.expand_dims(v, jnp.ndim(v) - r))  # (..., n_kind, 1, ...)
         cols = [distance(expanded, obstacle) for obstacle in world.kinds()]

@@ -282,7 +282,7 @@ def mjcf_specs(root: ET.Element, path: str | None) -> tuple[list[Spec], set[froz
             T[:3, :3] = reader._rotation(el, cls)
             T[:3, 3] = _numbers(None, "pos", 3, reader._get(el, "pos", cls, "0 0 0") or "0 0 0", where)
         T = T_body_container @ T
-        kw = {"contype": contype, "conaffinity": conaffinity, "body": body}
+        kw: dict = {"contype": contype, "conaffinity": conaffinity, "body": body}
         if kind == "mesh":
             mesh_name = reader._get(el, "mesh", cls) or ""
             if mesh_name not in meshes:
