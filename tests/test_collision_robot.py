@@ -94,6 +94,32 @@ def test_batches_base_jit_and_gradients(toy):
     assert np.all(np.isfinite(g32))
 
 
+def test_large_batches_go_in_steps(toy, monkeypatch):
+    """Above twice the step, the batch goes through in fixed-size steps (the last overlapping): same values,
+    a floating base included, and gradients through the steps."""
+    from diffkin.collision import _robot
+
+    robot, geom = toy
+    rng = np.random.default_rng(3)
+    q = jnp.asarray(rng.uniform(-3, 3, (5, 7, 2)))
+    base = jnp.tile(jnp.eye(4), (7, 1, 1)).at[:, :3, 3].set(jnp.asarray(rng.uniform(-0.2, 0.2, (7, 3))))
+    world = World(Box(jnp.eye(4).at[2, 3].set(-1.0), jnp.ones(3)), Sphere(jnp.array([0.3, 0, 0.5]), 0.1))
+    whole = (
+        dk.collision.self_distances(robot, geom, q, base),
+        dk.collision.world_distances(robot, geom, q, world, base),
+    )
+    monkeypatch.setattr(_robot, "STEP", 4)
+    stepped = (
+        dk.collision.self_distances(robot, geom, q, base),
+        dk.collision.world_distances(robot, geom, q, world, base),
+    )
+    for a, b in zip(whole, stepped, strict=True):
+        assert a.shape == b.shape
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-14)
+    g = jax.grad(lambda q: dk.collision.clearance(robot, geom, q, world).sum())(q)
+    assert g.shape == q.shape and np.all(np.isfinite(g))
+
+
 def test_bad_input():
     robot = dk.load_robot(URDF)
     with pytest.raises(ValueError, match="meshes"):
