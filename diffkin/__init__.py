@@ -1,7 +1,7 @@
 """diffkin: differentiable robot kinematics in JAX.
 
 The public names of the API contract: models, forward kinematics, Jacobians, and the
-``robots``, ``ik``, ``se3``, ``srs`` and ``workspace`` modules. They are imported on first use
+``robots``, ``ik``, ``se3``, ``srs``, ``workspace`` and ``collision`` modules. They are imported on first use
 (``dk.fk``, ``from diffkin import fk``), so that ``import diffkin`` alone does not import JAX and
 the ``diffkin`` command answers ``--help`` and usage errors at once.
 """
@@ -12,11 +12,12 @@ import importlib
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
-    from diffkin import ik, robots, se3, srs, workspace
+    from diffkin import collision, ik, robots, se3, srs, workspace
     from diffkin.kinematics import fk, jacobian, link_poses, manipulability
     from diffkin.models import DHChain, PoEChain, Robot, load_robot, load_urdf, to_poe
 
 _HOMES = {
+    "collision": None,
     "ik": None,
     "robots": None,
     "se3": None,
@@ -45,6 +46,7 @@ __all__ = [
     "load_robot",
     "load_urdf",
     "manipulability",
+    "collision",
     "ik",
     "robots",
     "se3",

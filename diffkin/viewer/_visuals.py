@@ -1,9 +1,8 @@
 """Visual geometry of robot description files: URDF ``<visual>`` and MJCF ``<geom>`` elements.
 
 Reads, per frame (URDF link or MJCF body), the shapes to draw with their pose in that frame, and
-loads mesh files through trimesh. ``package://NAME/rest`` is resolved by looking for a folder
-``NAME`` next to the file and in each of its parent folders (also under ``share/``), relative
-paths relative to the file. Nothing here is differentiable: it only feeds the viewer.
+loads mesh files through trimesh (paths resolved by :func:`diffkin._meshfiles.resolve_mesh`).
+Nothing here is differentiable: it only feeds the viewer.
 """
 
 from __future__ import annotations
@@ -13,6 +12,8 @@ import os
 import xml.etree.ElementTree as ET
 
 import numpy as np
+
+from diffkin._meshfiles import resolve_mesh
 
 DEFAULT_RGBA = (0.72, 0.74, 0.78, 1.0)
 
@@ -77,37 +78,6 @@ def _pose(R: np.ndarray, p: np.ndarray) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, p
     return T
-
-
-def resolve_mesh(filename: str, base_dir: str | None) -> str | None:
-    """The file a URDF/MJCF mesh reference points to, or ``None`` if it is not found.
-
-    Args:
-        filename: ``package://NAME/rest``, ``file://path``, an absolute path or a path relative
-            to ``base_dir``.
-        base_dir: folder of the description file (``None`` for XML given as text: only absolute
-            paths resolve).
-    """
-    if filename.startswith("file://"):
-        filename = filename[len("file://") :]
-    if filename.startswith("package://"):
-        package, _, rest = filename[len("package://") :].partition("/")
-        folder = base_dir
-        while folder:
-            for candidate in (os.path.join(folder, package), os.path.join(folder, "share", package)):
-                if os.path.isfile(os.path.join(candidate, rest)):
-                    return os.path.join(candidate, rest)
-            if os.path.basename(folder) == package and os.path.isfile(os.path.join(folder, rest)):
-                return os.path.join(folder, rest)
-            parent = os.path.dirname(folder)
-            folder = parent if parent != folder else None
-        return None
-    if os.path.isabs(filename):
-        return filename if os.path.isfile(filename) else None
-    if base_dir is None:
-        return None
-    path = os.path.join(base_dir, filename)
-    return path if os.path.isfile(path) else None
 
 
 def urdf_visuals(root: ET.Element, base_dir: str | None) -> list[Visual]:

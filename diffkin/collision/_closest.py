@@ -1,0 +1,115 @@
+"""Closest-point geometry, written batched: vectors are ``(..., 3)`` arrays with broadcasting leading axes.
+
+Everything here is finite with finite derivatives for every input, degenerate ones included
+(coincident points, zero-length segments, parallel segments, points on a box face): divisions and
+square roots go through :func:`safe_div` and :func:`norm`, whose unused branch never sees a zero.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+
+def dot(u: jax.Array, v: jax.Array) -> jax.Array:
+    """``(...,)`` dot product over the last axis."""
+    return jnp.sum(u * v, axis=-1)
+
+
+def cross(u: jax.Array, v: jax.Array) -> jax.Array:
+    return jnp.cross(u, v)
+
+
+def norm(v: jax.Array) -> jax.Array:
+    """``(...,)`` Euclidean norm over the last axis; its derivative at ``v = 0`` is zero (not NaN)."""
+    sq = dot(v, v)
+    positive = sq > 0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, sq, 1)), 0)
+
+
+def safe_div(num: jax.Array, den: jax.Array, default: float = 0.0) -> jax.Array:
+    """``num / den`` where ``den > 0``, else ``default`` (derivatives finite)."""
+    ok = den > 0
+    return jnp.where(ok, num / jnp.where(ok, den, 1), default)
+
+
+def point_segment(p: jax.Array, a: jax.Array, b: jax.Array) -> jax.Array:
+    """``(...,)`` distance from the points ``p`` to the segments ``a``-``b`` (a point if ``a == b``)."""
+    d = b - a
+    t = jnp.clip(safe_div(dot(p - a, d), dot(d, d)), 0, 1)
+    return norm(p - a - t[..., None] * d)
+
+
+def segment_segment(p1: jax.Array, q1: jax.Array, p2: jax.Array, q2: jax.Array) -> jax.Array:
+    """``(...,)`` distance between the segments ``p1``-``q1`` and ``p2``-``q2``.
+
+    The closest parameters ``s`` (on the first) and ``t`` (on the second) of the clamped
+    least-squares problem (Ericson, *Real-Time Collision Detection*, 5.1.9): ``s`` from the
+    unconstrained optimum clamped to ``[0, 1]``, ``t`` as the optimum for that ``s``; if ``t`` leaves
+    ``[0, 1]`` it is clamped and ``s`` recomputed. Parallel segments (``a e - b^2 = 0``) take
+    ``s = 0``; zero-length segments are points. The distance is exact: every branch ends at a
+    closest pair.
+    """
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a, e, f = dot(d1, d1), dot(d2, d2), dot(d2, r)
+    c, b = dot(d1, r), dot(d1, d2)
+    denom = a * e - b * b
+    s = jnp.clip(safe_div(b * f - c * e, denom), 0, 1)
+    s = jnp.where(e > 0, s, jnp.clip(safe_div(-c, a), 0, 1))  # second segment a point
+    t = safe_div(b * s + f, e)
+    s_low = jnp.clip(safe_div(-c, a), 0, 1)  # t clamped to 0
+    s_high = jnp.clip(safe_div(b - c, a), 0, 1)  # t clamped to 1
+    s = jnp.where(t < 0, s_low, jnp.where(t > 1, s_high, s))
+    t = jnp.clip(t, 0, 1)
+    return norm(r + s[..., None] * d1 - t[..., None] * d2)
+
+
+def point_box(p: jax.Array, h: jax.Array) -> jax.Array:
+    """``(...,)`` signed distance from the points ``p`` (in the box frame) to the boxes of half extents ``h``.
+
+    Outside: the Euclidean distance; inside: minus the distance to the nearest face.
+    """
+    q = jnp.abs(p) - h
+    return norm(jnp.maximum(q, 0)) + jnp.minimum(jnp.max(q, axis=-1), 0)
+
+
+def box_vertices(h: jax.Array) -> jax.Array:
+    """``(..., 8, 3)`` corners of boxes of half extents ``h (..., 3)`` in their own frame."""
+    signs = jnp.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=h.dtype)
+    return signs * h[..., None, :]
+
+
+def box_edges(h: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """``(..., 12, 3)`` start and end points of the 12 edges of boxes of half extents ``h (..., 3)``."""
+    starts, ends = [], []
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        for sj in (-1, 1):
+            for sk in (-1, 1):
+                lo, hi = [0.0] * 3, [0.0] * 3
+                lo[i], hi[i] = -1.0, 1.0
+                lo[j] = hi[j] = float(sj)
+                lo[k] = hi[k] = float(sk)
+                starts.append(lo)
+                ends.append(hi)
+    return jnp.array(starts, h.dtype) * h[..., None, :], jnp.array(ends, h.dtype) * h[..., None, :]
+
+
+def unit_axes(c: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """``c / |c|`` over the last axis and a mask of the axes in use (``|c|`` not vanishingly small)."""
+    sq = dot(c, c)
+    ok = sq > jnp.sqrt(jnp.finfo(c.dtype).tiny)
+    return c / jnp.sqrt(jnp.where(ok, sq, 1))[..., None], ok
+
+
+def separation(axes: jax.Array, ok: jax.Array, center: jax.Array, radius_of) -> jax.Array:
+    """``(...,)`` the largest separation along candidate axes of two convex sets (``-inf`` if none in use).
+
+    Args:
+        axes: ``(..., K, 3)`` unit axes; ``ok (..., K)`` which are in use.
+        center: ``(..., 3)`` offset between the sets' centres (both centrally symmetric).
+        radius_of: function of ``axes`` giving ``(..., K)``: the sum of the sets' support radii
+            along each axis (half widths of their projections).
+    """
+    sep = jnp.abs(jnp.sum(axes * center[..., None, :], axis=-1)) - radius_of(axes)
+    return jnp.max(jnp.where(ok, sep, -jnp.inf), axis=-1)

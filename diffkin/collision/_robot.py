@@ -1,0 +1,224 @@
+"""Distances of a robot: its shapes against each other (self) and against a :class:`World` of obstacles."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffkin._xla import in_steps
+from diffkin.collision._distance import distance
+from diffkin.collision._geometry import KINDS, Geometry, placed
+from diffkin.collision._shapes import SHAPES, Box, Capsule, Plane, Sphere, unchecked
+from diffkin.models.robot import Robot
+
+#: trailing rank of every shape field (its own axes after the batch axes)
+_TRAILING = {"center": 1, "radius": 0, "a": 1, "b": 1, "pose": 2, "half_extents": 1, "normal": 1, "offset": 0}
+_ORDER = (Sphere, Capsule, Box, Plane)
+
+#: Batches larger than this go through :func:`diffkin._xla.in_steps`, ``STEP`` configurations at a
+#: time: the memory then stays bounded whatever the batch (at 100,000 Panda configurations the
+#: unstepped world distances asked for a 52 GB buffer), and each step's intermediates stay in cache.
+STEP = 1024
+
+
+def _fields(shape) -> dict[str, jax.Array]:
+    return {name: getattr(shape, name) for name in _TRAILING if hasattr(shape, name)}
+
+
+def _batch_shape(shape) -> tuple[int, ...]:
+    return jnp.broadcast_shapes(*(jnp.shape(v)[: jnp.ndim(v) - _TRAILING[k]] for k, v in _fields(shape).items()))
+
+
+def _map(shape, fn):
+    """A shape of the same kind with ``fn(value, trailing_rank)`` applied to every field (unchecked)."""
+    return unchecked(type(shape), **{k: fn(v, _TRAILING[k]) for k, v in _fields(shape).items()})
+
+
+@jax.tree_util.register_pytree_node_class
+class World:
+    """Obstacles: every shape given, stacked per kind (spheres, capsules, boxes, half-spaces, in that order).
+
+    ``World(*shapes)``: each argument a :class:`Sphere`, :class:`Capsule`, :class:`Box` or
+    :class:`Plane` of any batch shape (flattened: a ``(4, 2)`` batch of boxes is 8 obstacles).
+    A world is a pytree of fixed shapes, so one compiled function serves any obstacles of the same
+    counts: to change the number of obstacles without recompiling, pad with far-away shapes.
+
+    Attributes:
+        spheres, capsules, boxes, planes: each kind stacked, batch axis ``(n_kind,)`` (possibly 0).
+    """
+
+    def __init__(self, *shapes):
+        groups: dict[type, list] = {cls: [] for cls in _ORDER}
+        for i, shape in enumerate(shapes):
+            if not isinstance(shape, SHAPES):
+                raise TypeError(
+                    f"World: argument {i}: expected a Sphere, Capsule, Box or Plane, got {type(shape).__name__}"
+                )
+            batch = _batch_shape(shape)
+            n = int(np.prod(batch, dtype=np.int64))
+            groups[type(shape)].append(
+                _map(
+                    shape,
+                    lambda v, r, batch=batch, n=n: jnp.reshape(
+                        jnp.broadcast_to(v, batch + jnp.shape(v)[jnp.ndim(v) - r :]),
+                        (n, *jnp.shape(v)[jnp.ndim(v) - r :]),
+                    ),
+                )
+            )
+        dtype = (
+            jnp.result_type(*(v for g in groups.values() for s in g for v in _fields(s).values()))
+            if shapes
+            else jnp.result_type(float)
+        )
+        empty = {
+            Sphere: dict(center=(0, 3), radius=(0,)),
+            Capsule: dict(a=(0, 3), b=(0, 3), radius=(0,)),
+            Box: dict(pose=(0, 4, 4), half_extents=(0, 3)),
+            Plane: dict(normal=(0, 3), offset=(0,)),
+        }
+        stacked = []
+        for cls in _ORDER:
+            if groups[cls]:
+                names = list(_fields(groups[cls][0]))
+                stacked.append(
+                    unchecked(cls, **{k: jnp.concatenate([getattr(s, k) for s in groups[cls]]) for k in names})
+                )
+            else:
+                stacked.append(unchecked(cls, **{k: jnp.zeros(v, dtype) for k, v in empty[cls].items()}))
+        self.spheres, self.capsules, self.boxes, self.planes = stacked
+
+    @property
+    def size(self) -> int:
+        """The number of obstacles ``W``."""
+        return sum(int(_batch_shape(s)[0]) for s in self.kinds())
+
+    def kinds(self) -> tuple[Sphere, Capsule, Box, Plane]:
+        return (self.spheres, self.capsules, self.boxes, self.planes)
+
+    def tree_flatten(self):
+        return self.kinds(), None
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        obj = object.__new__(cls)
+        obj.spheres, obj.capsules, obj.boxes, obj.planes = children
+        return obj
+
+
+def _check(robot, geom) -> None:
+    if not isinstance(robot, Robot):
+        raise TypeError(f"robot: expected a diffkin.Robot, got {type(robot).__name__}")
+    if not isinstance(geom, Geometry):
+        raise TypeError(f"geom: expected a diffkin.collision.Geometry (dk.collision.load), got {type(geom).__name__}")
+    if geom.shape_frames and max(geom.shape_frames) >= len(robot.frame_names):
+        raise ValueError("geom: its shapes are on frames this robot does not have (load it with this robot)")
+
+
+def _in_steps(fn, q, base) -> jax.Array:
+    """``fn(q, base)`` for a batch of configurations, :data:`STEP` at a time when the batch is large.
+
+    The batch axes of ``q`` and ``base`` are broadcast and flattened; small batches (at most twice
+    the step) are evaluated in one go. Values and derivatives are those of ``fn`` itself.
+    """
+    q = jnp.asarray(q)
+    batch = jnp.broadcast_shapes(q.shape[:-1], jnp.shape(base)[:-2] if base is not None else ())
+    n = int(np.prod(batch, dtype=np.int64))
+    if n <= 2 * STEP:
+        return fn(q, base)
+    flat_q = jnp.broadcast_to(q, (*batch, q.shape[-1])).reshape(n, q.shape[-1])
+    if base is None:
+        (out,) = in_steps(lambda q_: (fn(q_, None),), (flat_q,), STEP)
+    else:
+        base = jnp.asarray(base)
+        flat_base = jnp.broadcast_to(base, (*batch, 4, 4)).reshape(n, 4, 4)
+        (out,) = in_steps(lambda q_, b_: (fn(q_, b_),), (flat_q, flat_base), STEP)
+    return out.reshape(*batch, *out.shape[1:])
+
+
+def self_distances(robot: Robot, geom: Geometry, q, base=None) -> jax.Array:
+    """Signed distances of the robot's self-collision pairs.
+
+    Args:
+        robot: the :class:`diffkin.Robot`.
+        geom: its :class:`Geometry` (:func:`diffkin.collision.load`).
+        q: ``(..., dof)`` joint values.
+        base: ``(..., 4, 4)`` pose ``T_world_root`` of the root (a floating base); default identity.
+
+    Returns:
+        ``(..., P)``, metres, in ``geom.pairs`` order.
+    """
+    _check(robot, geom)
+    return _in_steps(lambda q_, base_: _self_distances(robot, geom, q_, base_), q, base)
+
+
+def _self_distances(robot: Robot, geom: Geometry, q, base) -> jax.Array:
+    shapes = placed(robot, geom, q, base)
+    counts = geom.counts
+    starts = np.cumsum((0, *counts))
+    pairs = geom.pairs
+    kind_of = np.searchsorted(starts, np.arange(sum(counts)), side="right") - 1
+    pieces, order = [], []
+    for ka in range(3):
+        for kb in range(ka, 3):
+            rows = np.flatnonzero((kind_of[pairs[:, 0]] == ka) & (kind_of[pairs[:, 1]] == kb)) if len(pairs) else None
+            if rows is None or len(rows) == 0:
+                continue
+            ia, ib = pairs[rows, 0] - starts[ka], pairs[rows, 1] - starts[kb]
+            pick = lambda s, idx: _map(s, lambda v, r, idx=idx: jnp.take(v, idx, axis=jnp.ndim(v) - r - 1))  # noqa: E731
+            pieces.append(distance(pick(shapes[ka], ia), pick(shapes[kb], ib)))
+            order.append(rows)
+    if not pieces:
+        batch = jnp.broadcast_shapes(jnp.shape(q)[:-1], jnp.shape(base)[:-2] if base is not None else ())
+        return jnp.zeros((*batch, 0), jnp.result_type(float))
+    batch = jnp.broadcast_shapes(*(p.shape[:-1] for p in pieces))
+    out = jnp.concatenate([jnp.broadcast_to(p, (*batch, p.shape[-1])) for p in pieces], axis=-1)
+    inverse = np.argsort(np.concatenate(order))
+    return out[..., inverse] if not np.array_equal(inverse, np.arange(len(inverse))) else out
+
+
+def world_distances(robot: Robot, geom: Geometry, q, world: World, base=None) -> jax.Array:
+    """Signed distances of every robot shape to every obstacle.
+
+    Args:
+        robot, geom, q, base: as :func:`self_distances`.
+        world: the obstacles (:class:`World`), in the world frame.
+
+    Returns:
+        ``(..., S, W)``, metres: shapes in :attr:`Geometry.shape_names` order, obstacles in the
+        world's order (spheres, capsules, boxes, half-spaces).
+    """
+    _check(robot, geom)
+    if not isinstance(world, World):
+        raise TypeError(f"world: expected a diffkin.collision.World, got {type(world).__name__}")
+    return _in_steps(lambda q_, base_: _world_distances(robot, geom, q_, world, base_), q, base)
+
+
+def _world_distances(robot: Robot, geom: Geometry, q, world: World, base) -> jax.Array:
+    shapes = placed(robot, geom, q, base)
+    rows: list[jax.Array] = []
+    for shape in shapes:
+        expanded = _map(shape, lambda v, r: jnp.expand_dims(v, jnp.ndim(v) - r))  # (..., n_kind, 1, ...)
+        cols = [distance(expanded, obstacle) for obstacle in world.kinds()]
+        rows.append(jnp.concatenate(cols, axis=-1))
+    batch = jnp.broadcast_shapes(*(r.shape[:-2] for r in rows))
+    rows = [jnp.broadcast_to(r, (*batch, *r.shape[-2:])) for r in rows]
+    return jnp.concatenate(rows, axis=-2)
+
+
+def clearance(robot: Robot, geom: Geometry, q, world: World | None = None, base=None) -> jax.Array:
+    """The smallest signed distance: of the self-collision pairs and, if ``world`` is given, of the shapes to it.
+
+    Returns:
+        ``(...,)``, metres (``inf`` if there is nothing to measure).
+    """
+    d = self_distances(robot, geom, q, base)
+    parts = [d]
+    if world is not None:
+        w = world_distances(robot, geom, q, world, base)
+        parts.append(w.reshape(*w.shape[:-2], -1))
+    every = jnp.concatenate(parts, axis=-1)
+    return jnp.min(every, axis=-1, initial=jnp.inf)
+
+
+__all__ = ["KINDS", "World", "clearance", "self_distances", "world_distances"]

@@ -1,0 +1,330 @@
+"""Collision shapes of robot description files: URDF ``<collision>`` elements and MJCF ``<geom>``s (host).
+
+Each element becomes one :class:`Spec`: a sphere, capsule or box in the frame of the link (URDF)
+or body (MJCF) that carries it. Spheres, boxes and capsules are kept exactly; cylinders,
+ellipsoids and meshes become capsules that contain them (:mod:`diffkin.collision._fit`), with
+the volume of the original and of the fit recorded. Meshes are read with trimesh (the
+``diffkin[collision]`` extra), imported only when a file has meshes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+from diffkin._meshfiles import resolve_mesh
+from diffkin.collision import _fit
+
+_MJCF_KINDS = ("sphere", "capsule", "box", "cylinder", "ellipsoid", "mesh")
+
+
+@dataclasses.dataclass(frozen=True)
+class Spec:
+    """One collision shape on a frame of the robot.
+
+    Attributes:
+        name: the element's name (URDF ``<collision name=>``, else ``link_k``: the k-th collision
+            element of the link, as Pinocchio names them; MJCF ``<geom name=>``, else ``geomN``).
+        frame: the frame (URDF link, MJCF body) that carries it.
+        kind: ``"sphere"``, ``"capsule"`` or ``"box"`` (what it is now).
+        source: what the file says (``"cylinder"``, ``"mesh"``, ... or the same as ``kind``).
+        params: ``sphere``: centre (3), radius; ``capsule``: a (3), b (3), radius; ``box``: pose
+            ``T_frame_box`` (16, row major), half extents (3); all in the frame, metres.
+        volume: the original shape's volume (for a mesh: its convex hull's), m^3.
+        fitted_volume: the volume of the shape kept (equal to ``volume`` when exact).
+        contype, conaffinity: MJCF collision bits (URDF: 1, 1).
+        body: MJCF body name (for ``<exclude>``), or the URDF link name.
+    """
+
+    name: str
+    frame: str
+    kind: str
+    source: str
+    params: tuple[float, ...]
+    volume: float
+    fitted_volume: float
+    contype: int = 1
+    conaffinity: int = 1
+    body: str = ""
+
+
+# --------------------------------------------------------------------------------------- shapes
+
+
+def _transform(T: np.ndarray, p: np.ndarray) -> np.ndarray:
+    return p @ T[:3, :3].T + T[:3, 3]
+
+
+def _capsule(name, frame, source, T, radius, half_length, volume, **kw) -> Spec:
+    """A capsule along the z axis of ``T`` (in the frame)."""
+    a = _transform(T, np.array([0.0, 0.0, -half_length]))
+    b = _transform(T, np.array([0.0, 0.0, half_length]))
+    fitted = _fit.capsule_volume(radius, 2 * half_length)
+    return Spec(name, frame, "capsule", source, (*a, *b, radius), volume, fitted, **kw)
+
+
+def _primitive(name: str, frame: str, kind: str, T: np.ndarray, size, **kw) -> Spec:
+    """A shape centred at ``T`` (its axis z): sphere ``(r,)``, capsule/cylinder ``(r, half length)``,
+    box ``(3 half extents)``, ellipsoid ``(3 semi-axes)``."""
+    size = np.asarray(size, dtype=np.float64)
+    if np.any(size < 0) or not np.all(np.isfinite(size)):
+        raise ValueError(f"collision shape {name!r} on {frame!r}: expected finite sizes >= 0, got {size.tolist()}")
+    if kind == "sphere":
+        r = float(size[0])
+        v = 4 / 3 * np.pi * r**3
+        return Spec(name, frame, "sphere", kind, (*T[:3, 3], r), v, v, **kw)
+    if kind == "capsule":
+        return _capsule(name, frame, kind, T, float(size[0]), float(size[1]), None, **kw)
+    if kind == "box":
+        v = 8 * float(np.prod(size[:3]))
+        return Spec(name, frame, "box", kind, (*T.reshape(-1), *size[:3]), v, v, **kw)
+    if kind == "cylinder":
+        r, h = float(size[0]), float(size[1])
+        R, L = _fit.cylinder(r, h)
+        return _capsule(name, frame, kind, T, R, L, 2 * np.pi * r * r * h, **kw)
+    if kind == "ellipsoid":
+        k, R, L = _fit.ellipsoid(size[:3])
+        axes = np.roll(np.eye(3), 2 - k, axis=1)  # columns: x, y, z of a frame whose z is axis k
+        Tk = T.copy()
+        Tk[:3, :3] = T[:3, :3] @ axes
+        return _capsule(name, frame, kind, Tk, R, L, 4 / 3 * np.pi * float(np.prod(size[:3])), **kw)
+    raise AssertionError(kind)
+
+
+def _fix_volume(spec: Spec) -> Spec:
+    if spec.volume is None:  # an exact capsule
+        return dataclasses.replace(spec, volume=spec.fitted_volume)
+    return spec
+
+
+def _mesh(name: str, frame: str, T: np.ndarray, path: str | None, reference: str, scale, **kw) -> Spec:
+    """A capsule containing every vertex of a mesh file, placed by ``T`` and scaled by ``scale``."""
+    if path is None:
+        raise ValueError(f"collision mesh {reference!r} of {name!r} on {frame!r}: file not found")
+    vertices = _read_vertices(path) * np.asarray(scale, dtype=np.float64)
+    vertices = _transform(T, vertices)
+    a, b, r = _fit.points(vertices)
+    return Spec(
+        name,
+        frame,
+        "capsule",
+        "mesh",
+        (*a, *b, r),
+        _hull_volume(vertices),
+        _fit.capsule_volume(r, float(np.linalg.norm(b - a))),
+        **kw,
+    )
+
+
+def _read_vertices(path: str) -> np.ndarray:
+    try:
+        import trimesh
+    except ImportError as err:
+        raise ImportError(
+            f'reading collision meshes needs trimesh: pip install "diffkin[collision]" ({path}: {err})'
+        ) from err
+    try:
+        mesh = trimesh.load(path, force="mesh")
+    except Exception as err:  # formats trimesh cannot read here (e.g. DAE without pycollada)
+        raise ValueError(f"collision mesh {path!r}: trimesh cannot read it ({err})") from err
+    vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
+    if vertices.size == 0:
+        raise ValueError(f"collision mesh {path!r}: no vertices")
+    return vertices
+
+
+def _hull_volume(vertices: np.ndarray) -> float:
+    try:
+        from scipy.spatial import ConvexHull
+
+        return float(ConvexHull(vertices).volume)
+    except Exception:  # no scipy, or a flat mesh
+        return float("nan")
+
+
+# ------------------------------------------------------------------------------------------ URDF
+
+
+def _numbers(el: ET.Element | None, attribute: str, count: int, default: str, where: str) -> np.ndarray:
+    text = el.get(attribute, default) if el is not None else default
+    try:
+        values = np.array([float(x) for x in text.split()], dtype=np.float64)
+    except ValueError:
+        values = np.zeros(0)
+    if values.shape != (count,) or not np.all(np.isfinite(values)):
+        raise ValueError(f"{where} {attribute}: expected {count} finite numbers, got {text!r}")
+    return values
+
+
+def _rpy(rpy: np.ndarray) -> np.ndarray:
+    """URDF fixed-axis roll-pitch-yaw: ``Rz(yaw) Ry(pitch) Rx(roll)``."""
+    (cr, cp, cy), (sr, sp, sy) = np.cos(rpy), np.sin(rpy)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def urdf_specs(root: ET.Element, base_dir: str | None) -> list[Spec]:
+    """Every ``<link><collision>`` of a URDF (sphere, box, cylinder, capsule, mesh), in document order."""
+    specs = []
+    for link in root.findall("link"):
+        frame = link.get("name", "")
+        for k, collision in enumerate(link.findall("collision")):
+            name = collision.get("name") or f"{frame}_{k}"
+            where = f"URDF <link name={frame!r}> <collision> {k}"
+            origin = collision.find("origin")
+            T = np.eye(4)
+            T[:3, :3] = _rpy(_numbers(origin, "rpy", 3, "0 0 0", where))
+            T[:3, 3] = _numbers(origin, "xyz", 3, "0 0 0", where)
+            geometry = collision.find("geometry")
+            shape = geometry[0] if geometry is not None and len(geometry) else None
+            if shape is None:
+                raise ValueError(f"{where}: missing <geometry>")
+            kw = {"body": frame}
+            if shape.tag == "sphere":
+                spec = _primitive(name, frame, "sphere", T, _numbers(shape, "radius", 1, "", where), **kw)
+            elif shape.tag == "box":
+                spec = _primitive(name, frame, "box", T, 0.5 * _numbers(shape, "size", 3, "", where), **kw)
+            elif shape.tag in ("cylinder", "capsule"):
+                r = _numbers(shape, "radius", 1, "", where)[0]
+                length = _numbers(shape, "length", 1, "", where)[0]
+                spec = _primitive(name, frame, shape.tag, T, (r, 0.5 * length), **kw)
+            elif shape.tag == "mesh":
+                reference = shape.get("filename", "")
+                path = resolve_mesh(reference, base_dir)
+                spec = _mesh(name, frame, T, path, reference, _numbers(shape, "scale", 3, "1 1 1", where), **kw)
+            else:
+                raise ValueError(f"{where}: <{shape.tag}> is not a supported collision geometry")
+            specs.append(_fix_volume(spec))
+    return specs
+
+
+# ------------------------------------------------------------------------------------------ MJCF
+
+
+def mjcf_specs(root: ET.Element, path: str | None) -> tuple[list[Spec], set[frozenset[str]], bool]:
+    """The geoms of an MJCF's bodies (world-body geoms are the environment, left out).
+
+    Returns:
+        The specs; the ``<contact><exclude>`` body pairs; whether MuJoCo's parent filter is on
+        (``<option><flag filterparent>``, default enabled).
+    """
+    from diffkin.models import mjcf  # the model reader's default classes, orientations and includes
+
+    mjcf._expand_includes(root, os.path.dirname(path) if path else os.getcwd())
+    reader = mjcf._Reader(root)
+    compiler = root.find("compiler")
+    base_dir = os.path.dirname(path) if path else None
+    meshdir = compiler.get("meshdir", compiler.get("assetdir", "")) if compiler is not None else ""
+    mesh_dir = os.path.join(base_dir, meshdir) if base_dir is not None else (meshdir or None)
+    meshes: dict[str, tuple[str | None, str, np.ndarray, np.ndarray | None]] = {}
+    for asset in root.findall("asset"):
+        for mesh in asset.findall("mesh"):
+            cls = reader._class(mesh, "main")
+            file = mesh.get("file")
+            name = mesh.get("name") or (os.path.splitext(os.path.basename(file))[0] if file else "")
+            scale = _numbers(None, "scale", 3, reader._get(mesh, "scale", cls, "1 1 1") or "1 1 1", "MJCF mesh")
+            vertex = mesh.get("vertex")
+            inline = np.array([float(x) for x in vertex.split()]).reshape(-1, 3) if vertex else None
+            meshes[name] = (resolve_mesh(file, mesh_dir) if file else None, file or name, scale, inline)
+    specs: list[Spec] = []
+    counter = {"body": 1, "geom": 0}
+
+    def contents(el: ET.Element, cls: str):
+        out, todo = [], [(child, np.eye(4), cls) for child in reversed(el)]
+        while todo:
+            child, T, c = todo.pop()
+            if child.tag == "frame":
+                inner = reader._class(child, c, "childclass")
+                T_frame = T @ reader._pose(child)
+                todo.extend((g, T_frame, inner) for g in reversed(child))
+            elif child.tag in ("geom", "body"):
+                out.append((child, T, c))
+        return out
+
+    def geom(el: ET.Element, T_body_container: np.ndarray, cls: str, body: str) -> None:
+        gid = counter["geom"]
+        counter["geom"] += 1
+        cls = reader._class(el, cls)
+        name = el.get("name") or f"geom{gid}"
+        where = f"MJCF <geom name={name!r}> on body {body!r}"
+        contype = int(reader._get(el, "contype", cls, "1") or 1)
+        conaffinity = int(reader._get(el, "conaffinity", cls, "1") or 1)
+        if contype == 0 and conaffinity == 0:
+            return  # visual only: MuJoCo never collides it
+        kind = reader._get(el, "type", cls, "sphere") or "sphere"
+        if kind not in _MJCF_KINDS:
+            raise ValueError(f"{where}: type {kind!r} is not supported on a moving body (supported: {_MJCF_KINDS})")
+        size_text = reader._get(el, "size", cls, "0 0 0") or "0 0 0"
+        size = np.array([float(x) for x in size_text.split()] + [0.0, 0.0, 0.0])[:3]
+        fromto = reader._get(el, "fromto", cls)
+        T = np.eye(4)
+        if fromto is not None and kind != "mesh":
+            ends = _numbers(None, "fromto", 6, fromto, where)
+            T[:3, :3] = (
+                mjcf._zaxis(ends[:3] - ends[3:], f"{where} fromto") if np.any(ends[:3] != ends[3:]) else np.eye(3)
+            )
+            T[:3, 3] = 0.5 * (ends[:3] + ends[3:])
+            half = 0.5 * float(np.linalg.norm(ends[3:] - ends[:3]))
+            size = (
+                np.array([size[0], half, 0.0])
+                if kind in ("capsule", "cylinder")
+                else np.array([size[0], size[1], half])
+            )
+        else:
+            T[:3, :3] = reader._rotation(el, cls)
+            T[:3, 3] = _numbers(None, "pos", 3, reader._get(el, "pos", cls, "0 0 0") or "0 0 0", where)
+        T = T_body_container @ T
+        kw: dict = {"contype": contype, "conaffinity": conaffinity, "body": body}
+        if kind == "mesh":
+            mesh_name = reader._get(el, "mesh", cls) or ""
+            if mesh_name not in meshes:
+                raise ValueError(f"{where}: unknown mesh {mesh_name!r}")
+            mesh_path, reference, scale, inline = meshes[mesh_name]
+            if inline is not None:
+                a, b, r = _fit.points(_transform(T, inline * scale))
+                V = _fit.capsule_volume(r, float(np.linalg.norm(b - a)))
+                spec = Spec(
+                    name, body, "capsule", "mesh", (*a, *b, r), _hull_volume(_transform(T, inline * scale)), V, **kw
+                )
+            else:
+                spec = _mesh(name, body, T, mesh_path, reference, scale, **kw)
+        else:
+            spec = _primitive(name, body, kind, T, size, **kw)
+        specs.append(_fix_volume(spec))
+
+    todo: list[tuple[ET.Element, str, str]] = []
+    for worldbody in root.findall("worldbody"):
+        for child, _, cls in contents(worldbody, "main"):
+            if child.tag == "body":
+                todo.append((child, cls, ""))
+            else:  # a world geom: the environment, but it takes a MuJoCo geom id
+                counter["geom"] += 1
+    todo.reverse()
+    while todo:  # bodies depth first in document order: MuJoCo's ids, as the model reader names them
+        el, cls, _ = todo.pop()
+        bid = counter["body"]
+        counter["body"] += 1
+        body = el.get("name") or f"body{bid}"
+        inner = reader._class(el, cls, "childclass")
+        later = []
+        for child, T, c in contents(el, inner):
+            if child.tag == "geom":
+                geom(child, T, c, body)
+            else:
+                later.append((child, c, body))
+        todo.extend(reversed(later))
+    excludes = set()
+    for contact in root.findall("contact"):
+        for ex in contact.findall("exclude"):
+            excludes.add(frozenset((ex.get("body1", ""), ex.get("body2", ""))))
+    flags = [f for option in root.findall("option") for f in option.findall("flag")]
+    filterparent = all(f.get("filterparent", "enable") == "enable" for f in flags)
+    return specs, excludes, filterparent

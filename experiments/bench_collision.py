@@ -1,0 +1,139 @@
+"""Benchmark: a Panda's fitted collision capsules, its self pairs and 16 obstacles (issue 27).
+
+diffkin's ``self_distances`` + ``world_distances`` (one jitted function, forward kinematics
+included) against a Python loop of coal's ``distance`` on the same primitives (the shapes placed
+by diffkin's poses beforehand: coal's time is the distances alone). Batch 1, 1,000 and 100,000,
+float32 and float64; the coal loop is timed on 200 configurations and reported per configuration
+times the batch. Medians of 5 warm calls.
+
+    python experiments/bench_collision.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import time
+
+import jax
+import numpy as np
+
+jax.config.update("jax_enable_x64", True)
+
+import diffkin as dk  # noqa: E402
+
+
+def panda():
+    import pinocchio  # noqa: F401  (example-robot-data comes with the validation install)
+
+    root = os.path.join(os.path.dirname(os.path.dirname(pinocchio.__file__)), "..", "..", "..", "share")
+    root = os.path.abspath(os.path.join(root, "example-robot-data", "robots", "panda_description"))
+    urdf, srdf = os.path.join(root, "urdf", "panda.urdf"), os.path.join(root, "srdf", "panda.srdf")
+    robot = dk.load_robot(urdf)
+    return robot, urdf, srdf
+
+
+def obstacles(rng):
+    C = dk.collision
+    spheres = C.Sphere(rng.uniform([-0.8, -0.8, 0], [0.8, 0.8, 1.2], (8, 3)), rng.uniform(0.03, 0.1, 8))
+    T = np.tile(np.eye(4), (7, 1, 1))
+    T[:, :3, 3] = rng.uniform([-0.8, -0.8, 0], [0.8, 0.8, 1.2], (7, 3))
+    boxes = C.Box(T, rng.uniform(0.03, 0.15, (7, 3)))
+    floor = C.Plane(np.array([0.0, 0, 1]), -0.01)
+    return C.World(spheres, boxes, floor)
+
+
+def timed(f, *args, repeats=5):
+    jax.block_until_ready(f(*args))
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        jax.block_until_ready(f(*args))
+        times.append(time.perf_counter() - t)
+    return float(np.median(times))
+
+
+def coal_per_config(robot, geom, world, q):
+    """Seconds per configuration of a Python loop of coal.distance over the self and world pairs."""
+    import coal
+
+    s, c, b = dk.collision._geometry.placed(robot, geom, q)  # noqa: SLF001  (host arrays, placed once)
+    caps = [(np.asarray(c.a[k]), np.asarray(c.b[k]), np.asarray(c.radius)) for k in range(len(q))]
+    boxes = [(np.asarray(b.pose[k]), np.asarray(b.half_extents)) for k in range(len(q))]
+
+    def capsule(a, bb, r):
+        L = float(np.linalg.norm(bb - a))
+        z = (bb - a) / L
+        x = np.cross([1.0, 0, 0] if abs(z[0]) < 0.9 else [0, 1.0, 0], z)
+        x /= np.linalg.norm(x)
+        return coal.Capsule(float(r), L), coal.Transform3s(np.column_stack([x, np.cross(z, x), z]), 0.5 * (a + bb))
+
+    obstacles_ = [
+        (coal.Sphere(float(r)), coal.Transform3s(np.eye(3), p))
+        for p, r in zip(np.asarray(world.spheres.center), np.asarray(world.spheres.radius), strict=True)
+    ]
+    obstacles_ += [
+        (coal.Box(*(2 * h)), coal.Transform3s(T[:3, :3], T[:3, 3]))
+        for T, h in zip(np.asarray(world.boxes.pose), np.asarray(world.boxes.half_extents), strict=True)
+    ]
+    obstacles_ += [
+        (coal.Halfspace(n, float(o)), coal.Transform3s())
+        for n, o in zip(np.asarray(world.planes.normal), np.asarray(world.planes.offset), strict=True)
+    ]
+    ns, nc, _ = geom.counts
+    request = coal.DistanceRequest()
+    start = time.perf_counter()
+    for k in range(len(q)):
+        shapes = [capsule(caps[k][0][i], caps[k][1][i], caps[k][2][i]) for i in range(nc)]
+        shapes += [
+            (coal.Box(*(2 * boxes[k][1][i])), coal.Transform3s(boxes[k][0][i][:3, :3], boxes[k][0][i][:3, 3]))
+            for i in range(len(boxes[k][1]))
+        ]
+        for i, j in geom.pairs:
+            coal.distance(*shapes[i - ns], *shapes[j - ns], request, coal.DistanceResult())
+        for g, T in shapes:
+            for o, To in obstacles_:
+                coal.distance(g, T, o, To, request, coal.DistanceResult())
+    return (time.perf_counter() - start) / len(q)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="batches 1 and 1,000 only")
+    parser.add_argument("--dtype", choices=("float32", "float64", "both"), default="both")
+    args = parser.parse_args(argv)
+    robot, urdf, srdf = panda()
+    t = time.perf_counter()
+    geom = dk.collision.load(urdf, robot, srdf=srdf)
+    load_s = time.perf_counter() - t
+    world = obstacles(np.random.default_rng(0))
+    ns, nc, nb = geom.counts
+    print(f"# Panda: {ns} spheres, {nc} capsules, {nb} boxes; {len(geom.pairs)} self pairs; {world.size} obstacles")
+    cpu = platform.processor() or platform.machine()
+    print(f"# load (mesh fits) {load_s:.1f} s; jax {jax.__version__}, {cpu}, {os.cpu_count()} CPUs")
+    rng = np.random.default_rng(1)
+    lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
+    coal_s = coal_per_config(robot, geom, world, rng.uniform(lo, hi, (200, robot.dof)))
+    print("| dtype | batch | diffkin (s) | coal loop (s, per config x batch) | speed-up |")
+    print("| --- | --- | --- | --- | --- |")
+    for dtype in {"float32": (np.float32,), "float64": (np.float64,), "both": (np.float32, np.float64)}[args.dtype]:
+        g = jax.tree.map(lambda x, dtype=dtype: x.astype(dtype), geom)
+        w = jax.tree.map(lambda x, dtype=dtype: x.astype(dtype), world)
+        r = jax.tree.map(lambda x, dtype=dtype: x.astype(dtype), robot)
+        f = jax.jit(
+            lambda q, r=r, g=g, w=w: (dk.collision.self_distances(r, g, q), dk.collision.world_distances(r, g, q, w))
+        )
+        for batch in (1, 1000) if args.quick else (1, 1000, 100_000):
+            q = rng.uniform(lo, hi, (batch, robot.dof)).astype(dtype)
+            s = timed(f, q)
+            print(
+                f"| {np.dtype(dtype).name} | {batch:,} | {s:.3g} | {coal_s * batch:.3g} | {coal_s * batch / s:.0f}x |",
+                flush=True,
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
