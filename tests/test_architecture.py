@@ -10,8 +10,9 @@ from diffkin.models import forward, robot
 PACKAGE = pathlib.Path(dk.__file__).parent
 MODEL_CLASSES = (dk.DHChain, dk.PoEChain, dk.Robot, forward.ChainPass, robot.RobotPass)
 HOOKS = {"_check"}  # diffkin._pytree's validation hook, which every model defines for it
-# The field checks of every pytree model, also of dk.srs.SRSArm (a model of its own kind in diffkin/srs/).
-SHARED = {"_validate"}
+# Helper modules of diffkin/models/ that other readers share, not model members: the field checks of
+# every pytree model (also dk.srs.SRSArm's) and the hardened XML reader (also dk.collision.load's).
+SHARED = {"_validate", "_xml"}
 
 
 def _private_members() -> set[str]:

@@ -17,6 +17,7 @@ import numpy as np
 
 from diffkin._meshfiles import resolve_mesh
 from diffkin.collision import _fit
+from diffkin.models.urdf import rpy_matrix
 
 _MJCF_KINDS = ("sphere", "capsule", "box", "cylinder", "ellipsoid", "mesh")
 
@@ -159,18 +160,6 @@ def _numbers(el: ET.Element | None, attribute: str, count: int, default: str, wh
     return values
 
 
-def _rpy(rpy: np.ndarray) -> np.ndarray:
-    """URDF fixed-axis roll-pitch-yaw: ``Rz(yaw) Ry(pitch) Rx(roll)``."""
-    (cr, cp, cy), (sr, sp, sy) = np.cos(rpy), np.sin(rpy)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
 def urdf_specs(root: ET.Element, base_dir: str | None) -> list[Spec]:
     """Every ``<link><collision>`` of a URDF (sphere, box, cylinder, capsule, mesh), in document order."""
     specs = []
@@ -181,7 +170,7 @@ def urdf_specs(root: ET.Element, base_dir: str | None) -> list[Spec]:
             where = f"URDF <link name={frame!r}> <collision> {k}"
             origin = collision.find("origin")
             T = np.eye(4)
-            T[:3, :3] = _rpy(_numbers(origin, "rpy", 3, "0 0 0", where))
+            T[:3, :3] = rpy_matrix(_numbers(origin, "rpy", 3, "0 0 0", where))
             T[:3, 3] = _numbers(origin, "xyz", 3, "0 0 0", where)
             geometry = collision.find("geometry")
             shape = geometry[0] if geometry is not None and len(geometry) else None

@@ -16,7 +16,9 @@ class IKResult(NamedTuple):
         q: ``(..., dof)`` best configuration found per target (radians / metres); within
             ``[lower, upper]`` when solved with ``respect_limits=True``. Differentiable with
             respect to the target and the chain's parameters (implicit function theorem).
-        success: ``(...,)`` bool, ``pos_err <= pos_tol`` and ``rot_err <= rot_tol``.
+        success: ``(...,)`` bool, ``pos_err <= pos_tol`` and ``rot_err <= rot_tol``, decided in the
+            solver's dtype with a margin for its rounding (float32: 9.5e-7 m and 1.9e-6 rad), so that
+            it also holds when the solution is checked in exact arithmetic.
         pos_err: ``(...,)`` distance in metres between the reached and the target position.
         rot_err: ``(...,)`` angle in radians of the residual rotation ``R_target R(q)^T``
             (0 for position-only targets).

@@ -13,8 +13,8 @@ from diffkin.models.robot import JointSpec, Robot, build
 _KINDS = {"revolute": "R", "continuous": "R", "prismatic": "P", "fixed": "F"}
 
 
-def _rpy(rpy: np.ndarray) -> np.ndarray:
-    """URDF fixed-axis roll-pitch-yaw: ``Rz(yaw) Ry(pitch) Rx(roll)``."""
+def rpy_matrix(rpy: np.ndarray) -> np.ndarray:
+    """The rotation of a URDF ``rpy`` (fixed-axis roll-pitch-yaw, radians): ``Rz(yaw) Ry(pitch) Rx(roll)``."""
     (cr, cp, cy), (sr, sp, sy) = np.cos(rpy), np.sin(rpy)
     return np.array(
         [
@@ -45,7 +45,7 @@ def _parse_joint(el: ET.Element) -> JointSpec:
         kind_letter = _KINDS[kind]
     origin_el = el.find("origin")
     T = np.eye(4)
-    T[:3, :3] = _rpy(_xml.numbers(origin_el, "rpy", 3, "0 0 0", f"{where} <origin>"))
+    T[:3, :3] = rpy_matrix(_xml.numbers(origin_el, "rpy", 3, "0 0 0", f"{where} <origin>"))
     T[:3, 3] = _xml.numbers(origin_el, "xyz", 3, "0 0 0", f"{where} <origin>")
     axis = _xml.numbers(el.find("axis"), "xyz", 3, "1 0 0", f"{where} <axis>")
     screw = np.zeros(6)

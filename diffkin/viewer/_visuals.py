@@ -14,6 +14,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 
 from diffkin._meshfiles import resolve_mesh
+from diffkin.models.urdf import rpy_matrix
 
 DEFAULT_RGBA = (0.72, 0.74, 0.78, 1.0)
 
@@ -51,18 +52,6 @@ def _floats(text: str | None, count: int, default: tuple[float, ...]) -> np.ndar
     return values
 
 
-def _rpy(rpy: np.ndarray) -> np.ndarray:
-    """URDF fixed-axis roll-pitch-yaw: ``Rz(yaw) Ry(pitch) Rx(roll)``."""
-    (cr, cp, cy), (sr, sp, sy) = np.cos(rpy), np.sin(rpy)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
 def _quat(wxyz: np.ndarray) -> np.ndarray:
     w, x, y, z = wxyz / np.linalg.norm(wxyz)
     return np.array(
@@ -92,7 +81,7 @@ def urdf_visuals(root: ET.Element, base_dir: str | None) -> list[Visual]:
         for visual in link.findall("visual"):
             origin = visual.find("origin")
             T = _pose(
-                _rpy(_floats(origin.get("rpy") if origin is not None else None, 3, (0, 0, 0))),
+                rpy_matrix(_floats(origin.get("rpy") if origin is not None else None, 3, (0, 0, 0))),
                 _floats(origin.get("xyz") if origin is not None else None, 3, (0, 0, 0)),
             )
             rgba = DEFAULT_RGBA
@@ -164,7 +153,7 @@ def mjcf_visuals(root: ET.Element, base_dir: str | None) -> list[Visual]:
                 R = _quat(_floats(geom.get("quat"), 4, (1, 0, 0, 0)))
             elif geom.get("euler"):
                 a, b, c = _floats(geom.get("euler"), 3, (0, 0, 0))
-                R = _rpy(np.array([a, 0, 0])) @ _rpy(np.array([0, b, 0])) @ _rpy(np.array([0, 0, c]))
+                R = rpy_matrix(np.array([a, 0, 0])) @ rpy_matrix(np.array([0, b, 0])) @ rpy_matrix(np.array([0, 0, c]))
             length = None
             if geom.get("fromto") and kind in ("capsule", "cylinder", "box"):
                 ends = _floats(geom.get("fromto"), 6, (0,) * 6)
