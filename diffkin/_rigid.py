@@ -160,12 +160,8 @@ def outputs(entries: list[Entry], shape: tuple[int, ...], dtype) -> jax.Array:
     On the CPU, and in float64, a plain stack. In float32 off the CPU (a GPU) the computed entries
     are first materialised behind an optimization barrier: XLA's GPU concatenate emits each
     operand's expression on its own, so a stack of the entries of a forward pass recomputes the
-    shared part of the pass for every entry. Measured on an H100 (jax 0.11.2, iiwa14, median of
-    warm calls, both versions in one process; ``experiments/probe_gpu_trig.py``): float32 FK at
-    10^7 configurations 7.34 -> 2.25 ms, at 10^8 41.9 -> 19.6 ms; the float32 world Jacobian at
-    10^7 28.0 -> 6.2 ms (analytic), 48.6 -> 6.1 ms (autodiff), at 1,000 1.9 ms -> 66 us
-    (analytic). In float64 the barrier made FK slower (10^7: 5.7 -> 18.7 ms; Jacobians 1.2x
-    faster), so float64 stays plain.
+    shared part of the pass for every entry (3x faster FK on an H100); in float64 the barrier made FK
+    slower, so float64 stays plain. Measurements: docs/performance.md, "GPU outputs".
     """
     arrays = [jnp.broadcast_to(jnp.asarray(e, dtype=dtype), shape) for e in entries]
     computed = [i for i, e in enumerate(entries) if not isinstance(e, float)]
@@ -194,7 +190,7 @@ def segment_end(i: int, dof: int) -> bool:
     XLA's CPU fusion duplicates an elementwise producer into each consumer kernel, and every
     output of a Jacobian depends on the forward pass up to its joint: without a barrier the
     compiled program holds ``O(dof^2)`` copies of the pass, and compile time and memory grow
-    accordingly (analytic world Jacobian, 20 joints: COMPILE_NOTE). Materialising the pose every
+    accordingly (docs/performance.md, "The first call"). Materialising the pose every
     :data:`SEGMENT` joints bounds each copy to one segment; chains of up to :data:`SEGMENT`
     joints (every arm) compile to the same program as without it.
     """
@@ -226,9 +222,8 @@ def to_matrix(A: Rigid, shape: tuple[int, ...], dtype) -> jax.Array:
 def to_matrices(poses: list[Rigid], shape: tuple[int, ...], dtype) -> jax.Array:
     """The ``shape + (len(poses), 4, 4)`` matrices of ``poses``, written by one stack.
 
-    One stack of every entry, not a stack of per-pose matrices: all 60 link poses of a humanoid
-    (Talos) at batch 100,000 took 308 ms the second way and 166 ms this way (float32, 2 CPU cores;
-    ``experiments/bench_robots.py``); stacking on a leading axis and transposing took 344 ms.
+    One stack of every entry, not a stack of per-pose matrices (about 2x faster for a humanoid's
+    link poses; docs/performance.md, "XLA CPU tricks").
     """
     flat = outputs([e for A in poses for e in _matrix_entries(A)], shape, dtype)
     return flat.reshape(shape + (len(poses), 4, 4))
@@ -389,9 +384,7 @@ def sincos_each(xs: Sequence[Entry]) -> list[tuple[Entry, Entry]]:
 
     One call for a whole forward pass instead of one per joint: on the CPU each call is a
     ``lax.cond`` with about nine kernels of its own, and XLA's compile time grows with the number
-    of kernels. Measured by timing ``jax.jit(f).lower(x).compile()`` (iiwa14, 2-core CPU,
-    2026-11-23): the default IK solver compiled in 18.8 s instead of 26.0 s, FK of 4,000
-    configurations in 0.55 s instead of 0.85 s (24 kernels instead of 78).
+    of kernels (docs/performance.md, "XLA CPU tricks").
     """
     arrays = [x for x in xs if not isinstance(x, float)]
     if not arrays:

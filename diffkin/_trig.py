@@ -17,10 +17,8 @@ it. Other dtypes use ``jnp.sin``/``jnp.cos``.
 The fused ``sincos`` is for XLA's CPU backend only. On a GPU, XLA's own ``sin``/``cos`` are cheap
 and the fused version is slower: the ``lax.cond`` on "any angle beyond the fast range" needs a
 reduction over the whole array first and splits the forward pass into 9-16 kernels instead of
-2-4. Measured on an H100 (jax 0.11.2, iiwa14 FK, median of warm calls, one process;
-``experiments/probe_gpu_trig.py``): float32 FK at 10^7 configurations 6.3 ms with the fused
-``sincos`` against 2.25 ms with XLA's, at 10^8 59.5 against 19.6 ms; float64 FK at 10^7 80.5 ms
-against 5.7 ms. :func:`sincos` picks per platform with ``lax.platform_dependent`` (the platform
+2-4 (about 3x slower float32 FK on an H100; docs/performance.md, "Trigonometry").
+:func:`sincos` picks per platform with ``lax.platform_dependent`` (the platform
 the computation is compiled for, not the default backend), so a program compiled for the CPU on a
 GPU machine still gets the fused version, and the CPU's programs are unchanged.
 

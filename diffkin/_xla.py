@@ -1,11 +1,7 @@
-"""Speed tricks for XLA's CPU backend: one name per trick, and the measurement that justifies it.
+"""Speed tricks for XLA's CPU backend: one name per trick, each with a line of reason.
 
 Each function here leaves values and derivatives as they are; it only changes what XLA compiles.
-The number that justifies each trick is in its docstring: this project's machine (AMD EPYC, 2
-cores shared with two other jobs, load average ~5: absolute times are ~2x a quiet run's, the
-ratios are what counts), jax 0.10.2, float32 unless noted, medians of 15 warm jitted calls in
-fresh processes, each variant run twice, 2026-11-23 (issue 17), with the trick switched off by
-monkeypatching its name.
+The measurements that justify them are in docs/performance.md, "XLA CPU tricks".
 
 - Model numbers known at trace time are folded into the program as Python floats (the
   static/traced rule: :mod:`diffkin._static`); only traced numbers become program inputs.
@@ -37,9 +33,7 @@ import numpy as np
 #: Compiler options of the IK solvers' ``jax.jit`` (:func:`diffkin.ik.solve` and the CLI's and
 #: viewer's compiled solvers): XLA's classic CPU kernel emitter instead of its MLIR fusion
 #: emitters. XLA's CPU compile time is mostly per-kernel code generation, and the classic emitter
-#: does it with less work: ``jit(dk.ik.solve)`` of 1,000 iiwa14 targets (float32) compiled in
-#: 6.2 s against 9.9 s, and ran in 28.4 ms against 25.5 ms (2 runs each, medians of 15 warm calls,
-#: ``experiments/compare_checkouts.py`` for before/after figures), issue 19, 2026-11-24. The
+#: does it with less work (about two thirds of the compile time; docs/performance.md). The
 #: option names a CPU setting only: other backends compile as they would without it. It applies to
 #: the ``jit`` it is given to; a solver traced inside a user's own ``jit`` gets that ``jit``'s options.
 SOLVER_COMPILE = {"xla_cpu_use_fusion_emitters": False}
@@ -86,10 +80,7 @@ def materialize(values: list) -> jax.Array:
     XLA's CPU fusion duplicates an elementwise producer into every consumer kernel; in a deep
     computation with much reuse (a forward pass, a Cholesky factorisation) that recomputes the
     same values many times over. Stacking the shared values behind an optimization barrier makes
-    XLA compute them once: ``dk.srs.ik`` at 100,000 problems took 8.0-9.2 ms with its four stages
-    materialised against 20-22 ms without. (Measured when introduced, commits ca1723f and
-    c4a52d4: the IK's unrolled 6x6 damped least-squares solve ~9x faster, its step, which reads
-    the forward pass's residual and Jacobian entries, 20x faster.)
+    XLA compute them once (``dk.srs.ik`` about 2x faster, the IK's step 20x).
     """
     arrays = [v for v in values if not isinstance(v, float)]
     shape = tuple(np.broadcast_shapes(*(jnp.shape(v) for v in arrays)))
@@ -105,8 +96,7 @@ def opaque_index(index: jax.Array, bound: jax.Array) -> jax.Array:
 
     An identity that XLA can neither fold nor duplicate into its consumers: an index computed
     from a forward pass and used by several scatters is then computed once, instead of once per
-    scatter and per index array. A reachability map (iiwa14, 4,000,000 samples, 5 cm voxels,
-    medians of 5 maps) took 264-271 ms with it against 280-281 ms without: a small gain (~4 %).
+    scatter and per index array (a reachability map: a small gain, ~4 %).
     """
     return jax.lax.rem(index, bound)
 
@@ -118,9 +108,8 @@ def in_steps(fn: Callable[..., tuple[jax.Array, ...]], inputs: tuple[jax.Array, 
     axis. The last step overlaps the one before it (every step has the same shape), so some
     problems are solved twice, with the same result. A step's intermediates then stay in cache,
     and XLA's temporary buffer stays small (a buffer above glibc's mmap threshold takes fresh,
-    page-faulted memory on every call). ``dk.srs.ik`` at 100,000 problems in float64: 25-32 ms in
-    steps of 4,096 against 54 ms in one go. In float32 the steps did not pay on the loaded machine
-    (9.9-14 ms against 7.7-11 ms in one go); they are kept for float64 and for the memory bound.
+    page-faulted memory on every call): ``dk.srs.ik`` in float64 about 2x faster; in float32 the
+    steps did not pay, and are kept for the memory bound.
 
     Returns:
         The outputs of ``fn``, each with a leading axis of ``n``.

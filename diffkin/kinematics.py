@@ -208,10 +208,9 @@ def jacobian(
             Jacobian ``J_b = Ad(T^-1) J_s`` in the frame itself (Pinocchio's ``LOCAL``).
         method: ``"analytic"`` (the default) uses the screw axes of the forward pass;
             ``"autodiff"`` differentiates :func:`fk` with JAX (forward mode). Both agree to
-            rounding. The analytic one is as fast or faster on every backend (iiwa14, float32:
-            10^6 configurations on an H100 0.77 against 0.90 ms, 10^7 the same 6.2 ms, float64
-            10^7 10.8 against 72 ms; 100,000 on 2 CPU cores 2.2 against 3.2 ms) and its compile
-            time grows linearly with the number of joints.
+            rounding. The analytic one is as fast or faster on every backend, and its compile
+            time grows linearly with the number of joints (docs/performance.md, "Analytic and
+            autodiff Jacobians").
         base: robots only: ``(..., 4, 4)`` pose ``T_world_root`` (default identity).
         include_base: robots only: prepend the six columns of the root's body twist ``[v; w]``
             (a floating base moving as ``T_world_root exp([V] t)``).

@@ -2,12 +2,11 @@
 
 A target's seeds must not depend on the rest of the batch, so every draw is a function of the
 target's own index. ``jax.random`` gives that with one key per target (a ``vmap`` of ``fold_in``
-and ``uniform``, a threefry hash per key): for 1,000 targets x 32 draws x 7 joints it compiled in
-2.3 s and ran in 4.7 ms (float32, this project's 2-core CPU), and the solver's two seed stages were
-about 4 s of its 19 s compile. Here each draw is a chain of ``lowbias32`` (C. Wellons'
-hash-prospector: a bijection of 32-bit words with near-ideal avalanche) over the key's words, the
-target, the round and the draw's counter: 0.15 s to compile, 0.44 ms to run (measured side by side,
-2026-11-23). Seeds need an even cover of the joint box, not cryptographic strength;
+and ``uniform``, a threefry hash per key), which is costly to compile and to run. Here each draw is
+a chain of ``lowbias32`` (C. Wellons' hash-prospector: a bijection of 32-bit words with near-ideal
+avalanche) over the key's words, the target, the round and the draw's counter, about 15x cheaper to
+compile and 10x to run (docs/performance.md, "The IK's seeds"). Seeds need an even cover of the
+joint box, not cryptographic strength;
 ``tests/test_ik.py`` checks the draws' moments, uniformity and independence.
 """
 
