@@ -22,6 +22,8 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
+from _bench import median_seconds  # noqa: E402
+
 import diffkin as dk  # noqa: E402
 
 
@@ -43,16 +45,6 @@ def obstacles(rng):
     boxes = C.Box(T, rng.uniform(0.03, 0.15, (7, 3)))
     floor = C.Plane(np.array([0.0, 0, 1]), -0.01)
     return C.World(spheres, boxes, floor)
-
-
-def timed(f, *args, repeats=5):
-    jax.block_until_ready(f(*args))
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        jax.block_until_ready(f(*args))
-        times.append(time.perf_counter() - t)
-    return float(np.median(times))
 
 
 def coal_per_config(robot, geom, world, q):
@@ -127,7 +119,7 @@ def main(argv=None) -> int:
         )
         for batch in (1, 1000) if args.quick else (1, 1000, 100_000):
             q = rng.uniform(lo, hi, (batch, robot.dof)).astype(dtype)
-            s = timed(f, q)
+            s = median_seconds(f, q, repeats=5, warmup=1, min_time=0.0)
             print(
                 f"| {np.dtype(dtype).name} | {batch:,} | {s:.3g} | {coal_s * batch:.3g} | {coal_s * batch / s:.0f}x |",
                 flush=True,

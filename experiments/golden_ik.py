@@ -11,25 +11,14 @@ Run: ``python experiments/golden_ik.py --write before.npz`` on one checkout, the
 """
 
 import argparse
-import os
 import time
-from importlib import metadata
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from bench_ik_robots import BAXTER, TALOS, random_q
 
 import diffkin as dk
-
-ERD = str(metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data/robots"))
-BAXTER = os.path.join(ERD, "baxter_description/urdf/baxter.urdf")
-TALOS = os.path.join(ERD, "talos_data/robots/talos_reduced.urdf")
-
-
-def random_q(model, n, seed):
-    lo = np.where(np.isfinite(model.lower), model.lower, -np.pi)
-    hi = np.where(np.isfinite(model.upper), model.upper, np.pi)
-    return np.random.default_rng(seed).uniform(lo, hi, (n, model.dof))
 
 
 def fields(prefix: str, res) -> dict:

@@ -261,3 +261,27 @@ def test_to_poe_is_differentiable():
         return jnp.sum(dk.fk(chain.replace(d=d), q)[..., :3, 3])
 
     np.testing.assert_allclose(jax.grad(via_poe)(chain.d), jax.grad(direct)(chain.d), atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["iiwa14", "panda"])
+def test_link_frame_columns_of_the_forward_pass(name):
+    """A chain's ``forward(q).columns(i)`` (link frame ``i``: joints before it move it, the others give zero
+    columns) against forward-mode autodiff of that link's pose, every link, DH and its PoE conversion."""
+    from diffkin import _rigid as rg
+
+    for chain in (getattr(dk.robots, name)(), dk.to_poe(getattr(dk.robots, name)())):
+        q = jnp.asarray(random_q(chain, 1, seed=5)[0])
+        for i in range(chain.dof + 1):
+            kin = chain.forward(list(q))
+            T = kin.pose(i)
+            columns = rg.world_from_space(kin.columns(i), T.p)
+            J = np.asarray([[float(c[part][k]) for c in columns] for part in (0, 1) for k in range(3)])
+
+            def pose(q, i=i, chain=chain):
+                return dk.link_poses(chain, q)[i]
+
+            dT = np.moveaxis(np.asarray(jax.jacfwd(pose)(q)), -1, 0)  # (dof, 4, 4)
+            R = np.asarray(pose(q))[:3, :3]
+            v = dT[:, :3, 3].T
+            w = np.stack([se3.vee(jnp.asarray(d[:3, :3] @ R.T)) for d in dT], axis=1)
+            np.testing.assert_allclose(J, np.concatenate([v, w]), atol=1e-10)

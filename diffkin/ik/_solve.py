@@ -365,13 +365,15 @@ def _solve(
     moves = _moves(model_in, spec.terms)
     still = ~np.any(moves, axis=1)  # joints that move no target
 
+    if base_flat is not None:  # the root's guess as state rows (n, 12), for a solved root
+        base_rows = jnp.concatenate([base_flat[:, :3, 3], base_flat[:, :3, :3].reshape(n, 9)], axis=-1)
+
     def lift(idx, q):  # joint seeds (copies, m, dof) -> states: joints that move nothing at q0, the root at its guess
         if q0_flat is not None and np.any(still):
             q = jnp.where(jnp.asarray(still), q0_flat[idx], q)
         if not spec.solve_base:
             return q
-        rows = jnp.concatenate([base_flat[:, :3, 3], base_flat[:, :3, :3].reshape(n, 9)], axis=-1)  # (n, 12)
-        return jnp.concatenate([q, jnp.broadcast_to(rows[idx], q.shape[:2] + (BASE_ROWS,))], axis=-1)
+        return jnp.concatenate([q, jnp.broadcast_to(base_rows[idx], q.shape[:2] + (BASE_ROWS,))], axis=-1)
 
     free = jnp.asarray([not lock for lock in spec.locked])
 
