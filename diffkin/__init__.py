@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from diffkin import collision, ik, robots, se3, srs, workspace
-    from diffkin.kinematics import fk, jacobian, link_poses, manipulability
+    from diffkin.kinematics import com, com_jacobian, fk, jacobian, link_poses, manipulability
     from diffkin.models import DHChain, PoEChain, Robot, load_robot, load_urdf, to_poe
 
 _HOMES = {
@@ -24,6 +24,8 @@ _HOMES = {
     "srs": None,
     "workspace": None,  # submodules
     "viewer": None,  # optional: needs viser and trimesh (pip install "diffkin[viewer]")
+    "com": "diffkin.kinematics",
+    "com_jacobian": "diffkin.kinematics",
     "fk": "diffkin.kinematics",
     "jacobian": "diffkin.kinematics",
     "link_poses": "diffkin.kinematics",
@@ -40,6 +42,8 @@ __all__ = [
     "DHChain",
     "PoEChain",
     "Robot",
+    "com",
+    "com_jacobian",
     "fk",
     "jacobian",
     "link_poses",

@@ -1,4 +1,5 @@
-"""Forward kinematics, Jacobians and manipulability for every model: chains and whole robots."""
+"""Forward kinematics, Jacobians and manipulability for every model (chains and whole robots), and a
+robot's centre of mass."""
 
 from __future__ import annotations
 
@@ -6,9 +7,11 @@ from collections.abc import Callable, Sequence
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.typing import ArrayLike
 
 from diffkin import _rigid as rg
+from diffkin._static import is_concrete
 from diffkin.models import forward
 from diffkin.models.forward import Model
 from diffkin.models.robot import Robot
@@ -256,3 +259,66 @@ def manipulability(model: Model, q: ArrayLike, frame_name: str | None = None, *,
     eye = jnp.eye(G.shape[-1], dtype=G.dtype)
     det_safe = jnp.linalg.det(jnp.where(singular[..., None, None], eye, G))
     return jnp.where(singular, 0.0, jnp.sqrt(det_safe))
+
+
+def _massive(model: Model) -> Robot:
+    """The robot of a centre-of-mass call, its masses checked on the host when they are concrete."""
+    if not isinstance(model, Robot):
+        raise TypeError(f"robot: the centre of mass needs a Robot (its masses), got {type(model).__name__}")
+    forward.check(model)
+    if model.unknown_masses:
+        raise ValueError(f"robot {model.name!r}: unknown masses: {'; '.join(model.unknown_masses)}")
+    if is_concrete(model.masses) and not np.sum(np.asarray(model.masses, np.float64)) > 0:
+        raise ValueError(f"robot {model.name!r}: its masses sum to 0 (no <inertial> in the file): no centre of mass")
+    return model
+
+
+def com(robot: Robot, q: ArrayLike, *, base=None) -> jax.Array:
+    """The robot's centre of mass in the world: ``sum_b m_b p_b / sum_b m_b`` over every body.
+
+    Every body counts, those fixed to the root included (MuJoCo's ``subtree_com`` of the world;
+    Pinocchio's ``centerOfMass`` of a fixed-base URDF leaves out the root link's mass).
+    Differentiable with respect to ``q``, ``base`` and the robot's ``masses`` and ``body_coms``.
+
+    Args:
+        robot: a :class:`Robot` with masses (URDF ``<inertial>``, MJCF inertials or geoms).
+        q: ``(..., dof)`` joint values.
+        base: ``(..., 4, 4)`` pose ``T_world_root`` (default identity).
+
+    Returns:
+        ``(..., 3)`` centre of mass in the world (metres).
+
+    Raises:
+        TypeError: a chain (it has no masses).
+        ValueError: a massless robot, or masses the file does not determine (named).
+    """
+    kin, shape, dtype = _pass(_massive(robot), q, base)
+    c, _ = kin.com()
+    return rg.stack(list(c), shape, dtype)
+
+
+def com_jacobian(robot: Robot, q: ArrayLike, *, base=None, include_base: bool = False) -> jax.Array:
+    """``d com / d q``: the velocity of the centre of mass (world axes) per unit joint motion.
+
+    Args:
+        robot: a :class:`Robot` with masses.
+        q: ``(..., dof)`` joint values.
+        base: ``(..., 4, 4)`` pose ``T_world_root`` (default identity).
+        include_base: prepend the six columns of the root's body twist ``[v; w]`` (as
+            :func:`jacobian`: the root moving as ``T_world_root exp([V] t)``).
+
+    Returns:
+        ``(..., 3, dof)`` (``(..., 3, 6 + dof)`` with ``include_base``); a mimic joint adds its
+        motion (times its multiplier) to its source's column.
+
+    Raises:
+        TypeError, ValueError: as :func:`com`.
+    """
+    kin, shape, dtype = _pass(_massive(robot), q, base)
+    c, columns = kin.com()
+    if include_base:
+        columns = [v for v, _ in rg.world_from_space(rg.root_screws(_base(robot, base)), c)] + columns
+    rows = [column[i] for i in range(3) for column in columns]
+    if not rows:  # a robot without joints
+        return jnp.zeros(shape + (3, 0), dtype)
+    return rg.outputs(rows, shape, dtype).reshape(shape + (3, len(columns)))

@@ -45,9 +45,10 @@ def _apply_equalities(model, qpos: np.ndarray, dq: np.ndarray) -> None:
 
 
 def mujoco_reference(robot, model, q: np.ndarray, base: np.ndarray | None, frames: list[str]):
-    """Poses ``{frame: (4, 4)}`` of MuJoCo's bodies and named sites, and the Jacobians ``(6, nv)``
+    """Poses ``{frame: (4, 4)}`` of MuJoCo's bodies and named sites, the Jacobians ``(6, nv)``
     (world-aligned: ``[jacp; jacr]``) of ``frames`` mapped to diffkin's columns (base columns first
-    for a floating robot)."""
+    for a floating robot), and the centre of mass of the robot (``subtree_com`` of the world, or of
+    the floating root) with its Jacobian (``mj_jacSubtreeCom``) mapped alike."""
     data = mujoco.MjData(model)
     qpos = model.qpos0.copy()
     nq_dk = robot.dof + (6 if robot.floating else 0)
@@ -91,7 +92,10 @@ def mujoco_reference(robot, model, q: np.ndarray, base: np.ndarray | None, frame
         kind, i = ids[frame]
         (mujoco.mj_jacBody if kind == "body" else mujoco.mj_jacSite)(model, data, jacp, jacr, i)
         jacobians[frame] = np.vstack([jacp, jacr]) @ M
-    return poses, jacobians
+    root = model.jnt_bodyid[0] if robot.floating else 0
+    jac_com = np.zeros((3, model.nv))
+    mujoco.mj_jacSubtreeCom(model, data, jac_com, root)
+    return poses, jacobians, (data.subtree_com[root].copy(), jac_com @ M)
 
 
 def random_base(rng) -> np.ndarray:
@@ -112,9 +116,14 @@ def against_mujoco(robot, model, n: int = 3, seed: int = 0, frames=None) -> tupl
     frames = list(robot.frame_names) if frames is None else frames
     poses = np.asarray(dk.link_poses(robot, Q, base=B))
     J = {f: np.asarray(dk.jacobian(robot, Q, f, frame="world", base=B, include_base=robot.floating)) for f in frames}
+    massive = not robot.unknown_masses and np.sum(robot.masses) > 0
+    if massive:  # the centre of mass: every body's mass and centre as MuJoCo compiles them
+        com = dk.com(robot, Q, base=B), dk.com_jacobian(robot, Q, base=B, include_base=robot.floating)
     pose_err = jac_err = 0.0
     for k in range(n):
-        ref, ref_J = mujoco_reference(robot, model, Q[k], None if B is None else B[k], frames)
+        ref, ref_J, ref_com = mujoco_reference(robot, model, Q[k], None if B is None else B[k], frames)
+        if massive:
+            jac_err = max(jac_err, np.abs(com[0][k] - ref_com[0]).max(), np.abs(com[1][k] - ref_com[1]).max())
         expected = set(ref) - ({"world"} if robot.floating else set())
         if robot.floating:  # static world bodies are not part of a floating robot
             expected = {f for f in expected if f not in _static_world_frames(model)}
@@ -276,6 +285,55 @@ def test_frame_elements():
     head = '<default><default class="c"><joint axis="0 1 0" pos=".1 0 0"/></default></default>'
     assert dk.load_robot(mjcf(body, head)).joint_names == ("j0", "j1", "j3", "j2")
     check(mjcf(body, head))
+
+
+MASS_BODY = """
+  <body name="torso" pos="0 0 1"><joint name="j0" axis="0 1 0"/>
+    <geom type="capsule" fromto="0 0 0 .3 .1 0" size=".05"/>
+    <geom class="heavy" type="box" pos=".1 .2 0" size=".1 .05 .02"/>
+    <geom type="sphere" pos="0 0 .3" size=".04" group="4"/><geom type="cylinder" pos="0 .1 0" size=".03 .1" mass="2"/>
+    <body name="arm" pos=".3 0 0"><joint name="j1" axis="0 0 1"/>
+      <inertial pos=".1 .02 0" mass="1.5" diaginertia=".1 .1 .1"/>
+      <geom type="ellipsoid" pos=".2 0 0" size=".1 .05 .04"/>
+      <frame pos="0 .1 0">
+        <body name="hand" pos=".4 0 0"><joint name="j2"/><geom type="sphere" pos=".05 0 0" size=".03"/></body>
+      </frame>
+    </body>
+    <body name="empty" pos="0 0 .2"><joint name="j3" axis="1 0 0"/></body>
+  </body>"""
+
+
+@pytest.mark.parametrize(
+    "compiler",
+    [
+        "",
+        '<compiler inertiafromgeom="true"/>',
+        '<compiler inertiagrouprange="0 3"/>',
+        '<compiler boundmass="0.7" boundinertia="0.1" settotalmass="9"/>',
+    ],
+    ids=["auto", "from-geoms", "group-range", "bound-and-total"],
+)
+def test_masses_and_centres_of_mass_as_mujoco_compiles_them(compiler):
+    """Inertials, geom volumes (fromto, every primitive), mass and density from classes, group ranges,
+    boundmass and settotalmass: the centre of mass and its Jacobian against MuJoCo's."""
+    head = compiler + '<default><default class="heavy"><geom density="3000"/></default></default>'
+    robot = dk.load_robot(mjcf(MASS_BODY, head))
+    assert np.sum(robot.masses) > 0 and not robot.unknown_masses
+    check(mjcf(MASS_BODY, head))
+
+
+def test_a_mesh_geom_without_inertial_has_an_unknown_mass():
+    body = '<body name="b"><joint name="j"/><geom type="mesh" mesh="m"/></body>'
+    robot = dk.load_robot(
+        mjcf(body, tail="").replace(
+            "<worldbody>", '<asset><mesh name="m" vertex="0 0 0 1 0 0 0 1 0 0 0 1"/></asset><worldbody>'
+        )
+    )
+    assert dk.fk(robot, np.zeros(1), "b").shape == (4, 4)  # the kinematics load
+    with pytest.raises(
+        ValueError, match=r"unknown masses: body 'b': the mass of its mesh geom \(give the body an <inertial>\)"
+    ):
+        dk.com(robot, np.zeros(1))
 
 
 def test_include_files_relative_to_the_main_file(tmp_path):

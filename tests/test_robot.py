@@ -1,6 +1,7 @@
 """Whole robots (trees, mimic joints, floating roots): every frame and Jacobian against Pinocchio on the
-URDFs of example-robot-data, finite differences, chains cut from trees, and bad input."""
+URDFs of example-robot-data (centre of mass too), finite differences, chains cut from trees, and bad input."""
 
+import dataclasses
 import glob
 import os
 import time
@@ -62,6 +63,27 @@ def _pin_q(model, robot, q):
     return qp
 
 
+def _com_error(robot, model, data, q, base=None) -> float:
+    """Largest difference between ``dk.com``/``dk.com_jacobian`` and Pinocchio's ``centerOfMass``/
+    ``jacobianCenterOfMass``: a fixed root's link mass (Pinocchio's universe inertia, which its centre
+    of mass leaves out) added back; with ``base``, Pinocchio's free-flyer model (body-twist columns)."""
+    floating = base is not None
+    c, J = dk.com(robot, q, base=base), dk.com_jacobian(robot, q, base=base, include_base=floating)
+    m0, p0 = model.inertias[0].mass, model.inertias[0].lever
+    worst = 0.0
+    for k in range(len(q)):
+        qp = _pin_q(model, robot, q[k])
+        if floating:
+            qp[:7] = pin.SE3ToXYZQUAT(pin.SE3(base[k]))
+        c_pin, J_pin = pin.centerOfMass(model, data, qp), pin.jacobianCenterOfMass(model, data, qp)
+        M = data.mass[0] + m0
+        c_ref = (data.mass[0] * c_pin + m0 * p0) / M
+        J_joints = _pin_columns(model, robot, np.vstack([J_pin, np.zeros_like(J_pin)]))[:3]
+        J_ref = data.mass[0] / M * (np.hstack([J_pin[:, :6], J_joints]) if floating else J_joints)
+        worst = max(worst, np.abs(c_ref - c[k]).max(), np.abs(J_ref - J[k]).max())
+    return worst
+
+
 def _pin_columns(model, robot, J):
     """Pinocchio's ``(6, nv)`` Jacobian as ours: each joint's column, times its multiplier, on its source's column."""
     out = np.zeros((6, robot.dof))
@@ -102,6 +124,8 @@ def test_every_frame_and_jacobian_matches_pinocchio(path):
             J_pin = pin.getFrameJacobian(model, data, model.getFrameId(robot.frame_names[f], pin.BODY), ref_frames[ref])
             worst_jac = max(worst_jac, np.abs(_pin_columns(model, robot, J_pin) - J[k]).max())
     assert worst_pose < 1e-10 and worst_jac < 1e-10, (worst_pose, worst_jac)
+    if robot.dof and np.sum(robot.masses) > 0:  # the centre of mass (eager: no compile per robot)
+        assert _com_error(robot, model, data, q) < 1e-10
     # the limits of the revolute and prismatic joints (continuous ones: (cos, sin) in Pinocchio)
     for i, name in enumerate(robot.joint_names):
         joint = model.joints[model.getJointId(name)]
@@ -111,6 +135,49 @@ def test_every_frame_and_jacobian_matches_pinocchio(path):
 
 
 @pytest.mark.slow
+@pytest.mark.skipif(not ERD, reason="example-robot-data is not installed")
+@pytest.mark.parametrize(
+    "name",
+    ["talos_data/robots/talos_full_v2.urdf", "g1_description/urdf/g1_29dof_with_hand_rev_1_0.urdf", "solo12"],
+)
+def test_com_of_floating_robots_matches_pinocchio(name):
+    path = os.path.join(ERD, "solo_description/robots/solo12.urdf" if name == "solo12" else name)
+    robot = dk.load_robot(path, floating=True)
+    model = pin.buildModelFromUrdf(path, pin.JointModelFreeFlyer())
+    q = _random_q(robot, 3, seed=7)
+    base = np.stack([pin.exp6(v).homogeneous for v in np.random.default_rng(7).normal(size=(3, 6))])
+    assert _com_error(robot, model, model.createData(), q, np.asarray(base)) < 1e-10
+
+
+def test_com_gradients_with_respect_to_masses_match_finite_differences(panda):
+    """Identification: d com / d masses (and body_coms) against central differences, float64."""
+    q = _random_q(panda, 4, seed=3)
+
+    def centre(masses, body_coms):
+        return dk.com(dataclasses.replace(panda, masses=masses, body_coms=body_coms), q)
+
+    m, c = panda.masses, panda.body_coms
+    dm, dc = jax.jacfwd(centre, argnums=(0, 1))(m, c)
+    eps = 1e-6
+    for b in range(len(m)):
+        step = jnp.zeros_like(m).at[b].set(eps)
+        np.testing.assert_allclose(dm[..., b], (centre(m + step, c) - centre(m - step, c)) / (2 * eps), atol=1e-9)
+        step = jnp.zeros_like(c).at[b, 1].set(eps)
+        np.testing.assert_allclose(dc[..., b, 1], (centre(m, c + step) - centre(m, c - step)) / (2 * eps), atol=1e-9)
+
+
+def test_com_refuses_what_has_no_masses():
+    chain = dk.load_urdf(PANDA, "panda_link8")
+    with pytest.raises(TypeError, match="needs a Robot"):
+        dk.com(chain, np.zeros(7))
+    massless = dk.load_robot(_urdf(_joint("j", "revolute", "a", "b", '<axis xyz="0 0 1"/>')))
+    with pytest.raises(ValueError, match="masses sum to 0"):
+        dk.com_jacobian(massless, np.zeros(1))
+    bad = _urdf("", ["a"]).replace('<link name="a"/>', '<link name="a"><inertial><mass value="-1"/></inertial></link>')
+    with pytest.raises(ValueError, match=r"link 'a' <inertial> <mass> value: expected a non-negative mass"):
+        dk.load_robot(bad)
+
+
 @pytest.mark.parametrize("kind", ["revolute", "prismatic"])
 @pytest.mark.parametrize(
     "attributes", ['upper="1.5"', 'lower="-0.5"', "", 'lower="-2" upper="0.25"', 'upper="1e-3" lower="-1e-3"']

@@ -7,9 +7,11 @@ by ``qpos - ref``. Lengths are metres; angles are degrees unless ``<compiler ang
 (Euler angles in ``<compiler eulerseq>``, default ``xyz``: lowercase about moving axes, uppercase
 about fixed axes). ``<default>`` classes (nested, ``class``, ``childclass``), ``<frame>``
 transforms and ``<include>`` are resolved as MuJoCo does; joint limits follow ``limited``,
-``range`` and ``<compiler autolimits>`` (radians in ``q``, ``+-inf`` when unlimited). Geoms,
-inertia, cameras, lights, actuators, sensors and tendons that no equality uses do not move
-anything and are ignored; mocap bodies are fixed at their pose in the file.
+``range`` and ``<compiler autolimits>`` (radians in ``q``, ``+-inf`` when unlimited). Body masses
+and centres of mass are MuJoCo's ``body_mass`` and ``body_ipos`` (:mod:`diffkin.models._mjcf_mass`).
+Geoms (but for their masses), inertia tensors, cameras, lights, actuators, sensors and tendons
+that no equality uses do not move anything and are ignored; mocap bodies are fixed at their pose
+in the file.
 
 Frames: the world body is ``"world"``; every body is a frame by its name (an unnamed body is
 ``body{id}``, ``id`` its MuJoCo body id); every named ``<site>`` is a frame (``site:{name}`` if a
@@ -40,7 +42,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from diffkin.models import _xml
+from diffkin.models import _mjcf_mass, _xml
 from diffkin.models.robot import JointSpec, Robot, build
 
 _ORIENTATIONS = ("quat", "axisangle", "euler", "xyaxes", "zaxis")
@@ -112,6 +114,8 @@ class _Part:
     joints: list[JointSpec] = dataclasses.field(default_factory=list)
     links: list[str] = dataclasses.field(default_factory=list)
     sites: list[tuple[str, str, np.ndarray]] = dataclasses.field(default_factory=list)
+    inertials: dict[str, tuple[float, np.ndarray]] = dataclasses.field(default_factory=dict)
+    unknown_masses: list[str] = dataclasses.field(default_factory=list)
     free: ET.Element | None = None
 
 
@@ -128,6 +132,7 @@ class _Reader:
             self._defaults(el, name, None if name == "main" else "main")
         self.n_bodies, self.n_joints = 1, 0
         self.parts: dict[str, _Part] = {"world": _Part(links=["world"])}
+        self.mass_rules = _mjcf_mass.Compiler(root, self)
 
     def _compiler(self, el: ET.Element) -> None:
         angle, seq, auto = el.get("angle"), el.get("eulerseq"), el.get("autolimits")
@@ -244,8 +249,8 @@ class _Reader:
     # -- the body tree
 
     def _contents(self, el: ET.Element, cls: str) -> list[tuple[ET.Element, np.ndarray, str]]:
-        """The joints, sites and bodies of a body (through its ``<frame>``s, any depth), in document
-        order, each as ``(element, pose of its container in the body frame, class)``."""
+        """The joints, sites, bodies, geoms and inertial of a body (through its ``<frame>``s, any depth),
+        in document order, each as ``(element, pose of its container in the body frame, class)``."""
         out = []
         todo = [(child, np.eye(4), cls) for child in reversed(el)]
         while todo:
@@ -255,7 +260,7 @@ class _Reader:
             if child.tag == "frame":
                 inner, T_frame = self._class(child, cls, "childclass"), T @ self._pose(child)
                 todo.extend((grandchild, T_frame, inner) for grandchild in reversed(child))
-            elif child.tag in ("joint", "freejoint", "site", "body"):
+            elif child.tag in ("joint", "freejoint", "site", "body", "geom", "inertial"):
                 out.append((child, T, cls))
         return out
 
@@ -330,7 +335,13 @@ class _Reader:
         name = el.get("name") or f"body{bid}"
         part.links.append(name)
         moving: list[JointSpec] = []
-        for child, T, c in self._contents(el, self._class(el, cls, "childclass")):
+        contents = self._contents(el, self._class(el, cls, "childclass"))
+        inertial = _mjcf_mass.body(self, self.mass_rules, el, name, contents)
+        if isinstance(inertial, str):
+            part.unknown_masses.append(inertial)
+        else:
+            part.inertials[name] = inertial
+        for child, T, c in contents:
             if child.tag in ("joint", "freejoint"):
                 spec, free = self._joint(child, T, c, name)
                 if free and (parent != "world" or part.free is not None):
@@ -507,4 +518,19 @@ def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
     links = [n for p in parts for n in p.links]
     bodies = set(links)
     sites = [(f"site:{n}" if n in bodies else n, body, T) for p in parts for n, body, T in p.sites]
-    return build(joints, links, frames=sites, floating=bool(free), name=root.get("model", ""), where="MJCF")
+    total = reader.mass_rules.total
+    scale = 1.0
+    if total is not None:  # settotalmass: over every body of the model (MuJoCo's), including those left out here
+        given = sum(m for p in reader.parts.values() for m, _ in p.inertials.values())
+        scale = total / given if given > 0 else 1.0
+    inertials = {n: (scale * m, c) for p in parts for n, (m, c) in p.inertials.items()}
+    return build(
+        joints,
+        links,
+        frames=sites,
+        inertials=inertials,
+        unknown_masses=[u for p in parts for u in p.unknown_masses],
+        floating=bool(free),
+        name=root.get("model", ""),
+        where="MJCF",
+    )

@@ -9,7 +9,8 @@ joint ``j`` moves body ``j + 1`` relative to body ``parents[j]`` (so parents com
 Fixed joints are merged: a link fixed to a body is a named *frame* of that body, at a constant
 pose ``frame_poses[f]`` in the body frame. URDF links and MJCF bodies and sites are all frames.
 ``q`` holds the actuated joints only; a mimic joint follows its source joint through
-``multipliers``/``offsets`` (and an MJCF joint's ``ref`` is an offset too).
+``multipliers``/``offsets`` (and an MJCF joint's ``ref`` is an offset too). Each body has a mass
+and a centre of mass (its links' URDF ``<inertial>`` or MJCF inertial, merged over fixed joints).
 
 Robots are built by the loaders (:func:`diffkin.load_robot`) through :func:`build`, which takes
 a host-side list of :class:`JointSpec` and checks the tree (one root, no loops, one parent per
@@ -19,7 +20,7 @@ link, known mimic sources, no mimic cycles).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -45,6 +46,8 @@ class Robot:
             (``1, 0`` for an actuated joint without MJCF ``ref``).
         frame_poses: ``(nf, 4, 4)`` pose of each named frame in the frame of its body.
         lower, upper: ``(dof,)`` limits of the actuated joints (``-inf``/``inf`` if unlimited).
+        masses: ``(nj + 1,)`` mass of each body in kg (its links merged).
+        body_coms: ``(nj + 1, 3)`` centre of mass of each body in the body's frame (metres).
         parents: static, per joint, the index of its parent body (``< j + 1``).
         joint_types: static, per joint, ``"R"`` (revolute) or ``"P"`` (prismatic).
         sources: static, per joint, the index in ``q`` of the actuated joint that drives it.
@@ -54,6 +57,8 @@ class Robot:
         joint_names: static names of the actuated joints, the order of ``q``.
         floating: static; ``True`` if the root moves (its pose is an argument of ``fk``).
         name: static name of the robot.
+        unknown_masses: static, the links whose mass the file does not determine (an MJCF mesh
+            geom without ``<inertial>``), each with the reason; :func:`diffkin.com` refuses them.
     """
 
     joint_poses: jax.Array
@@ -63,6 +68,8 @@ class Robot:
     frame_poses: jax.Array
     lower: jax.Array
     upper: jax.Array
+    masses: jax.Array
+    body_coms: jax.Array
     parents: tuple[int, ...] = static()
     joint_types: str = static()
     sources: tuple[int, ...] = static()
@@ -72,6 +79,7 @@ class Robot:
     joint_names: tuple[str, ...] = static()
     floating: bool = static(default=False)
     name: str = static(default="")
+    unknown_masses: tuple[str, ...] = static(default=())
 
     @property
     def dof(self) -> int:
@@ -109,8 +117,15 @@ class Robot:
         check.leaf(self.offsets, "offsets", (nj,), concrete)
         F = check.leaf(self.frame_poses, "frame_poses", (nf, 4, 4), concrete)
         lo, hi = check.limit_leaves(self, dof, concrete)
+        m = check.leaf(self.masses, "masses", (nj + 1,), concrete)
+        check.leaf(self.body_coms, "body_coms", (nj + 1, 3), concrete)
+        if not isinstance(self.unknown_masses, tuple) or not all(isinstance(n, str) for n in self.unknown_masses):
+            raise TypeError(f"unknown_masses: expected a tuple of strings, got {self.unknown_masses!r}")
         if not concrete:
             return
+        assert m is not None
+        if np.any(m < 0):
+            raise ValueError(f"masses: expected non-negative masses (kg), got {m.min()} at index {int(m.argmin())}")
         assert S is not None and P is not None and F is not None  # concrete: check.leaf returned the values
         for j, kind in enumerate(_screw_types(S, check.tolerance(self.screws))):
             if kind != self.joint_types[j]:
@@ -285,6 +300,39 @@ class RobotPass:
         """Every frame, in ``robot.frame_names`` order."""
         return [self.pose(f) for f in range(len(self.robot.frame_names))]
 
+    def com(self) -> tuple[rg.Vec3, list[rg.Vec3]]:
+        """The centre of mass in the world, and per entry of ``q`` its velocity per unit ``q_i``.
+
+        Joint ``j`` carries the bodies below it, of mass ``M_j`` and first moment ``S_j = sum m p``
+        (world); its space screw ``(v_j, w_j)`` moves the centre by ``(M_j v_j + w_j x S_j) / M``.
+        """
+        robot = self.robot
+        masses = rg.per_joint(host(robot.masses))
+        c = host(robot.body_coms)
+        moments = [
+            rg.scale(masses[b], rg.vadd(rg.rotate(T.R, rg.vector(c[b])), T.p)) for b, T in enumerate(self.bodies)
+        ]
+        for j in reversed(range(len(robot.parents))):  # subtree sums, leaves first (children follow parents)
+            parent = robot.parents[j]
+            masses[parent] = rg.add(masses[parent], masses[j + 1])
+            moments[parent] = rg.vadd(moments[parent], moments[j + 1])
+        inverse = _reciprocal(masses[0])
+        zero = (0.0, 0.0, 0.0)
+        columns: list[rg.Vec3] = [zero] * robot.dof
+        for j, (v, w) in enumerate(self.screws):
+            i, k = robot.sources[j], rg.mul(self.multipliers[j], inverse)
+            moved = rg.vadd(rg.scale(masses[j + 1], v), rg.cross(w, moments[j + 1]))
+            columns[i] = rg.vadd(columns[i], rg.scale(k, moved))
+        return rg.scale(inverse, moments[0]), columns
+
+
+def _reciprocal(total: rg.Entry) -> rg.Entry:
+    """``1 / total`` of a total mass, 0 for a massless robot (finite under ``jit``; the host refuses it)."""
+    if isinstance(total, float):
+        return 1.0 / total if total > 0.0 else 0.0
+    positive = total > 0
+    return jnp.where(positive, 1.0 / jnp.where(positive, total, 1.0), 0.0)
+
 
 # --------------------------------------------------------------------------------------------- building
 
@@ -322,6 +370,8 @@ def build(
     links: Sequence[str],
     *,
     frames: Sequence[tuple[str, str, np.ndarray]] = (),
+    inertials: Mapping[str, tuple[float, np.ndarray]] | None = None,
+    unknown_masses: Sequence[str] = (),
     floating: bool = False,
     name: str = "",
     where: str = "robot",
@@ -334,6 +384,9 @@ def build(
         links: every named link; joints may also connect unnamed links (not frames; the MJCF
             loader uses them for bodies with several joints).
         frames: extra fixed frames ``(name, link, T_link_frame)``.
+        inertials: ``{link: (mass, centre of mass (3,) in the link frame)}`` (links left out are
+            massless); merged per body.
+        unknown_masses: links whose mass the description does not determine, with the reason.
         floating: whether the root moves.
         name: robot name.
         where: what the description is called in error messages (``"URDF"``, ``"MJCF"``).
@@ -427,6 +480,13 @@ def build(
         body, T_body_link = body_of[link]
         frame_specs.append((fname, body, T_body_link @ check.rigid_transform(T, f"frame {fname!r}")))
         frame_names.append(fname)
+    masses, moments = np.zeros(len(moving) + 1), np.zeros((len(moving) + 1, 3))
+    for link, (mass, com) in (inertials or {}).items():
+        if link in body_of:  # (a floating URDF joint's world link is not part of the robot)
+            body, T_body_link = body_of[link]
+            masses[body] += mass
+            moments[body] += mass * (T_body_link[:3, :3] @ com + T_body_link[:3, 3])
+    body_coms = moments / np.where(masses > 0, masses, 1.0)[:, None]
     f = jnp.asarray
     nj = len(moving)
     return Robot(
@@ -437,6 +497,8 @@ def build(
         frame_poses=f(np.array([T for _, _, T in frame_specs]).reshape(-1, 4, 4)),
         lower=f(np.array([j.lower for j in actuated], np.float64)),
         upper=f(np.array([j.upper for j in actuated], np.float64)),
+        masses=f(masses),
+        body_coms=f(body_coms),
         parents=tuple(parents),
         joint_types="".join(j.kind for j in moving),
         sources=tuple(sources),
@@ -446,4 +508,5 @@ def build(
         joint_names=tuple(j.name for j in actuated),
         floating=bool(floating),
         name=name,
+        unknown_masses=tuple(unknown_masses),
     )

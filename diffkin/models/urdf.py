@@ -83,20 +83,35 @@ def _read(source) -> ET.Element:
     return root
 
 
-def _parse(root: ET.Element) -> tuple[list[JointSpec], list[str]]:
-    links = []
+def _inertial(el: ET.Element, link: str) -> tuple[float, np.ndarray] | None:
+    """``(mass, centre of mass in the link frame)`` of a link's ``<inertial>`` (``None`` without one)."""
+    inertial = el.find("inertial")
+    if inertial is None:
+        return None
+    where = f"URDF link {link!r} <inertial>"
+    mass = float(_xml.numbers(inertial.find("mass"), "value", 1, None, f"{where} <mass>")[0])
+    if mass < 0:
+        raise ValueError(f"{where} <mass> value: expected a non-negative mass (kg), got {mass}")
+    return mass, _xml.numbers(inertial.find("origin"), "xyz", 3, "0 0 0", f"{where} <origin>")
+
+
+def _parse(root: ET.Element) -> tuple[list[JointSpec], list[str], dict[str, tuple[float, np.ndarray]]]:
+    links, inertials = [], {}
     for el in root.findall("link"):
         name = el.get("name")
         if not name:
             raise ValueError("URDF <link>: missing 'name' attribute")
         links.append(name)
+        inertial = _inertial(el, name)
+        if inertial is not None:
+            inertials[name] = inertial
     joints = [_parse_joint(el) for el in root.findall("joint")]
     known = set(links)
     for j in joints:
         for link in (j.parent, j.child):
             if link not in known:
                 raise ValueError(f"URDF joint {j.name!r}: link {link!r} is not defined by a <link> element")
-    return joints, links
+    return joints, links, inertials
 
 
 def robot_from_urdf(root: ET.Element, *, floating: bool = False) -> Robot:
@@ -104,7 +119,14 @@ def robot_from_urdf(root: ET.Element, *, floating: bool = False) -> Robot:
     return _robot(root, *_parse(root), floating=floating)
 
 
-def _robot(root: ET.Element, joints: list[JointSpec], links: list[str], *, floating: bool = False) -> Robot:
+def _robot(
+    root: ET.Element,
+    joints: list[JointSpec],
+    links: list[str],
+    inertials: dict[str, tuple[float, np.ndarray]],
+    *,
+    floating: bool = False,
+) -> Robot:
     """The :class:`Robot` of the joints and links read from ``root`` (a floating root joint made the base)."""
     free = [j for j in joints if j.kind == "floating"]
     if free:
@@ -116,7 +138,7 @@ def _robot(root: ET.Element, joints: list[JointSpec], links: list[str], *, float
                 "of the root link (the floating base)"
             )
         joints, links, floating = [k for k in joints if k is not j], [n for n in links if n != j.parent], True
-    return build(joints, links, floating=floating, name=root.get("name", ""), where="URDF")
+    return build(joints, links, inertials=inertials, floating=floating, name=root.get("name", ""), where="URDF")
 
 
 def load_urdf(source, end_link: str | None = None, *, base_link: str | None = None) -> PoEChain:
@@ -141,8 +163,8 @@ def load_urdf(source, end_link: str | None = None, *, base_link: str | None = No
             and no ``end_link``, unsupported joint types, or a mimic coupling a chain cannot hold.
     """
     root = _read(source)
-    joints, links = _parse(root)
-    robot = _robot(root, joints, links)
+    joints, links, inertials = _parse(root)
+    robot = _robot(root, joints, links, inertials)
     for arg, link in (("base_link", base_link), ("end_link", end_link)):
         if link is not None and link not in links:
             raise ValueError(f"{arg}: unknown link {link!r}; available links: {sorted(links)}")
