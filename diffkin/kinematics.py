@@ -261,8 +261,9 @@ def manipulability(model: Model, q: ArrayLike, frame_name: str | None = None, *,
     return jnp.where(singular, 0.0, jnp.sqrt(det_safe))
 
 
-def _massive(model: Model) -> Robot:
-    """The robot of a centre-of-mass call, its masses checked on the host when they are concrete."""
+def massive(model: Model) -> Robot:
+    """``robot``, checked for a centre of mass on the host: a Robot whose masses the file determines
+    and (when concrete) do not sum to 0."""
     if not isinstance(model, Robot):
         raise TypeError(f"robot: the centre of mass needs a Robot (its masses), got {type(model).__name__}")
     forward.check(model)
@@ -292,7 +293,7 @@ def com(robot: Robot, q: ArrayLike, *, base=None) -> jax.Array:
         TypeError: a chain (it has no masses).
         ValueError: a massless robot, or masses the file does not determine (named).
     """
-    kin, shape, dtype = _pass(_massive(robot), q, base)
+    kin, shape, dtype = _pass(massive(robot), q, base)
     c, _ = kin.com()
     return rg.stack(list(c), shape, dtype)
 
@@ -314,7 +315,7 @@ def com_jacobian(robot: Robot, q: ArrayLike, *, base=None, include_base: bool = 
     Raises:
         TypeError, ValueError: as :func:`com`.
     """
-    kin, shape, dtype = _pass(_massive(robot), q, base)
+    kin, shape, dtype = _pass(massive(robot), q, base)
     c, columns = kin.com()
     if include_base:
         columns = [v for v, _ in rg.world_from_space(rg.root_screws(_base(robot, base)), c)] + columns

@@ -181,6 +181,35 @@ def test_quadruped_four_feet_with_floating_base(solo, solo_solved):
     assert np.all(q >= np.asarray(solo.lower, np.float32)) and np.all(q <= np.asarray(solo.upper, np.float32))
 
 
+@pytest.mark.parametrize("axes", [2, 3], ids=["horizontal", "3-D"])
+def test_centre_of_mass_target_with_feet_and_floating_base(solo, axes):
+    """Four feet and the centre of mass (over the support: horizontal, or a point), the root solved:
+    every success re-checked by Pinocchio (feet, and its centerOfMass with the returned root)."""
+    n, rng = 32, np.random.default_rng(5)
+    q_true = _random_q(solo, n, seed=6)
+    base = np.tile(np.eye(4), (n, 1, 1))
+    base[:, :3, :3] = _rotations(rng.normal(0, 0.2, (n, 3)))
+    feet = np.asarray(dk.fk(solo, q_true, FEET, base=base))[..., :3, 3]
+    com = np.asarray(dk.com(solo, q_true, base=base))[:, :axes]
+    targets = {c: jnp.asarray(feet[:, k], jnp.float32) for k, c in enumerate(FEET)}
+    res = dk.ik.solve(solo, targets, com=jnp.asarray(com, jnp.float32), solve_base=True, key=jax.random.key(8))
+    assert res.com_err.shape == (n,) and res.pos_err.shape == (n, 4)
+    assert _rate(res.success) >= 0.95
+    ok = np.asarray(res.success)
+    assert np.all(np.asarray(res.com_err)[ok] <= POS_TOL)
+    model = pin.buildModelFromUrdf(SOLO, pin.JointModelFreeFlyer())
+    data = model.createData()
+    base_got = np.asarray(res.base, np.float64)
+    for i in np.flatnonzero(ok):
+        qp = _pin_q(model, solo, np.asarray(res.q[i], np.float64))
+        qp[:7] = pin.SE3ToXYZQUAT(pin.SE3(base_got[i]))
+        c = pin.centerOfMass(model, data, qp)
+        assert np.linalg.norm(c[:axes] - com[i]) <= POS_TOL, i
+        pin.framesForwardKinematics(model, data, qp)
+        for k, name in enumerate(FEET):
+            assert np.linalg.norm(data.oMf[model.getFrameId(name)].translation - feet[i, k]) <= POS_TOL, (i, name)
+
+
 @pytest.fixture(scope="module")
 def iiwa():
     return dk.load_robot(dk.robots.urdf_path("iiwa14"))
@@ -292,6 +321,9 @@ def test_bad_arguments_raise_before_tracing(baxter):
         (dict(secondary="rest"), ValueError, "needs a rest configuration"),
         (dict(rest=np.zeros(3)), ValueError, "rest: expected shape"),
         (dict(solve_base=True), ValueError, "fixed root"),
+        (dict(com=np.zeros(4)), ValueError, r"com: expected shape \(\.\.\., 3\)"),
+        (dict(com=np.zeros((2, 3))), ValueError, "batch shape"),
+        (dict(com="middle"), TypeError, "com: expected an array"),
     ]
     for kwargs, error, match in cases:
         kwargs = {"target": {"left_gripper": T}, **kwargs}
@@ -301,6 +333,8 @@ def test_bad_arguments_raise_before_tracing(baxter):
         dk.ik.solve(dk.load_robot(TALOS, floating=True), {"left_sole_link": T}, solve_base=True, method="optax")
     with pytest.raises(ValueError, match="only for a Robot"):
         dk.ik.solve(dk.robots.iiwa14(), T, weights={"x": (1, 1)})
+    with pytest.raises(ValueError, match="com: only for a Robot"):
+        dk.ik.solve(dk.robots.iiwa14(), T, com=np.zeros(3))
 
 
 def test_panda_tree_with_mimic_finger_and_position_target():

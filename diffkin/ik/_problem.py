@@ -56,7 +56,8 @@ class Kinematics:
 
     ``pose(frame)``: the frame's world pose; ``columns(frame)``: per column of the state, the
     space twist of the frame's motion: one per joint (zero for a locked joint), then, when the
-    root is solved, the six of the root's body twist. ``dtype``: the solver's dtype.
+    root is solved, the six of the root's body twist; ``com()``: a robot's centre of mass and its
+    velocity per column. ``dtype``: the solver's dtype.
     """
 
     def __init__(self, problem: Problem, x: jax.Array):
@@ -73,6 +74,13 @@ class Kinematics:
         zero = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
         joints = [zero if lock else c for lock, c in zip(self.locked, self.kin.columns(frame), strict=True)]
         return joints + self.root_columns
+
+    def com(self) -> tuple[rg.Vec3, list[rg.Vec3]]:
+        """The robot's centre of mass and its velocity per column of the state."""
+        c, velocities = self.kin.com()
+        zero = (0.0, 0.0, 0.0)
+        joints = [zero if lock else v for lock, v in zip(self.locked, velocities, strict=True)]
+        return c, joints + [v for v, _ in rg.world_from_space(self.root_columns, c)]
 
 
 class Problem(NamedTuple):

@@ -25,6 +25,8 @@ class IKResult(NamedTuple):
         iters: ``(...,)`` int32 number of solver iterations the returned seed ran.
         base: ``(..., 4, 4)`` the solved root pose ``T_world_root`` of a floating robot solved
             with ``solve_base=True``, else ``None``.
+        com_err: ``(...,)`` distance in metres between the centre of mass and its target (over the
+            horizontal axes for a horizontal target) when solved with ``com=``, else ``None``.
 
     For a :class:`~diffkin.Robot` with ``k`` targets, ``pos_err`` and ``rot_err`` are ``(..., k)``
     (in the order of the ``targets`` mapping), each measured on the target's weighted axes only,
@@ -37,3 +39,4 @@ class IKResult(NamedTuple):
     rot_err: jax.Array
     iters: jax.Array
     base: jax.Array | None = None
+    com_err: jax.Array | None = None

@@ -24,6 +24,7 @@ from diffkin.ik._prepare import cast, detach, inward, valid_targets
 from diffkin.ik._problem import BASE_ROWS, Problem
 from diffkin.ik._result import IKResult
 from diffkin.ik._terms import pose, relative
+from diffkin.ik._terms.com import ComTarget, from_target
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain
 from diffkin.models.robot import Robot
@@ -63,6 +64,7 @@ def solve(
     solve_base: bool = False,
     base=None,
     relative=None,
+    com=None,
 ) -> IKResult:
     """Inverse kinematics for a batch of targets, from random seeds (and an optional warm start).
 
@@ -122,6 +124,9 @@ def solve(
             (or the position ``(..., 3)`` of ``b``'s origin in ``a``), the batch shape of ``target``
             (which may then be empty): two hands holding one object, a tool held against a part.
             Their errors follow the targets' in ``IKResult.pos_err``/``rot_err``.
+        com: robots: ``(..., 3)`` the centre of mass in the world, or ``(..., 2)`` its horizontal
+            components only (balance over the feet), the batch shape of ``target`` (which may then
+            be empty); its error is ``IKResult.com_err`` and success needs it within ``pos_tol``.
         weights: robots: ``{frame_name: w}`` (``{(a, b): w}`` for a relative target), ``w`` six
             non-negative weights of the ``[v; w]`` error in the target frame (world axes for a
             position target) or a pair
@@ -157,7 +162,7 @@ def solve(
         max_iters = facts.iters_robot if is_robot else facts.iters_chain
     _args.check_settings(num_seeds, method, 0 if max_iters is None else max_iters, pos_tol, rot_tol, optimizer)
     if is_robot:
-        terms, arrays, batch = _robot_terms(chain, target, relative, weights)
+        terms, arrays, batch = _robot_terms(chain, target, relative, weights, com)
     else:
         for name, value in (
             ("weights", weights),
@@ -166,6 +171,7 @@ def solve(
             ("secondary", secondary),
             ("base", base),
             ("relative", relative),
+            ("com", com),
         ):
             if value is not None:
                 raise ValueError(f"{name}: only for a Robot (solve dk.load_robot(...) with a mapping of targets)")
@@ -200,7 +206,8 @@ def solve(
     spec = Spec(terms, mask, _args.secondary_spec(secondary, rest), bool(solve_base), is_robot)
     if 0 in batch:  # no targets: empty results of the batch's shape
         empty = lambda *shape, dt=dtype: jnp.zeros(batch + shape, dt)  # noqa: E731
-        errors = (len(terms),) if is_robot else ()
+        has_com = isinstance(terms[-1], ComTarget)
+        errors = (len(terms) - has_com,) if is_robot else ()
         return IKResult(
             empty(chain.dof),
             empty(dt=bool),
@@ -208,6 +215,7 @@ def solve(
             empty(*errors),
             empty(dt=jnp.int32),
             empty(4, 4) if solve_base else None,
+            empty() if has_com else None,
         )
     static, traced = partition(chain)
     as_dtype = lambda x: None if x is None else jnp.asarray(x, dtype)  # noqa: E731
@@ -232,14 +240,17 @@ def solve(
     )
 
 
-def _robot_terms(robot: Robot, targets, relative_targets, weights) -> tuple[tuple, list, tuple[int, ...]]:
-    """The terms of a robot's targets (world, then relative), their arrays and their batch shape."""
+def _robot_terms(robot: Robot, targets, relative_targets, weights, com) -> tuple[tuple, list, tuple[int, ...]]:
+    """The terms of a robot's targets (world, relative, then the centre of mass), their arrays and their
+    batch shape."""
     if weights is not None and not isinstance(weights, Mapping):
         raise TypeError(f"weights: expected a mapping from target frame names to weights, got {type(weights).__name__}")
     weights = {} if weights is None else weights
     found: list[tuple[Any, Any, str]] = list(pose.from_mapping(robot, targets, weights))
     if relative_targets is not None:
         found += relative.from_mapping(robot, relative_targets, weights)
+    if com is not None:
+        found.append((*from_target(robot, com), "'com'"))
     if not found:
         raise TypeError(f"target: for a Robot, expected a non-empty mapping frame name -> target, got {targets!r}")
     keys = set(targets) | set(relative_targets or ())
@@ -436,6 +447,10 @@ def _solve(
             .at[:, 3, 3]
             .set(1.0)
         )
+    com_err = None
+    if isinstance(spec.terms[-1], ComTarget):  # the centre of mass: its own field
+        com_err, pos_err, rot_err = pos_err[:, -1].reshape(batch), pos_err[:, :-1], rot_err[:, :-1]
+        k -= 1
     tail = (k,) if spec.errors_per_term else ()
     return IKResult(
         q=x[:dof].T.reshape(batch + (dof,)),
@@ -444,4 +459,5 @@ def _solve(
         rot_err=rot_err.reshape(batch + tail),
         iters=best.iters.reshape(batch),
         base=None if T_world_root is None else T_world_root.reshape(batch + (4, 4)),
+        com_err=com_err,
     )

@@ -1,0 +1,62 @@
+"""The robot's centre of mass at a point of the world (3-D, or its horizontal components only):
+balance over the feet of a humanoid or a quadruped.
+
+The error is ``c_t - c`` in world axes (the vertical row dropped for a horizontal target); its
+Jacobian rows are the centre's velocity per column of the state (:meth:`RobotPass.com`). Success
+needs ``|c_t - c| <= pos_tol`` over the constrained axes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+
+from diffkin import _rigid as rg
+from diffkin._checks import real_array
+from diffkin.ik._terms import Rows
+from diffkin.ik._terms.pose import ONES, error_rows, screen_cost, target_entries
+from diffkin.kinematics import massive
+
+HORIZONTAL = (1.0, 1.0, 0.0, 1.0, 1.0, 1.0)  # weights of a horizontal target: the z row dropped
+
+
+@dataclasses.dataclass(frozen=True)
+class ComTarget:
+    """The centre of mass at a target ``(P, 3)`` (a horizontal target carries ``z = 0``, unweighted).
+
+    Attributes:
+        frames: every frame of the robot (every joint can move the centre of mass).
+        weights: the weights of ``[x, y, z]`` (then three unused): :data:`HORIZONTAL` or ones.
+    """
+
+    frames: tuple[int, ...]
+    weights: tuple[float, ...] = ONES
+    position_only: bool = True
+
+    def bind(self, target: jax.Array) -> tuple:
+        return target_entries(target, True)
+
+    def rows(self, kin, bound: tuple, jacobian: bool) -> Rows:
+        c, velocities = kin.com()
+        zero = (0.0, 0.0, 0.0)
+        columns = [(v, zero) for v in velocities] if jacobian else []
+        p_t, _ = bound
+        return error_rows(rg.Rigid(rg.IDENTITY.R, c), columns, p_t, None, self.weights, kin.dtype)
+
+    def screen(self, kin, bound: tuple) -> rg.Entry:
+        p_t, _ = bound
+        return screen_cost(rg.Rigid(rg.IDENTITY.R, kin.com()[0]), p_t, None, self.weights, kin.dtype)
+
+
+def from_target(robot, com) -> tuple[ComTarget, jax.Array]:
+    """The term of ``dk.ik.solve(robot, ..., com=c)`` and its ``(..., 3)`` target, checked on the host."""
+    massive(robot)
+    target = real_array(com, "com", "centre-of-mass positions")
+    if target.ndim < 1 or target.shape[-1] not in (2, 3):
+        raise ValueError(f"com: expected shape (..., 3) (a point) or (..., 2) (horizontal: x, y), got {target.shape}")
+    frames = tuple(range(len(robot.frame_names)))
+    if target.shape[-1] == 3:
+        return ComTarget(frames), target
+    return ComTarget(frames, HORIZONTAL), jnp.concatenate([target, jnp.zeros_like(target[..., :1])], axis=-1)
