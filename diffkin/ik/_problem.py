@@ -92,7 +92,8 @@ class Problem(NamedTuple):
     Attributes:
         model: the model (any kind: :mod:`diffkin.models.forward`).
         terms: static, the terms (:mod:`diffkin.ik._terms`); ``bound``: per term, its target entries.
-        lower, upper: ``(dof,)`` limits; ``wrap``: ``(dof,)`` unlimited revolute joints.
+        lower, upper: ``(dof,)`` limits (or ``(dof, P)``: a path's step bounds); ``wrap``: ``(dof,)``
+            unlimited revolute joints.
         respect_limits: static; clip the joints to the limits.
         locked: static, per joint, whether it is locked; ``locked_q``: ``(dof, P)`` its values.
         base: the root pose ``T_world_root`` (entries ``(P,)`` or constants) when not solved.
@@ -169,9 +170,11 @@ class Problem(NamedTuple):
 
 def project(q: jax.Array, lower, upper, wrap, respect_limits: bool) -> jax.Array:
     """``q`` ``(dof, P)`` with unlimited revolute joints (``wrap``) wrapped to ``[-pi, pi)`` and,
-    with ``respect_limits``, every joint clipped to ``[lower, upper]`` ``(dof,)``."""
+    with ``respect_limits``, every joint clipped to ``[lower, upper]`` (``(dof,)``, or ``(dof, P)``
+    per problem)."""
     wrapped = jnp.where(wrap[:, None], jnp.mod(q + np.pi, 2 * np.pi) - np.pi, q)
-    return jnp.clip(wrapped, lower[:, None], upper[:, None]) if respect_limits else wrapped
+    per_problem = lambda x: x if x.ndim == 2 else x[:, None]  # noqa: E731
+    return jnp.clip(wrapped, per_problem(lower), per_problem(upper)) if respect_limits else wrapped
 
 
 def _head(entries: Entries) -> list:

@@ -267,6 +267,12 @@ def search(
     return best
 
 
+def follow(problem, x: jax.Array, method, settings: Settings) -> Best:
+    """Iterate one state per problem from ``x`` ``(n_state, P)`` (a warm start, no random seeds)."""
+    s = _iterate(problem, problem.project(x), None, method, x.shape[1], False, settings)
+    return Best(s.x, s.ev, s.success, s.iters)
+
+
 def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int) -> Best:
     """Rounds ``1 .. rounds - 1`` for every unsolved target, ``chunk`` targets at a time.
 

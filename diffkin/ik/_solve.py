@@ -9,6 +9,7 @@ import functools
 from collections.abc import Mapping
 from typing import Any, NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -155,59 +156,30 @@ def solve(
         TypeError: a chain that is not a chain model, an optimizer that is not an optax
             ``GradientTransformation``, a bool, complex or float16 target.
     """
-    instance(chain, (DHChain, PoEChain, Robot), "chain", "a DHChain, PoEChain or Robot")
-    is_robot = isinstance(chain, Robot)
-    facts = METHODS.get(method)
-    if max_iters is None and facts is not None:
-        max_iters = facts.iters_robot if is_robot else facts.iters_chain
-    _args.check_settings(num_seeds, method, 0 if max_iters is None else max_iters, pos_tol, rot_tol, optimizer)
-    if is_robot:
-        terms, arrays, batch = _robot_terms(chain, target, relative, weights, com)
-    else:
-        for name, value in (
-            ("weights", weights),
-            ("locked", locked),
-            ("rest", rest),
-            ("secondary", secondary),
-            ("base", base),
-            ("relative", relative),
-            ("com", com),
-        ):
-            if value is not None:
-                raise ValueError(f"{name}: only for a Robot (solve dk.load_robot(...) with a mapping of targets)")
-        if solve_base:
-            raise ValueError("solve_base: only for a floating Robot")
-        array, position_only, batch = _args.check_target(target)
-        terms, arrays = (pose.PoseTarget(None, position_only),), [array]
-    dtypes = {a.dtype for a in arrays}
-    if len(dtypes) > 1:
-        raise TypeError(
-            "target: every target needs one dtype (the solver and its tolerances follow it), "
-            f"got {sorted(map(str, dtypes))}"
-        )
-    dtype = arrays[0].dtype
-    what = f"for a {chain.dof}-joint {'robot' if is_robot else 'chain'}"
-    for name, value in (("q0", q0), ("rest", rest)):
-        if value is not None:
-            _args.check_batched(value, name, (chain.dof,), batch, what)
-    if rest is not None:
-        _args.finite(rest, "rest", "a finite rest configuration")
-    if base is not None:
-        _args.check_target(base, "base")
-        _args.check_batched(base, "base", (4, 4), batch, "(T_world_root)")
-    if solve_base and not chain.floating:
-        raise ValueError(f"solve_base: robot {chain.name!r} has a fixed root (load it with floating=True)")
-    if solve_base and not METHODS[method].solves_base:
-        raise ValueError(f"solve_base: needs method='lm', got method={method!r}")
-    mask, locked_q = _args.locked_joints(chain, locked, q0, batch) if is_robot else ((False,) * chain.dof, None)
-    if chain.dof == 0 and not solve_base:
-        raise ValueError(f"robot: {chain.name!r} has no joints to solve")
-    assert max_iters is not None  # (checked by check_settings)
-    spec = Spec(terms, mask, _args.secondary_spec(secondary, rest), bool(solve_base), is_robot)
+    p = plan(
+        chain,
+        target,
+        q0=q0,
+        num_seeds=num_seeds,
+        method=method,
+        max_iters=max_iters,
+        pos_tol=pos_tol,
+        rot_tol=rot_tol,
+        optimizer=optimizer,
+        weights=weights,
+        locked=locked,
+        rest=rest,
+        secondary=secondary,
+        solve_base=solve_base,
+        base=base,
+        relative=relative,
+        com=com,
+    )
+    spec, arrays, batch, dtype, max_iters, locked_q = p
     if 0 in batch:  # no targets: empty results of the batch's shape
         empty = lambda *shape, dt=dtype: jnp.zeros(batch + shape, dt)  # noqa: E731
-        has_com = isinstance(terms[-1], ComTarget)
-        errors = (len(terms) - has_com,) if is_robot else ()
+        has_com = isinstance(spec.terms[-1], ComTarget)
+        errors = (len(spec.terms) - has_com,) if spec.errors_per_term else ()
         return IKResult(
             empty(chain.dof),
             empty(dt=bool),
@@ -238,6 +210,96 @@ def solve(
         optimizer=optimizer,
         batch=batch,
     )
+
+
+class Plan(NamedTuple):
+    """A checked call of :func:`solve`: its static problem, target arrays (in term order), batch shape,
+    dtype, iterations per seed and locked values (``None``: none, or all from ``q0``)."""
+
+    spec: Spec
+    arrays: list
+    batch: tuple[int, ...]
+    dtype: Any
+    max_iters: int
+    locked_q: Any
+
+
+def terms_of(chain, target, relative, weights, com) -> tuple[tuple, list, tuple[int, ...]]:
+    """The terms of a call's targets, their arrays and their batch shape (checked on the host)."""
+    if isinstance(chain, Robot):
+        return _robot_terms(chain, target, relative, weights, com)
+    array, position_only, batch = _args.check_target(target)
+    return (pose.PoseTarget(None, position_only),), [array], batch
+
+
+def plan(
+    chain,
+    target,
+    *,
+    q0,
+    num_seeds,
+    method,
+    max_iters,
+    pos_tol,
+    rot_tol,
+    optimizer,
+    weights,
+    locked,
+    rest,
+    secondary,
+    solve_base,
+    base,
+    relative,
+    com,
+) -> Plan:
+    """Check every argument of :func:`solve` on the host (see its Raises) and build its :class:`Plan`."""
+    instance(chain, (DHChain, PoEChain, Robot), "chain", "a DHChain, PoEChain or Robot")
+    is_robot = isinstance(chain, Robot)
+    facts = METHODS.get(method)
+    if max_iters is None and facts is not None:
+        max_iters = facts.iters_robot if is_robot else facts.iters_chain
+    _args.check_settings(num_seeds, method, 0 if max_iters is None else max_iters, pos_tol, rot_tol, optimizer)
+    if not is_robot:
+        for name, value in (
+            ("weights", weights),
+            ("locked", locked),
+            ("rest", rest),
+            ("secondary", secondary),
+            ("base", base),
+            ("relative", relative),
+            ("com", com),
+        ):
+            if value is not None:
+                raise ValueError(f"{name}: only for a Robot (solve dk.load_robot(...) with a mapping of targets)")
+        if solve_base:
+            raise ValueError("solve_base: only for a floating Robot")
+    terms, arrays, batch = terms_of(chain, target, relative, weights, com)
+    dtypes = {a.dtype for a in arrays}
+    if len(dtypes) > 1:
+        raise TypeError(
+            "target: every target needs one dtype (the solver and its tolerances follow it), "
+            f"got {sorted(map(str, dtypes))}"
+        )
+    dtype = arrays[0].dtype
+    what = f"for a {chain.dof}-joint {'robot' if is_robot else 'chain'}"
+    for name, value in (("q0", q0), ("rest", rest)):
+        if value is not None:
+            _args.check_batched(value, name, (chain.dof,), batch, what)
+    if rest is not None:
+        _args.finite(rest, "rest", "a finite rest configuration")
+    if base is not None:
+        _args.check_target(base, "base")
+        _args.check_batched(base, "base", (4, 4), batch, "(T_world_root)")
+    if solve_base and not chain.floating:
+        raise ValueError(f"solve_base: robot {chain.name!r} has a fixed root (load it with floating=True)")
+    if solve_base and not METHODS[method].solves_base:
+        raise ValueError(f"solve_base: needs method='lm', got method={method!r}")
+    mask, locked_q = _args.locked_joints(chain, locked, q0, batch) if is_robot else ((False,) * chain.dof, None)
+    if chain.dof == 0 and not solve_base:
+        raise ValueError(f"robot: {chain.name!r} has no joints to solve")
+    assert max_iters is not None  # (checked by check_settings)
+    spec = Spec(terms, mask, _args.secondary_spec(secondary, rest), bool(solve_base), is_robot)
+    return Plan(spec, arrays, batch, dtype, max_iters, locked_q)
 
 
 def _robot_terms(robot: Robot, targets, relative_targets, weights, com) -> tuple[tuple, list, tuple[int, ...]]:
@@ -430,9 +492,17 @@ def _solve(
         x, ev = _secondary.refine(build(everything, 1), x, ev, best.success, h_of(everything), pos_tol, rot_tol)
     solved_root = base_in if base is not None and not spec.solve_base else None
     x = implicit(spec, cast(model_in, dtype), safe, solved_root, x)
-    big = jnp.finfo(dtype).max
     success = best.success & valid if base_ok is None else best.success & valid & base_ok
-    pos_err, rot_err = (jnp.where(valid, e, big).T for e in (ev.pos_err, ev.rot_err))  # (n, k)
+    return result(spec, x, ev.pos_err, ev.rot_err, valid, success, best.iters, batch)
+
+
+def result(spec: Spec, x: jax.Array, pos_err, rot_err, valid, success, iters, batch: tuple[int, ...]) -> IKResult:
+    """The :class:`IKResult` of states ``x`` ``(n_state, n)`` with per-term errors ``(k, n)`` (the largest
+    float where the targets were not ``valid``), ``success`` and ``iters`` ``(n,)``, shaped ``batch``."""
+    dtype, dof, k = x.dtype, x.shape[0] - (BASE_ROWS if spec.solve_base else 0), len(spec.terms)
+    n = x.shape[1]
+    big = jnp.finfo(dtype).max
+    pos_err, rot_err = (jnp.where(valid, e, big).T for e in (pos_err, rot_err))  # (n, k)
     if not spec.errors_per_term:
         pos_err, rot_err = pos_err[:, 0], rot_err[:, 0]
     T_world_root = None
@@ -457,7 +527,7 @@ def _solve(
         success=success.reshape(batch),
         pos_err=pos_err.reshape(batch + tail),
         rot_err=rot_err.reshape(batch + tail),
-        iters=best.iters.reshape(batch),
+        iters=iters.reshape(batch),
         base=None if T_world_root is None else T_world_root.reshape(batch + (4, 4)),
         com_err=com_err,
     )

@@ -1,0 +1,310 @@
+"""``solve_path``: IK along waypoints, each solved from the previous solution with bounded joint steps.
+
+Waypoint 0 is solved by :func:`~diffkin.ik.solve` (every seed, or from ``q0``). Each later waypoint
+starts from the previous solution and iterates only that state (no random seeds), every joint
+kept within ``max_step`` of its previous value (a box intersected with the limits), so a solution
+never jumps to another branch: a waypoint that cannot be reached within the step fails and the
+path is reported not ok. The waypoints are a ``lax.scan``: one compiled step serves any number.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffkin import _rigid as rg
+from diffkin._checks import instance
+from diffkin._static import ModelKey, combine, partition
+from diffkin.ik import _args, _search
+from diffkin.ik._implicit import implicit
+from diffkin.ik._methods import METHODS
+from diffkin.ik._prepare import cast, detach, inward, valid_targets
+from diffkin.ik._problem import Problem
+from diffkin.ik._solve import Spec, plan, result, solve, terms_of
+from diffkin.models.dh import DHChain
+from diffkin.models.poe import PoEChain
+from diffkin.models.robot import Robot
+
+# Arguments of solve that a path passes on (secondary objectives and a rest pose are not: a path's
+# later waypoints move by the targets only).
+_PASSED = (
+    "key",
+    "num_seeds",
+    "method",
+    "max_iters",
+    "pos_tol",
+    "rot_tol",
+    "respect_limits",
+    "optimizer",
+    "weights",
+    "locked",
+    "solve_base",
+    "base",
+    "relative",
+    "com",
+)
+
+
+class PathResult(NamedTuple):
+    """Solutions along paths of waypoints (a pytree); ``...`` is the batch of paths, ``T`` the waypoints.
+
+    Attributes:
+        q: ``(..., T, dof)`` the solution at every waypoint.
+        success: ``(..., T)`` each waypoint within tolerance (as :attr:`IKResult.success`).
+        path_ok: ``(...,)`` every waypoint a success and every joint step within ``max_step``.
+        max_step: ``(...,)`` the largest joint step taken between consecutive waypoints (radians or
+            metres; 0 for a single waypoint).
+        pos_err, rot_err: ``(..., T)`` (a chain) or ``(..., T, k)`` (a robot's ``k`` targets), as
+            :class:`IKResult`.
+        base: ``(..., T, 4, 4)`` the solved root poses with ``solve_base=True``, else ``None``.
+        com_err: ``(..., T)`` with a ``com`` target, else ``None``.
+    """
+
+    q: jax.Array
+    success: jax.Array
+    path_ok: jax.Array
+    max_step: jax.Array
+    pos_err: jax.Array
+    rot_err: jax.Array
+    base: jax.Array | None = None
+    com_err: jax.Array | None = None
+
+
+def _pose_axis(a) -> int:
+    """The path axis of a target array: before ``(4, 4)`` of a pose, before the last axis otherwise."""
+    return -3 if np.ndim(a) >= 3 and np.shape(a)[-2:] == (4, 4) else -2
+
+
+def _waypoint(tree, t: int):
+    """Waypoint ``t`` of every target array of ``tree`` (an array, a mapping of them, or ``None``)."""
+    if tree is None:
+        return None
+    if isinstance(tree, Mapping):
+        return {key: _waypoint(value, t) for key, value in tree.items()}
+    a = jnp.asarray(tree)
+    return jnp.take(a, t, axis=_pose_axis(a)) if a.ndim >= 2 else a
+
+
+def solve_path(model, targets, *, q0=None, max_step=None, **solve_kwargs) -> PathResult:
+    """Inverse kinematics along paths: waypoint 0 solved globally, each later one from the previous solution.
+
+    Every joint moves at most ``max_step`` between consecutive waypoints (a bound on each step,
+    intersected with the joint limits), so the solution stays on one branch; a waypoint it cannot
+    reach that way fails (``success`` False there, ``path_ok`` False) instead of jumping. The
+    waypoints are scanned: compile time does not grow with their number. Pure and traceable; ``q``
+    is differentiable with respect to the waypoints (implicit function theorem, per waypoint).
+
+    Args:
+        model: a chain or a :class:`~diffkin.Robot` (as :func:`solve`).
+        targets: a chain: ``(..., T, 4, 4)`` poses or ``(..., T, 3)`` positions; a robot: a mapping
+            of those. ``relative`` and ``com`` (keyword arguments of :func:`solve`) carry the same
+            path axis (``(..., T, 4, 4)``, ``(..., T, 3)`` or ``(..., T, 2)``).
+        q0: ``(..., dof)`` warm start of waypoint 0 (its solution is then the one nearest ``q0``).
+        max_step: the largest joint move between waypoints, radians (revolute) or metres
+            (prismatic): a scalar or ``(dof,)``; default unbounded.
+        **solve_kwargs: the other arguments of :func:`solve` (``key``, ``num_seeds``, ``method``,
+            ``max_iters``, tolerances, ``respect_limits``, ``optimizer``, ``weights``, ``locked``,
+            ``solve_base``, ``base``, ``relative``, ``com``); ``max_iters`` applies to every waypoint.
+
+    Returns:
+        :class:`PathResult`.
+
+    Raises:
+        ValueError, TypeError: as :func:`solve`; also targets without a path axis (or with none
+            of its waypoints), a ``max_step`` that is not positive or of the wrong shape, and the
+            ``secondary``/``rest`` arguments (not supported along a path).
+    """
+    instance(model, (DHChain, PoEChain, Robot), "model", "a DHChain, PoEChain or Robot")
+    for name in ("secondary", "rest"):
+        if solve_kwargs.get(name) is not None:
+            raise ValueError(f"{name}: not supported by solve_path (later waypoints move by the targets only)")
+    unknown = sorted(set(solve_kwargs) - set(_PASSED))
+    if unknown:
+        raise TypeError(f"solve_path: unexpected arguments {unknown}; expected those of dk.ik.solve: {list(_PASSED)}")
+    kw = {name: solve_kwargs.get(name) for name in _PASSED}
+    relative, com = kw["relative"], kw["com"]
+    _, arrays, path_batch = terms_of(model, targets, relative, kw["weights"], com)
+    if not path_batch or path_batch[-1] == 0:
+        raise ValueError(
+            f"targets: expected a path axis with at least one waypoint before the pose axes ((..., T, 4, 4) or "
+            f"(..., T, 3)), got batch shape {path_batch}"
+        )
+    bound = _max_step(max_step, model.dof)
+    first_kw = {name: value for name, value in kw.items() if value is not None}
+    first_kw.update(relative=_waypoint(relative, 0), com=_waypoint(com, 0))
+    defaults = dict(num_seeds=32, method="lm", max_iters=None, pos_tol=1e-5, rot_tol=1e-4, solve_base=False)
+    checked = plan(
+        model,
+        _waypoint(targets, 0),
+        q0=q0,
+        optimizer=kw["optimizer"],
+        weights=kw["weights"],
+        locked=kw["locked"],
+        rest=None,
+        secondary=None,
+        base=kw["base"],
+        relative=first_kw["relative"],
+        com=first_kw["com"],
+        **{name: kw[name] if kw[name] is not None else value for name, value in defaults.items()},
+    )
+    first = solve(model, _waypoint(targets, 0), q0=q0, **{k: v for k, v in first_kw.items() if v is not None})
+    dtype = checked.dtype
+    static, traced = partition(model)
+    return _follow(
+        traced,
+        tuple(arrays),
+        first,
+        None if kw["base"] is None else jnp.asarray(kw["base"], dtype),
+        None if checked.locked_q is None else jnp.asarray(checked.locked_q, dtype),
+        jnp.asarray(bound, dtype),
+        _args.tolerance(1e-5 if kw["pos_tol"] is None else kw["pos_tol"], dtype),
+        _args.tolerance(1e-4 if kw["rot_tol"] is None else kw["rot_tol"], dtype),
+        static=static,
+        spec=checked.spec,
+        method=kw["method"] or "lm",
+        max_iters=checked.max_iters,
+        respect_limits=True if kw["respect_limits"] is None else bool(kw["respect_limits"]),
+        optimizer=kw["optimizer"],
+        batch=path_batch,
+    )
+
+
+def _max_step(max_step, dof: int) -> np.ndarray:
+    """``(dof,)`` step bounds (``inf``: unbounded), checked on the host."""
+    if max_step is None:
+        return np.full(dof, np.inf)
+    try:
+        bound = np.broadcast_to(np.asarray(max_step, dtype=np.float64), (dof,))
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"max_step: expected a positive number or {dof} of them, got {max_step!r}") from err
+    if np.any(np.isnan(bound)) or np.any(bound <= 0):
+        raise ValueError(f"max_step: expected positive bounds (radians or metres), got {max_step!r}")
+    return bound
+
+
+@functools.partial(
+    jax.jit,
+    static_argnames=("static", "spec", "method", "max_iters", "respect_limits", "optimizer", "batch"),
+)
+def _follow(
+    traced,
+    targets: tuple,
+    first,
+    base,
+    locked_q,
+    bound,
+    pos_tol,
+    rot_tol,
+    *,
+    static: ModelKey,
+    spec: Spec,
+    method: str,
+    max_iters: int,
+    respect_limits: bool,
+    optimizer,
+    batch: tuple[int, ...],
+) -> PathResult:
+    """Waypoints ``1 .. T-1`` from waypoint 0's solution ``first`` (an :class:`IKResult`), scanned."""
+    model_in = combine(static, traced)
+    dtype, dof = targets[0].dtype, model_in.dof
+    paths, T = batch[:-1], batch[-1]
+    n = int(np.prod(paths, dtype=np.int64))
+    model = cast(detach(model_in), dtype)
+    lower, upper = inward(detach(model_in.lower), dtype, -1), inward(detach(model_in.upper), dtype, 1)
+    if not respect_limits:
+        lower, upper = jnp.full_like(lower, -jnp.inf), jnp.full_like(upper, jnp.inf)
+    # per waypoint (T, n, ...), in term order; non-finite targets fail (finite stand-ins solved)
+    per_waypoint = [jnp.moveaxis(a.reshape((n, T) + a.shape[len(batch) :]), 1, 0) for a in targets]
+    checked = [
+        jax.vmap(lambda a, term=term: valid_targets(a, term.position_only))(a)
+        for a, term in zip(per_waypoint, spec.terms, strict=True)
+    ]
+    valid = jnp.all(jnp.stack([v for v, _ in checked]), axis=0)  # (T, n)
+    safe = [s for _, s in checked]
+    fixed = [detach(s) for s in safe]
+    locked_values = (
+        jnp.broadcast_to(locked_q, paths + (dof,)).reshape(n, dof).T if locked_q is not None else jnp.zeros((dof, 1))
+    )
+    root = rg.IDENTITY
+    base_flat = None
+    if base is not None and not spec.solve_base:
+        base_flat = jnp.broadcast_to(base, paths + (4, 4)).reshape(n, 4, 4)
+        root = rg.from_matrix(detach(base_flat))
+    x0 = jax.lax.stop_gradient(first.q.reshape(n, dof).T)
+    if spec.solve_base:
+        B = jax.lax.stop_gradient(first.base.reshape(n, 4, 4))
+        x0 = jnp.concatenate([x0, B[:, :3, 3].T, B[:, :3, :3].reshape(n, 9).T])
+    no_wrap = jnp.zeros(dof, bool)
+    steps = METHODS[method].steps(optimizer)
+    settings = _search.Settings(1, max_iters, 0, pos_tol, rot_tol)
+
+    def step(x_prev, waypoint):
+        q_prev = x_prev[:dof]
+        lo = jnp.maximum(lower[:, None], q_prev - bound[:, None])
+        hi = jnp.minimum(upper[:, None], q_prev + bound[:, None])
+        bound_terms = tuple(term.bind(t) for term, t in zip(spec.terms, waypoint, strict=True))
+        problem = Problem(
+            model, spec.terms, bound_terms, lo, hi, no_wrap, True, spec.locked, locked_values, root, spec.solve_base
+        )
+        best = _search.follow(problem, x_prev, steps, settings)
+        return best.x, (best.x, best.success, best.ev.pos_err, best.ev.rot_err, best.iters)
+
+    later = [w[1:] for w in fixed]
+    _, (xs, success, pos_err, rot_err, iters) = jax.lax.scan(step, x0, later)
+    # every waypoint's state (T, n_state, n), its derivative by the implicit function theorem
+    xs = jnp.concatenate([x0[None], xs])
+    flat = lambda a: jnp.moveaxis(a, 0, -1).reshape(a.shape[1:-1] + (n * T,))  # noqa: E731  (..., n, T) order
+    x_all = implicit(
+        spec,
+        cast(model_in, dtype),
+        tuple(jnp.moveaxis(s, 0, 1).reshape((n * T,) + s.shape[2:]) for s in safe),
+        None if base_flat is None else jnp.repeat(base_flat, T, axis=0),
+        flat(xs),
+    )
+    first_rows = lambda e: e.reshape(n, -1).T[None]  # noqa: E731  (n[, k]) -> (1, k, n)
+    k = len(spec.terms)
+    ok0, first_errors = first.success.reshape(1, n), first_rows(_all_errors(first, k, n))
+    errors = jnp.concatenate([first_errors, jnp.concatenate([pos_err, rot_err], axis=1)])  # (T, 2k, n)
+    success = jnp.concatenate([ok0, success & valid[1:]])
+    iters = jnp.concatenate([first.iters.reshape(1, n), iters])
+    out = result(
+        spec,
+        x_all,
+        flat(errors[:, :k]),
+        flat(errors[:, k:]),
+        flat(valid),
+        flat(success),
+        flat(iters),
+        paths + (T,),
+    )
+    q = out.q
+    moves = jnp.abs(jnp.diff(q, axis=-2))  # (..., T - 1, dof)
+    largest = jnp.max(moves, axis=(-2, -1), initial=0.0)
+    eps = jnp.finfo(dtype).eps
+    within = jnp.all(moves <= bound + 8 * eps * (1.0 + jnp.abs(q[..., 1:, :])), axis=(-2, -1))
+    return PathResult(
+        q=q,
+        success=out.success,
+        path_ok=jnp.all(out.success, axis=-1) & within,
+        max_step=largest,
+        pos_err=out.pos_err,
+        rot_err=out.rot_err,
+        base=out.base,
+        com_err=out.com_err,
+    )
+
+
+def _all_errors(first, k: int, n: int) -> jax.Array:
+    """Waypoint 0's per-term errors ``(n, 2k)``: position errors (the centre of mass last), then rotation
+    errors (0 for the centre of mass), as the terms report them."""
+    pos, rot = first.pos_err.reshape(n, -1), first.rot_err.reshape(n, -1)
+    if first.com_err is not None:
+        pos = jnp.concatenate([pos, first.com_err.reshape(n, 1)], axis=-1)
+        rot = jnp.concatenate([rot, jnp.zeros((n, 1), rot.dtype)], axis=-1)
+    assert pos.shape[-1] == k
+    return jnp.concatenate([pos, rot], axis=-1)
