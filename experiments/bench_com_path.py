@@ -1,0 +1,160 @@
+"""Benchmark (issue 29): the centre of mass of Talos, and Panda paths.
+
+1. ``dk.com`` + ``dk.com_jacobian`` of Talos (``talos_full_v2.urdf``, floating base, base columns
+   included), float64, one jitted call over a batch, against a Python loop of Pinocchio's
+   ``centerOfMass`` + ``jacobianCenterOfMass`` (timed on 2,000 configurations, per configuration
+   times the batch).
+2. Panda paths (``dk.robots.panda()``, float32): 1,000 paths of 100 waypoints (lines and circles of
+   5-10 cm from random in-limit configurations, the orientation held), ``dk.ik.solve_path`` with
+   ``max_step=0.1`` rad, against solving the 100,000 waypoints independently with ``dk.ik.solve``:
+   time (median of warm calls, compile separately), waypoint success, paths without a failed
+   waypoint, and jumps (consecutive waypoints whose solutions differ by more than ``max_step``
+   in some joint).
+
+    python experiments/bench_com_path.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+jax.config.update("jax_enable_x64", True)
+
+from _bench import busy_note, machine_line, median_seconds, random_configs  # noqa: E402
+
+import diffkin as dk  # noqa: E402
+
+MAX_STEP = 0.1
+
+
+def talos():
+    import pinocchio as pin
+    from importlib import metadata
+
+    root = metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data/robots")
+    path = os.path.join(str(root), "talos_data/robots/talos_full_v2.urdf")
+    return dk.load_robot(path, floating=True), pin.buildModelFromUrdf(path, pin.JointModelFreeFlyer())
+
+
+def bench_com(batch: int) -> list[str]:
+    import pinocchio as pin
+
+    robot, model = talos()
+    data = model.createData()
+    rng = np.random.default_rng(0)
+    q = random_configs(robot, batch, np.float64)
+    base = np.tile(np.eye(4), (batch, 1, 1))
+    base[:, :3, 3] = rng.normal(size=(batch, 3))
+
+    @jax.jit
+    def both(q, base):
+        return dk.com(robot, q, base=base), dk.com_jacobian(robot, q, base=base, include_base=True)
+
+    start = time.perf_counter()
+    jax.block_until_ready(both(q, base))
+    compile_s = time.perf_counter() - start
+    ours = median_seconds(both, q, base, repeats=3, warmup=1)
+    sample = min(batch, 2000)
+    qp = [pin.neutral(model) for _ in range(sample)]
+    for k in range(sample):  # joints in Pinocchio's order (no mimic joints in Talos); revolute only
+        for i, name in enumerate(robot.joint_names):
+            joint = model.joints[model.getJointId(name)]
+            qp[k][joint.idx_q] = q[k, i]
+        qp[k][:3] = base[k, :3, 3]
+    start = time.perf_counter()
+    for k in range(sample):
+        pin.centerOfMass(model, data, qp[k])
+        pin.jacobianCenterOfMass(model, data, qp[k])
+    loop = (time.perf_counter() - start) / sample * batch
+    return [
+        "| Talos (" + f"{robot.dof} + 6 dof) | {batch:,} | {ours * 1e3:.1f} | {loop * 1e3:.1f} | "
+        f"{loop / ours:.1f}x | {compile_s:.1f} |"
+    ]
+
+
+def panda_paths(n: int, T: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """``(n, T, 4, 4)`` waypoints and the ``(n, 7)`` start configurations (lines and circles)."""
+    chain = dk.robots.panda()
+    lo, hi = np.asarray(chain.lower), np.asarray(chain.upper)
+    q_start = rng.uniform(lo + 0.25 * (hi - lo), hi - 0.25 * (hi - lo), (n, 7))
+    T0 = np.asarray(dk.fk(chain, q_start))
+    s = np.linspace(0.0, 1.0, T)
+    radius = rng.uniform(0.05, 0.10, n)
+    u = rng.normal(size=(n, 3))
+    u /= np.linalg.norm(u, axis=-1, keepdims=True)
+    v = np.cross(u, rng.normal(size=(n, 3)))
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    line = radius[:, None, None] * s[None, :, None] * u[:, None]
+    angle = 2 * np.pi * s[None, :, None]
+    circle = radius[:, None, None] * ((np.cos(angle) - 1.0) * u[:, None] + np.sin(angle) * v[:, None])
+    offsets = np.where((np.arange(n) % 2 == 0)[:, None, None], line, circle)
+    paths = np.repeat(T0[:, None], T, axis=1)
+    paths[..., :3, 3] += offsets
+    return paths, q_start
+
+
+def jumps(q: np.ndarray) -> int:
+    """Consecutive waypoints whose solutions differ by more than ``MAX_STEP`` in some joint."""
+    return int(np.count_nonzero(np.abs(np.diff(q, axis=-2)).max(axis=-1) > MAX_STEP))
+
+
+def bench_paths(n: int, T: int) -> list[str]:
+    chain = dk.robots.panda()
+    paths, q_start = panda_paths(n, T, np.random.default_rng(1))
+    targets = jnp.asarray(paths, jnp.float32)
+    q0 = jnp.asarray(q_start, jnp.float32)
+    follow = jax.jit(lambda t, q: dk.ik.solve_path(chain, t, q0=q, max_step=MAX_STEP))
+    start = time.perf_counter()
+    res = jax.block_until_ready(follow(targets, q0))
+    compile_path = time.perf_counter() - start
+    path_s = median_seconds(follow, targets, q0, repeats=3, warmup=0)
+    flat = targets.reshape(n * T, 4, 4)
+    warm = jnp.repeat(q0, T, axis=0)
+    each = jax.jit(lambda t, q: dk.ik.solve(chain, t, q0=q))
+    start = time.perf_counter()
+    ind = jax.block_until_ready(each(flat, warm))
+    compile_each = time.perf_counter() - start
+    each_s = median_seconds(each, flat, warm, repeats=3, warmup=0)
+    q_ind = np.asarray(ind.q).reshape(n, T, 7)
+    ok_ind = np.asarray(ind.success).reshape(n, T)
+    return [
+        f"| `solve_path` (max_step {MAX_STEP}) | {n:,} x {T} | {path_s:.3f} | {compile_path:.1f} | "
+        f"{100 * float(np.mean(res.success)):.2f} % | {100 * float(np.mean(res.path_ok)):.1f} % | "
+        f"{jumps(np.asarray(res.q))} | {float(jnp.max(res.max_step)):.3f} |",
+        f"| `solve` per waypoint (q0 = the path's start) | {n * T:,} | {each_s:.3f} | {compile_each:.1f} | "
+        f"{100 * float(np.mean(ok_ind)):.2f} % | {100 * float(np.mean(np.all(ok_ind, axis=1))):.1f} % | "
+        f"{jumps(q_ind)} | {float(np.abs(np.diff(q_ind, axis=1)).max()):.3f} |",
+    ]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="small batches (a smoke run)")
+    args = parser.parse_args()
+    batch, (n, T) = (1_000, (50, 20)) if args.quick else (100_000, (1_000, 100))
+    print(machine_line())
+    print(busy_note())
+    print(f"jax {jax.__version__}, {' '.join(sys.argv)}\n")
+    print("| robot | batch | diffkin com + com_jacobian (ms) | Pinocchio loop (ms) | speed-up | compile (s) |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    for row in bench_com(batch):
+        print(row, flush=True)
+    print()
+    print(
+        "| Panda paths, float32 | waypoints | warm (s) | compile (s) | waypoint success | paths all solved | "
+        "jumps | largest step (rad) |"
+    )
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for row in bench_paths(n, T):
+        print(row, flush=True)
+
+
+if __name__ == "__main__":
+    main()
