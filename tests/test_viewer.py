@@ -5,6 +5,8 @@ import re
 import shutil
 import socket
 import subprocess
+import threading
+import time
 
 import jax
 import numpy as np
@@ -199,27 +201,46 @@ def test_arm_angle_moves_along_the_self_motion(viewer_of):
         np.testing.assert_array_equal(np.sign(viewer.q[[1, 3, 5]]), [float(s) for s in other.split()])
 
 
+def _root_poses(n: int) -> np.ndarray:
+    """``(n, 4, 4)`` rigid root poses ``T_world_root``: random rotations, translations within 1 m."""
+    rng = np.random.default_rng(2)
+    T = np.tile(np.eye(4), (n, 1, 1))
+    T[:, :3, :3] = np.asarray(dk.se3.rotation_from_quaternion(rng.normal(size=(n, 4))))
+    T[:, :3, 3] = rng.uniform(-1, 1, (n, 3))
+    return T
+
+
 @pytest.mark.skipif(bool(IK_BROKEN), reason=IK_BROKEN or "ik runs")
 @pytest.mark.parametrize("which", ["iiwa14", "finger"])
 def test_gizmo_solves_ik_from_the_current_configuration(viewer_of, which):
+    """A drag solves from the current ``q``; a floating finger's drag keeps its root where the
+    result shown put it (the world target solved in the root frame)."""
+    T_world_root = np.eye(4)
     if which == "iiwa14":
         model, end = dk.robots.iiwa14(), "ee"
         chain, index = model, np.arange(7)
         viewer = viewer_of(model)
     else:
-        model, end = dk.load_robot(FINGER), "finger_tip_link"
+        model, end = dk.load_robot(FINGER, floating=True), "finger_tip_link"
         chain = model.chain(end)
         index = np.array([model.joint_names.index(n) for n in chain.joint_names])
-        viewer = viewer_of(FINGER, q0=np.array([0.2, 0.3, -0.5]))
+        T_world_root = _root_poses(1)[0]
+        results = {"q": np.array([[0.2, 0.3, -0.5]]), "base": T_world_root[None]}
+        viewer = viewer_of(model, source=FINGER, results=results)
+        viewer.show_result(0)
     q_start = viewer.q.copy()
     q_goal = np.clip(q_start + 0.15, viewer.kin.lower, viewer.kin.upper)
-    T = np.asarray(dk.fk(model, q_goal) if which == "iiwa14" else dk.fk(model, q_goal, end))
+    T_root = np.asarray(dk.fk(model, q_goal) if which == "iiwa14" else dk.fk(model, q_goal, end))
+    T = T_world_root @ T_root
     res = viewer.move_target(end, T)
-    ref = dk.ik.solve(chain, T, q0=q_start[index], key=jax.random.key(0), num_seeds=8)
+    ref = dk.ik.solve(chain, T_root, q0=q_start[index], key=jax.random.key(0), num_seeds=8)
     assert bool(res.success) and bool(ref.success)
     np.testing.assert_allclose(viewer.q[index], np.asarray(ref.q), atol=1e-6)
     np.testing.assert_allclose(viewer.frame_pose(end), T, atol=1e-4)  # within the solver's tolerances
-    poses = _chain_poses(model, viewer.q) if which == "iiwa14" else np.asarray(dk.link_poses(model, viewer.q))
+    if which == "iiwa14":
+        poses = _chain_poses(model, viewer.q)
+    else:
+        poses = np.asarray(dk.link_poses(model, viewer.q, base=T_world_root))
     _assert_scene_matches(viewer, poses)
     np.testing.assert_allclose(viewer.targets[end].position, T[:3, 3], atol=1e-9)  # the gizmo stays at the target
     assert "solved" in viewer.ik_status[end].content
@@ -291,6 +312,10 @@ _BAD_RESULTS = {  # (results, the ValueError's message; a TypeError's for a list
     ),
     "rot_err_negative": (_results(rot_err=-np.ones(5)), r"results rot_err: expected errors >= 0"),
     "not_a_mapping": ([np.zeros((5, 7))], r"results: expected a mapping of arrays \(or an .npz path\), got list"),
+    "base_of_a_chain": (
+        _results(base=np.tile(np.eye(4), (5, 1, 1))),
+        r"results base: root poses are drawn only for a dk.Robot with a floating root \(floating=True\)",
+    ),
 }
 
 
@@ -303,6 +328,109 @@ def test_batch_results_are_checked_before_serving(case):
         show("iiwa14", results=results, port=port, verbose=False, warmup=False)
     with socket.socket() as s:
         s.bind(("127.0.0.1", port))  # nothing serves there
+
+
+def _bad_base(rows, value) -> np.ndarray:
+    T = _root_poses(4)
+    T[rows] = value
+    return T
+
+
+_BAD_BASES = {  # (base of 4 results of the floating finger, the ValueError's message)
+    "short": (_root_poses(3), r"results base: expected shape \(4, 4, 4\) \(a pose T_world_root per row of q\)"),
+    "positions": (np.zeros((4, 3)), r"results base: expected shape \(4, 4, 4\) .*, got \(4, 3\)"),
+    "nan": (_bad_base([1], np.nan), r"results base: expected finite numbers, got NaN or inf in rows \[1\]"),
+    "scaled": (
+        _bad_base([0, 2], 2 * np.eye(4)),
+        r"results base: expected rigid transforms \(within 1e-09\), got others in rows \[0, 2\]",
+    ),
+    "reflection": (_bad_base([3], np.diag([1.0, 1, -1, 1])), r"results base: expected rigid .* rows \[3\]"),
+    "float32_sheared": (
+        _bad_base([1], np.eye(4) + 1e-3 * np.eye(4, k=1)).astype(np.float32),
+        r"results base: expected rigid transforms \(within 1e-05\), got others in rows \[1\]",
+    ),
+    "text": (np.full((4, 4, 4), "1"), r"results base: expected real numbers, got dtype <U1"),
+}
+
+
+@pytest.mark.parametrize("case", _BAD_BASES)
+def test_root_poses_are_checked_before_serving(case):
+    """``base`` of a floating robot's results: shape, finite, rigid (to the tolerance of its dtype)."""
+    base, message = _BAD_BASES[case]
+    robot = dk.load_robot(FINGER, floating=True)
+    results = {"q": np.zeros((4, 3)), "base": base}
+    with pytest.raises(ValueError, match=message):
+        show(robot, results=results, port=_free_port(), verbose=False, warmup=False)
+
+
+def test_results_with_root_poses(viewer_of, tmp_path):
+    """Each result of a floating robot is drawn at its root pose: frames, meshes and skeleton; a
+    ``.npz`` carries ``base``; ``set_q`` keeps the root where the result put it."""
+    robot = dk.load_robot(FINGER, floating=True)
+    q = np.random.default_rng(3).uniform(-1, 1, (4, 3))
+    base = _root_poses(4)
+    np.savez(tmp_path / "res.npz", q=q, base=base.astype(np.float32), success=np.ones(4, bool))
+    viewer = viewer_of(robot, source=FINGER, results=tmp_path / "res.npz")
+    np.testing.assert_allclose(viewer.results["base"], base, atol=1e-7)
+    _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, viewer.q)))  # the root at the identity
+    for i in (2, 0):
+        viewer.result_slider.value = i
+        assert viewer.result_index == i
+        np.testing.assert_allclose(viewer.q, q[i])
+        T = np.asarray(dk.link_poses(robot, q[i], base=viewer.results["base"][i]))
+        _assert_scene_matches(viewer, T)
+        f = robot.frame_names.index("finger_upper_link")
+        parent = viewer.kin.frame_parents[f]
+        np.testing.assert_allclose(
+            viewer.skeleton["finger_upper_link"].position, (T[parent, :3, 3] + T[f, :3, 3]) / 2, atol=1e-9
+        )
+    assert all(h.name.startswith("/robot/finger_upper_link/") for h in viewer.visuals["finger_upper_link"])
+    viewer.set_q(np.zeros(3))
+    np.testing.assert_allclose(viewer.T_world_root, viewer.results["base"][0])
+    _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, np.zeros(3), base=viewer.results["base"][0])))
+
+
+def _wait_until(condition, timeout: float = 20.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.001)
+
+
+def _players() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name == "diffkin-viewer-play"]
+
+
+def test_play_results(viewer_of):
+    """Play shows the results in order in a thread (to the end, or looping), pause and stop end it."""
+    chain = dk.robots.planar([1.0, 0.5])  # a small model: little to compile
+    results = {"q": np.random.default_rng(4).uniform(-1, 1, (5, 2)), "success": np.ones(5, bool)}
+    viewer = viewer_of(chain, results=results)
+    with pytest.raises(ValueError, match=r"fps: expected frames per second in \[0.1, 1000\], got 0"):
+        viewer.play(fps=0)
+    viewer.play(fps=200, loop=False)  # from result 0 (none shown yet) to the last
+    assert viewer.play_fps.value == 200 and viewer.play_loop.value is False
+    _wait_until(lambda: not viewer.playing and not _players())  # the thread ends at the last result
+    assert viewer.result_index == 4 and viewer.result_slider.value == 4 and viewer.play_button.label == "Play"
+    np.testing.assert_allclose(viewer.q, np.clip(results["q"][4], viewer.kin.lower, viewer.kin.upper))
+    assert "result 4 of 5" in viewer.result_status.content
+    viewer.play_loop.value = True
+    viewer.play_button.value = True  # a click: from the last result, over again from 0, looping
+    assert viewer.playing and viewer.play_button.label == "Pause"
+    shown = [viewer.result_index]
+    _wait_until(lambda: shown.append(viewer.result_index) or shown[-1] < max(shown))  # past the end, to the start
+    viewer.play_button.value = True  # a click: pause
+    assert not viewer.playing and viewer.play_button.label == "Play" and _players() == []
+    i = viewer.result_index
+    time.sleep(0.05)
+    assert viewer.result_index == i
+    _assert_scene_matches(viewer, _chain_poses(chain, viewer.q))
+    viewer.play(fps=50)
+    assert len(_players()) == 1
+    viewer.stop()
+    assert _players() == [] and not viewer.playing
+    with pytest.raises(ValueError, match="play: the viewer has no batch results"):
+        viewer_of(chain).play()
 
 
 def test_batch_results_errors_per_target_and_from_the_command_line(viewer_of, tmp_path, capsys):

@@ -297,7 +297,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")
     p.add_argument("--map", metavar="MAP.npz", help="reachability map from 'diffkin workspace', drawn as points")
     p.add_argument(
-        "--ik-results", metavar="FILE.npz", help=".npz: q (N, dof), optional success, pos_err, rot_err (N,), to browse"
+        "--ik-results",
+        metavar="FILE.npz",
+        help=".npz: q (N, dof), optional success, pos_err, rot_err (N,), a floating root's base (N, 4, 4); "
+        "to browse and play",
     )
     p.add_argument("--end", nargs="+", metavar="FRAME", help="frames with an IK target (default: the leaf frames)")
     p.set_defaults(func=cmd_view)

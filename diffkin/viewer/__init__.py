@@ -4,9 +4,10 @@
     viewer = dk.viewer.show("iiwa14")            # or a chain, a Robot, a URDF path
     viewer.set_q(q); viewer.move_target("ee", T) # everything the page does, from Python
 
-The page draws the robot (its URDF visual meshes, or cylinders between its frames), one slider
-per joint, a draggable IK target per end frame, the iiwa arm-angle self-motion, a reachability
-map as points and a slider through batched results. viser and trimesh are imported only here.
+The page draws the robot (its URDF visual meshes, or cylinders between its frames), one slider per
+joint, a draggable IK target per end frame, the iiwa arm-angle self-motion, a reachability map as
+points and a slider and playback through batched results (with a floating robot's root poses). viser
+and trimesh are imported only here.
 """
 
 from __future__ import annotations

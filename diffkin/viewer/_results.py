@@ -6,6 +6,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from diffkin._checks import rigid_poses, rigid_tol
+
 ERRORS = ("pos_err", "rot_err")
 
 
@@ -23,19 +25,23 @@ def _rows(bad: np.ndarray) -> str:
     return "[" + ", ".join(str(r) for r in rows[:5]) + (", ...]" if len(rows) > 5 else "]")
 
 
-def check_results(results, dof: int) -> dict[str, np.ndarray]:
+def check_results(results, dof: int, floating: bool) -> dict[str, np.ndarray]:
     """The batch results to browse, checked field by field.
 
     Args:
         results: a mapping (a dict, or the arrays of an ``.npz``) with ``q (N, dof)``: finite
             real numbers, ``N >= 1``; and optionally ``success (N,)`` booleans, ``pos_err`` and
             ``rot_err`` ``(N,)`` or ``(N, k)`` (per target, as a whole robot's IK gives them):
-            real numbers ``>= 0`` (``inf`` allowed, NaN not). Other fields are ignored (an
-            ``IKResult``'s ``iters``...).
+            real numbers ``>= 0`` (``inf`` allowed, NaN not); ``base (N, 4, 4)`` root poses
+            ``T_world_root`` (a floating robot's solved base): finite rigid transforms (within
+            :func:`diffkin._checks.rigid_tol` of their dtype, integers as float64). Other fields
+            are ignored (an ``IKResult``'s ``iters``...).
         dof: the number of joints of the model.
+        floating: whether the model is a :class:`diffkin.Robot` with a floating root (only such
+            a model takes ``base``).
 
     Returns:
-        ``{field: array}`` of the fields above that are given (``q`` as float64).
+        ``{field: array}`` of the fields above that are given (``q`` and ``base`` as float64).
 
     Raises:
         TypeError: ``results`` is not a mapping.
@@ -72,7 +78,31 @@ def check_results(results, dof: int) -> dict[str, np.ndarray]:
                 f"results {name}: expected errors >= 0 (inf allowed), got NaN or a negative value in rows {_rows(bad)}"
             )
         checked[name] = err
+    if "base" in results:
+        checked["base"] = _check_base(results["base"], n, floating)
     return checked
+
+
+def _check_base(value, n: int, floating: bool) -> np.ndarray:
+    """``base (n, 4, 4)`` root poses ``T_world_root`` as float64, checked (see :func:`check_results`)."""
+    if not floating:
+        raise ValueError("results base: root poses are drawn only for a dk.Robot with a floating root (floating=True)")
+    base = _real("base", value)
+    if base.shape != (n, 4, 4):
+        raise ValueError(
+            f"results base: expected shape ({n}, 4, 4) (a pose T_world_root per row of q), got {base.shape}"
+        )
+    if not np.all(np.isfinite(base)):
+        raise ValueError(f"results base: expected finite numbers, got NaN or inf in rows {_rows(~np.isfinite(base))}")
+    if not np.issubdtype(base.dtype, np.floating):
+        base = base.astype(np.float64)
+    rigid = rigid_poses(base)
+    if not np.all(rigid):
+        raise ValueError(
+            f"results base: expected rigid transforms (within {rigid_tol(base.dtype):g}), "
+            f"got others in rows {_rows(~rigid)}"
+        )
+    return base.astype(np.float64)
 
 
 def describe(results: dict[str, np.ndarray], i: int) -> str:

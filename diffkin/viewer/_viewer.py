@@ -24,6 +24,7 @@ GC_OPTIONS = tuple(" ".join(f"{s:+d}" for s in signs) for signs in itertools.pro
 IIWA_READY = np.array([0.0, 0.5, 0.0, -1.2, 0.0, 0.7, 0.0])  # a bent pose: the arm angle is defined
 _ARM_NAMES = ("iiwa7", "iiwa14")
 BUILTIN = ("iiwa7", "iiwa14", "panda", "ur5", "puma560")
+FPS_RANGE = (0.1, 1000.0)  # playback rates of batch results, results per second
 
 
 def _shown(x: float) -> float:
@@ -96,12 +97,17 @@ class Viewer:
     component): ``/robot/<frame>`` is a frame node per model frame at its world pose (axes
     toggled by "Show frames"), its visual meshes below it at their fixed pose in the frame;
     ``/skeleton/<frame>`` cylinders join each frame to its parent frame; ``/targets/<frame>``
-    are the IK gizmos; ``/map`` the reachability point cloud.
+    are the IK gizmos; ``/map`` the reachability point cloud. The model is drawn with its root at
+    :attr:`T_world_root` (the identity, or the ``base`` of the batch result shown); IK targets are
+    world poses, solved for the chain from the root at that pose.
 
     Attributes:
         server: the ``viser.ViserServer``.
         kin: the model's frames, joints and jitted poses (``diffkin.viewer._model.Kinematics``).
         q: ``(dof,)`` float64, the configuration shown (actuated joints; mimic joints follow).
+        T_world_root: ``(4, 4)`` float64, the pose of the model's root frame (a chain's ``base``
+            frame, a robot's root) in the world as drawn: the identity unless a batch result with
+            ``base`` was shown.
         frames: ``{frame name: FrameHandle}``.
         skeleton: ``{frame name: cylinder}`` from each frame (but the root) to its parent frame.
         joint_spheres: ``{frame name: sphere}`` at each frame (shown with the skeleton).
@@ -112,6 +118,8 @@ class Viewer:
         targets: ``{end frame: TransformControlsHandle}``.
         ik_results: ``{end frame: last IKResult}`` (numpy fields).
         results: the batch results browsed, ``{field: array}`` as checked, or ``None``.
+        result_index: the batch result shown last (``None`` before the first).
+        play_fps, play_loop, play_button: the "Batch results" playback controls (with results).
         arm: the ``dk.srs.SRSArm`` driving the arm-angle controls, or ``None``.
         url: ``http://host:port``.
     """
@@ -147,12 +155,18 @@ class Viewer:
         if q0.shape != (dof,):
             raise ValueError(f"q0: expected shape ({dof},), got {q0.shape}")
         self.q = np.clip(q0, self.kin.lower, self.kin.upper)
-        self.results = check_results(results, dof) if results is not None else None
+        floating = isinstance(model, dk.Robot) and model.floating
+        self.results = check_results(results, dof, floating) if results is not None else None
+        self.result_index: int | None = None
+        self.T_world_root = np.eye(4)
+        self._player: tuple[threading.Thread, threading.Event] | None = None
 
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.url = f"http://{host}:{self.server.get_port()}"
         poses = np.asarray(self.kin.poses(jnp.asarray(self.q)), dtype=np.float64)
         origins = poses[:, :3, 3]
+        if self.results is not None and "base" in self.results:  # the scene spans the root poses too
+            origins = np.concatenate([origins, self.results["base"][:, :3, 3]])
         lo, hi = origins.min(0), origins.max(0)
         self.size = size = max(float(np.max(hi - lo)), 0.3)
         center = (lo + hi) / 2
@@ -326,8 +340,24 @@ class Viewer:
             n = len(self.results["q"])
             with gui.add_folder("Batch results"):
                 self.result_slider = gui.add_slider("result", min=0, max=max(n - 1, 1), step=1, initial_value=0)
+                self.play_fps = gui.add_number(
+                    "frames per second", initial_value=10.0, min=FPS_RANGE[0], max=FPS_RANGE[1], step=0.1
+                )
+                self.play_loop = gui.add_checkbox("Loop", initial_value=True)
+                self.play_button = gui.add_button("Play")
                 self.result_status = gui.add_markdown(f"{n} configurations")
-            self.result_slider.on_update(lambda _event: self.show_result(int(self.result_slider.value)))
+
+            @self.result_slider.on_update
+            def _(_event) -> None:
+                if not self._quiet:
+                    self.show_result(int(self.result_slider.value))
+
+            @self.play_button.on_click
+            def _(_event) -> None:
+                if self.playing:
+                    self.pause()
+                else:
+                    self.play()
 
     def _show_gc(self, text: str) -> None:
         """Show the global configuration ``text`` in its dropdown.
@@ -369,7 +399,7 @@ class Viewer:
         """Show ``q``: scene, sliders, gizmos (all but the one dragged), arm angle (unless it moved the arm)."""
         with self._lock:
             self.q = np.asarray(q, dtype=np.float64).copy()
-            poses = np.asarray(self.kin.poses(jnp.asarray(self.q)), dtype=np.float64)
+            poses = self.T_world_root @ np.asarray(self.kin.poses(jnp.asarray(self.q)), dtype=np.float64)
             self._update_scene(poses)
             self._quiet = True
             try:
@@ -413,14 +443,16 @@ class Viewer:
         return self._ik[end]
 
     def solve_ik(self, end: str, T) -> object:
-        """IK for frame ``end`` to the pose ``T (4, 4)`` from the current ``q``; shows the result.
+        """IK for frame ``end`` to the world pose ``T (4, 4)`` from the current ``q``; shows the result.
 
-        The chain's joints take the solver's ``q`` (the best found, even if it failed); the other
-        joints keep theirs. Returns the ``IKResult`` (numpy fields).
+        The root stays at :attr:`T_world_root` (the chain is solved for ``T_world_root^-1 T``). The
+        chain's joints take the solver's ``q`` (the best found, even if it failed); the other
+        joints keep theirs. Returns the ``IKResult`` (numpy fields; poses in the root frame).
         """
         fn, index = self._ik_fn(end)
         with self._lock:
-            res = fn(jnp.asarray(T), jnp.asarray(self.q[index]), self._key)
+            T_root_target = np.linalg.solve(self.T_world_root, np.asarray(T, dtype=np.float64))
+            res = fn(jnp.asarray(T_root_target), jnp.asarray(self.q[index]), self._key)
             res = jax.tree.map(np.asarray, res)
             q = self.q.copy()
             q[index] = res.q
@@ -512,13 +544,87 @@ class Viewer:
 
     # ------------------------------------------------------------------------------------- results
 
-    def show_result(self, i: int) -> None:
-        """Show configuration ``i`` of the batch results."""
+    def _checked_results(self, what: str) -> dict[str, np.ndarray]:
         if self.results is None:
-            raise ValueError("show_result: the viewer has no batch results (show(..., results=...))")
-        i = int(np.clip(i, 0, len(self.results["q"]) - 1))
-        self.result_status.content = describe(self.results, i)
-        self.set_q(self.results["q"][i])
+            raise ValueError(f"{what}: the viewer has no batch results (show(..., results=...))")
+        return self.results
+
+    def show_result(self, i: int) -> None:
+        """Show result ``i`` of the batch results (clipped to ``[0, N)``): its ``q``, and its root pose
+        ``base`` where given (the root stays where it is otherwise); the result slider follows."""
+        results = self._checked_results("show_result")
+        i = int(np.clip(i, 0, len(results["q"]) - 1))
+        with self._lock:
+            self.result_index = i
+            self._quiet = True
+            try:
+                self.result_slider.value = i  # type: ignore[misc]  # viser's stub: read-only; its API sets it
+            finally:
+                self._quiet = False
+            self.result_status.content = describe(results, i)
+            if "base" in results:
+                self.T_world_root = results["base"][i]
+            self.set_q(results["q"][i])
+
+    @property
+    def playing(self) -> bool:
+        """Whether the batch results are being played."""
+        return self._player is not None
+
+    def play(self, fps: float | None = None, loop: bool | None = None) -> None:
+        """Play the batch results in order in a background thread, from the one after the shown one.
+
+        One result is shown every ``1 / fps`` seconds (the "frames per second" and "Loop" controls
+        are read at every step: changing them changes the playback). Playback from the last result
+        starts over at result 0. A playback already running goes on at the new settings.
+
+        Args:
+            fps: results shown per second, in ``[0.1, 1000]`` (default: the GUI's value; set there).
+            loop: after the last result, start over at result 0 (default: the GUI's value; set
+                there); otherwise stop at the last.
+        """
+        results = self._checked_results("play")
+        if fps is not None:
+            if not FPS_RANGE[0] <= float(fps) <= FPS_RANGE[1]:
+                raise ValueError(f"fps: expected frames per second in [{FPS_RANGE[0]:g}, {FPS_RANGE[1]:g}], got {fps}")
+            self.play_fps.value = float(fps)  # type: ignore[misc]  # viser's stub: read-only; its API sets it
+        if loop is not None:
+            self.play_loop.value = bool(loop)  # type: ignore[misc]  # viser's stub: read-only; its API sets it
+        with self._lock:
+            if self.playing:
+                return
+            if self.result_index in (None, len(results["q"]) - 1):
+                self.show_result(0)
+            stop = threading.Event()
+            thread = threading.Thread(target=self._play, args=(stop,), name="diffkin-viewer-play", daemon=True)
+            self._player = thread, stop
+            self.play_button.label = "Pause"
+            thread.start()
+
+    def pause(self) -> None:
+        """Stop the playback (if any) and wait for its thread to end; the shown result stays."""
+        with self._lock:
+            player, self._player = self._player, None
+            if player is None:
+                return
+            player[1].set()
+            self.play_button.label = "Play"
+        if player[0] is not threading.current_thread():
+            player[0].join()  # outside the lock: the thread may be waiting for it to see the stop
+
+    def _play(self, stop: threading.Event) -> None:
+        """The playback thread: the next result every ``1 / fps`` seconds until ``stop`` is set or the end."""
+        n = len(self._checked_results("play")["q"])
+        while not stop.wait(1.0 / float(np.clip(self.play_fps.value, *FPS_RANGE))):  # (a browser may send any)
+            with self._lock:
+                if stop.is_set():
+                    return
+                i = (self.result_index or 0) + 1
+                if i == n and not self.play_loop.value:
+                    self._player = None
+                    self.play_button.label = "Play"
+                    return
+                self.show_result(i % n)
 
     # ------------------------------------------------------------------------------------- lifecycle
 
@@ -534,7 +640,8 @@ class Viewer:
             pass
 
     def stop(self) -> None:
-        """Stop the server."""
+        """Stop the playback (see :meth:`pause`) and the server."""
+        self.pause()
         self.server.stop()
 
 
@@ -566,10 +673,18 @@ def show(
             the built-in ``iiwa7``/``iiwa14``).
         q0: initial configuration ``(dof,)`` (default zeros; a bent pose for the iiwa).
         workspace_map: a ``dk.workspace.ReachabilityMap`` (or the path of its ``.npz``) drawn as points.
-        results: batched configurations to browse: a mapping (or ``.npz`` path) with ``q (N, dof)``
-            and optionally ``success (N,)``, ``pos_err`` and ``rot_err`` ``(N,)`` or ``(N, k)``
-            (a whole robot's per-target errors); each field is checked before the page is served
-            (``q`` finite, ``success`` booleans, errors real and ``>= 0``, one row per row of ``q``).
+        results: batched configurations to browse and play (a slider, a "Play" button; from
+            Python ``viewer.show_result(i)``, ``viewer.play(fps=..., loop=...)``,
+            ``viewer.pause()``): a mapping (or ``.npz`` path) with ``q (N, dof)`` and optionally
+            ``success (N,)``, ``pos_err`` and ``rot_err`` ``(N,)`` or ``(N, k)`` (a whole robot's
+            per-target errors), and, for a :class:`~diffkin.Robot` with a floating root,
+            ``base (N, 4, 4)``: the root pose ``T_world_root`` each row is drawn at. Each field is
+            checked before the page is served (``q`` finite, ``success`` booleans, errors real and
+            ``>= 0``, ``base`` finite rigid transforms, one row per row of ``q``). A path solved
+            by ``res = dk.ik.solve_path(robot, targets, solve_base=True)`` (one path, or
+            ``dk.ik.solve`` over a batch of ``N`` targets) is
+            ``{"q": res.q, "base": res.base, "success": res.success}``; reshape a larger batch to
+            ``(N, ...)`` first.
         host, port: where to serve (the next free port is taken if ``port`` is in use).
         num_seeds: seeds of each interactive IK solve (the warm start is one of them).
         warmup: compile the IK functions in a background thread right away.
@@ -593,7 +708,7 @@ def show(
     if isinstance(workspace_map, (str, bytes)) or hasattr(workspace_map, "__fspath__"):
         workspace_map = dk.workspace.ReachabilityMap.load(workspace_map)
     if isinstance(results, (str, bytes)) or hasattr(results, "__fspath__"):
-        results = read_npz(results, "of batch results (q, and optionally success, pos_err, rot_err)")
+        results = read_npz(results, "of batch results (q, and optionally success, pos_err, rot_err, base)")
     viewer = Viewer(
         model,
         source=source,
