@@ -294,7 +294,7 @@ def com(robot: Robot, q: ArrayLike, *, base=None) -> jax.Array:
         ValueError: a massless robot, or masses the file does not determine (named).
     """
     kin, shape, dtype = _pass(massive(robot), q, base)
-    c, _ = kin.com()
+    c, _ = kin.com(velocities=False)
     return rg.stack(list(c), shape, dtype)
 
 

@@ -75,11 +75,13 @@ class Kinematics:
         joints = [zero if lock else c for lock, c in zip(self.locked, self.kin.columns(frame), strict=True)]
         return joints + self.root_columns
 
-    def com(self) -> tuple[rg.Vec3, list[rg.Vec3]]:
-        """The robot's centre of mass and its velocity per column of the state."""
-        c, velocities = self.kin.com()
+    def com(self, velocities: bool = True) -> tuple[rg.Vec3, list[rg.Vec3]]:
+        """The robot's centre of mass and its velocity per column of the state (empty without ``velocities``)."""
+        c, joint_velocities = self.kin.com(velocities)
+        if not velocities:
+            return c, []
         zero = (0.0, 0.0, 0.0)
-        joints = [zero if lock else v for lock, v in zip(self.locked, velocities, strict=True)]
+        joints = [zero if lock else v for lock, v in zip(self.locked, joint_velocities, strict=True)]
         return c, joints + [v for v, _ in rg.world_from_space(self.root_columns, c)]
 
 

@@ -29,6 +29,7 @@ import numpy as np
 from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._static import host, is_concrete
+from diffkin._xla import materialize
 from diffkin.models import _validate as check
 from diffkin.models.poe import PoEChain, _screw_types
 
@@ -300,8 +301,9 @@ class RobotPass:
         """Every frame, in ``robot.frame_names`` order."""
         return [self.pose(f) for f in range(len(self.robot.frame_names))]
 
-    def com(self) -> tuple[rg.Vec3, list[rg.Vec3]]:
-        """The centre of mass in the world, and per entry of ``q`` its velocity per unit ``q_i``.
+    def com(self, velocities: bool = True) -> tuple[rg.Vec3, list[rg.Vec3]]:
+        """The centre of mass in the world, and per entry of ``q`` its velocity per unit ``q_i``
+        (empty without ``velocities``).
 
         Joint ``j`` carries the bodies below it, of mass ``M_j`` and first moment ``S_j = sum m p``
         (world); its space screw ``(v_j, w_j)`` moves the centre by ``(M_j v_j + w_j x S_j) / M``.
@@ -312,18 +314,39 @@ class RobotPass:
         moments = [
             rg.scale(masses[b], rg.vadd(rg.rotate(T.R, rg.vector(c[b])), T.p)) for b, T in enumerate(self.bodies)
         ]
+        screws = self.screws
+        if velocities:  # every column reads them: computed once, not inside each column's kernel
+            moments, screws = _computed_once(moments, screws)
         for j in reversed(range(len(robot.parents))):  # subtree sums, leaves first (children follow parents)
             parent = robot.parents[j]
             masses[parent] = rg.add(masses[parent], masses[j + 1])
             moments[parent] = rg.vadd(moments[parent], moments[j + 1])
         inverse = _reciprocal(masses[0])
         zero = (0.0, 0.0, 0.0)
-        columns: list[rg.Vec3] = [zero] * robot.dof
-        for j, (v, w) in enumerate(self.screws):
+        columns: list[rg.Vec3] = [zero] * robot.dof if velocities else []
+        for j, (v, w) in enumerate(screws if velocities else []):
             i, k = robot.sources[j], rg.mul(self.multipliers[j], inverse)
             moved = rg.vadd(rg.scale(masses[j + 1], v), rg.cross(w, moments[j + 1]))
             columns[i] = rg.vadd(columns[i], rg.scale(k, moved))
         return rg.scale(inverse, moments[0]), columns
+
+
+def _computed_once(moments: list[rg.Vec3], screws: list) -> tuple[list[rg.Vec3], list]:
+    """Body moments and joint screws behind one barrier (:func:`diffkin._xla.materialize`): XLA's CPU
+    fusion would otherwise recompute the forward pass inside the kernel of every centre-of-mass
+    column (Talos: 1.4x faster)."""
+    flat = [e for m in moments for e in m] + [e for v, w in screws for e in (*v, *w)]
+    arrays = [i for i, e in enumerate(flat) if not isinstance(e, float)]
+    if arrays:
+        done = materialize([flat[i] for i in arrays])
+        for k, i in enumerate(arrays):
+            flat[i] = done[k]
+    nb = len(moments)
+    rest = flat[3 * nb :]
+    return (
+        [tuple(flat[3 * b : 3 * b + 3]) for b in range(nb)],
+        [(tuple(rest[6 * j : 6 * j + 3]), tuple(rest[6 * j + 3 : 6 * j + 6])) for j in range(len(screws))],
+    )
 
 
 def _reciprocal(total: rg.Entry) -> rg.Entry:

@@ -39,7 +39,7 @@ class ComTarget:
         return target_entries(target, True)
 
     def rows(self, kin, bound: tuple, jacobian: bool) -> Rows:
-        c, velocities = kin.com()
+        c, velocities = kin.com(jacobian)
         zero = (0.0, 0.0, 0.0)
         columns = [(v, zero) for v in velocities] if jacobian else []
         p_t, _ = bound
@@ -47,7 +47,7 @@ class ComTarget:
 
     def screen(self, kin, bound: tuple) -> rg.Entry:
         p_t, _ = bound
-        return screen_cost(rg.Rigid(rg.IDENTITY.R, kin.com()[0]), p_t, None, self.weights, kin.dtype)
+        return screen_cost(rg.Rigid(rg.IDENTITY.R, kin.com(False)[0]), p_t, None, self.weights, kin.dtype)
 
 
 def from_target(robot, com) -> tuple[ComTarget, jax.Array]:
