@@ -16,10 +16,6 @@ def dot(u: jax.Array, v: jax.Array) -> jax.Array:
     return jnp.sum(u * v, axis=-1)
 
 
-def cross(u: jax.Array, v: jax.Array) -> jax.Array:
-    return jnp.cross(u, v)
-
-
 def norm(v: jax.Array) -> jax.Array:
     """``(...,)`` Euclidean norm over the last axis; its derivative at ``v = 0`` is zero (not NaN)."""
     sq = dot(v, v)
@@ -71,45 +67,3 @@ def point_box(p: jax.Array, h: jax.Array) -> jax.Array:
     """
     q = jnp.abs(p) - h
     return norm(jnp.maximum(q, 0)) + jnp.minimum(jnp.max(q, axis=-1), 0)
-
-
-def box_vertices(h: jax.Array) -> jax.Array:
-    """``(..., 8, 3)`` corners of boxes of half extents ``h (..., 3)`` in their own frame."""
-    signs = jnp.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=h.dtype)
-    return signs * h[..., None, :]
-
-
-def box_edges(h: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """``(..., 12, 3)`` start and end points of the 12 edges of boxes of half extents ``h (..., 3)``."""
-    starts, ends = [], []
-    for i in range(3):
-        j, k = (i + 1) % 3, (i + 2) % 3
-        for sj in (-1, 1):
-            for sk in (-1, 1):
-                lo, hi = [0.0] * 3, [0.0] * 3
-                lo[i], hi[i] = -1.0, 1.0
-                lo[j] = hi[j] = float(sj)
-                lo[k] = hi[k] = float(sk)
-                starts.append(lo)
-                ends.append(hi)
-    return jnp.array(starts, h.dtype) * h[..., None, :], jnp.array(ends, h.dtype) * h[..., None, :]
-
-
-def unit_axes(c: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """``c / |c|`` over the last axis and a mask of the axes in use (``|c|`` not vanishingly small)."""
-    sq = dot(c, c)
-    ok = sq > jnp.sqrt(jnp.finfo(c.dtype).tiny)
-    return c / jnp.sqrt(jnp.where(ok, sq, 1))[..., None], ok
-
-
-def separation(axes: jax.Array, ok: jax.Array, center: jax.Array, radius_of) -> jax.Array:
-    """``(...,)`` the largest separation along candidate axes of two convex sets (``-inf`` if none in use).
-
-    Args:
-        axes: ``(..., K, 3)`` unit axes; ``ok (..., K)`` which are in use.
-        center: ``(..., 3)`` offset between the sets' centres (both centrally symmetric).
-        radius_of: function of ``axes`` giving ``(..., K)``: the sum of the sets' support radii
-            along each axis (half widths of their projections).
-    """
-    sep = jnp.abs(jnp.sum(axes * center[..., None, :], axis=-1)) - radius_of(axes)
-    return jnp.max(jnp.where(ok, sep, -jnp.inf), axis=-1)
