@@ -26,7 +26,8 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from diffkin.collision._closest import safe_div
+from diffkin._xla import materialize
+from diffkin.collision._closest import safe_div, segment_params
 from diffkin.collision._shapes import Box, Capsule
 
 Vec = tuple[jax.Array, jax.Array, jax.Array]
@@ -65,6 +66,10 @@ def _sqrt(sq: jax.Array) -> jax.Array:
     return jnp.where(ok, jnp.sqrt(jnp.where(ok, sq, 1)), 0)
 
 
+def _norm(v: Vec) -> jax.Array:
+    return _sqrt(_dot(v, v))
+
+
 def _unit(v: Vec) -> tuple[Vec, jax.Array]:
     """``v / |v|`` and a mask of the axes in use (``|v|`` not vanishingly small)."""
     sq = _dot(v, v)
@@ -83,21 +88,25 @@ def _cross_axis(i: int, v: Vec) -> Vec:
     return (-v[1], v[0], zero)
 
 
+def _cross(u: Vec, v: Vec) -> Vec:
+    return (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+
+
+def _axis(i: jax.Array, dtype) -> Vec:
+    """``e_i`` for an array of axis numbers ``i``."""
+    return tuple((i == k).astype(dtype) for k in range(3))  # type: ignore[return-value]
+
+
 def _clamp(p: Vec, h: Vec) -> tuple[jax.Array, Vec]:
     """The squared distance from points ``p`` (box frame) to a box of half extents ``h``, and the closest point."""
     closest = tuple(jnp.clip(p[i], -h[i], h[i]) for i in range(3))
     return sum(jnp.square(p[i] - closest[i]) for i in range(3)), closest  # type: ignore[return-value]
 
 
-def _segment_edge(r: Vec, u: Vec, uu: jax.Array, i: int, h: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """The segment ``r + s u`` (``0 <= s <= 1``) against the axis-aligned segment ``t e_i`` (``|t| <= h``).
-
-    Ericson's clamped least squares (as :func:`diffkin.collision._closest.segment_segment`),
-    written for an edge along a coordinate axis.
-
-    Returns:
-        The squared distance and the closest parameters ``s`` and ``t``.
-    """
+def _segment_edge(r: Vec, u: Vec, uu: jax.Array, i: int, h: jax.Array) -> jax.Array:
+    """The squared distance between the segment ``r + s u`` (``0 <= s <= 1``) and the axis-aligned segment
+    ``t e_i`` (``|t| <= h``): Ericson's clamped least squares (:func:`diffkin.collision._closest.segment_params`),
+    written for an edge along a coordinate axis."""
     j, k = (i + 1) % 3, (i + 2) % 3
     perp = u[j] * u[j] + u[k] * u[k]  # |u|^2 - u_i^2, the denominator of the unclamped optimum
     s = jnp.clip(safe_div(-(r[j] * u[j] + r[k] * u[k]), perp), 0, 1)
@@ -106,7 +115,7 @@ def _segment_edge(r: Vec, u: Vec, uu: jax.Array, i: int, h: jax.Array) -> tuple[
     s = jnp.where(t == clamped, s, jnp.clip(safe_div(clamped * u[i] - _dot(r, u), uu), 0, 1))
     w = [r[0] + s * u[0], r[1] + s * u[1], r[2] + s * u[2]]
     w[i] = w[i] - clamped
-    return w[0] * w[0] + w[1] * w[1] + w[2] * w[2], s, clamped
+    return w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
 
 
 def _support_edges(n: Vec, i: int, h: Vec) -> list[Vec]:
@@ -129,11 +138,6 @@ def _support_edges(n: Vec, i: int, h: Vec) -> list[Vec]:
     return out
 
 
-def _with(v: Vec, i: int, x: jax.Array) -> Vec:
-    """``v`` with entry ``i`` replaced by ``x``."""
-    return tuple(x if k == i else v[k] for k in range(3))  # type: ignore[return-value]
-
-
 def _best(candidates: list, better: Callable) -> Any:
     """The candidate whose key (its first leaf) is ``better`` than the others', the first on ties.
 
@@ -149,31 +153,93 @@ def _best(candidates: list, better: Callable) -> Any:
     return best
 
 
-def _apart(closest: Callable, point_a: Callable, point_b: Callable) -> Callable:
-    """The distance ``|x_b - x_a|`` of the closest points of two shapes, and its derivative.
+# Candidates are numbered, so that the nearest is one integer (its code) and its closest points are
+# computed afterwards from it alone. A corner is numbered by its signs, an edge of a box by its
+# axis and the signs of its other two coordinates (the 12 edges).
 
-    ``closest(a, b)`` gives the squared distance and a witness of the closest point on each shape
-    (coordinates in the shape: a capsule's segment parameter, a box's local point in units of its
-    half extents); ``point_a(a, witness)`` places it with the shape. The derivative is
-    ``n . (dx_b - dx_a)``, ``n`` the unit vector between the closest points, each point moving with
-    its shape (the witness held fixed): the envelope theorem, exact wherever the closest points are
-    unique. It is a few products, so a gradient compiles quickly, whereas the derivative of every
-    candidate compiles for minutes.
+
+def _corner_code(signs: tuple[int, int, int]) -> int:
+    return 4 * (signs[0] > 0) + 2 * (signs[1] > 0) + (signs[2] > 0)
+
+
+def _corner(code: jax.Array, dtype) -> Vec:
+    """The corner of number ``code`` (:func:`_corner_code`) in units of the half extents."""
+    return tuple((2 * ((code >> (2 - k)) & 1) - 1).astype(dtype) for k in range(3))  # type: ignore[return-value]
+
+
+def _edge_code(mid: Vec, i: int) -> jax.Array:
+    """The number (0 to 11) of the edge along axis ``i`` of midpoint ``mid``."""
+    j, k = (i + 1) % 3, (i + 2) % 3
+    return 4 * i + 2 * (mid[j] > 0) + (mid[k] > 0)
+
+
+def _edge(code: jax.Array, dtype) -> tuple[Vec, Vec]:
+    """The end points of the edge of number ``code`` (:func:`_edge_code`) in units of the half extents."""
+    i, sj, sk = code // 4, 2 * ((code >> 1) & 1) - 1, 2 * (code & 1) - 1
+    ends = []
+    for end in (-1, 1):
+        # coordinate c is the edge's axis (i = c), its j = i + 1 (i = c - 1) or its k = i + 2 (i = c + 1)
+        ends.append(tuple(jnp.where(i == c, end, jnp.where(i == (c + 2) % 3, sj, sk)).astype(dtype) for c in range(3)))
+    return ends[0], ends[1]
+
+
+def _stack(v: Vec) -> jax.Array:
+    return jnp.stack(jnp.broadcast_arrays(*v), axis=-1)
+
+
+def _segments(p1: Vec, q1: Vec, p2: Vec, q2: Vec) -> tuple[jax.Array, jax.Array]:
+    """The closest parameters of two segments (:func:`diffkin.collision._closest.segment_params`)."""
+    return segment_params(_stack(p1), _stack(q1), _stack(p2), _stack(q2))
+
+
+def _lerp(p: Vec, q: Vec, t: jax.Array) -> Vec:
+    return tuple(p[k] + t * (q[k] - p[k]) for k in range(3))  # type: ignore[return-value]
+
+
+def _scale(v: Vec, h: Vec) -> Vec:
+    return (v[0] * h[0], v[1] * h[1], v[2] * h[2])
+
+
+def _where(condition: jax.Array, x, y):
+    return jax.tree.map(lambda x, y: jnp.where(condition, x, y), x, y)
+
+
+def _chosen(candidates: Callable, expression: Callable) -> Callable:
+    """``f(a, b)``: the best of ``candidates(a, b) -> (value, code of the best)``, with the derivative
+    of ``expression(a, b, code)``, a function of the two shapes whose value is the chosen candidate's.
+
+    Only the chosen candidate is differentiated, so a gradient compiles in seconds where the
+    derivative of every candidate compiled for minutes; and the code is computed once
+    (:func:`diffkin._xla.materialize`), or XLA recomputes the candidates in every consumer.
     """
 
     @jax.custom_jvp
-    def distance(a, b):
-        return _sqrt(closest(a, b)[0])
+    def f(a, b):
+        return candidates(a, b)[0]
 
-    @distance.defjvp
-    def distance_jvp(primals, tangents):
-        sq, wa, wb = closest(*primals)
-        gap, dgap = jax.jvp(lambda a, b: _sub(point_b(b, wb), point_a(a, wa)), primals, tangents)
-        length = _sqrt(_dot(gap, gap))
-        n = tuple(safe_div(g, length) for g in gap)
-        return _sqrt(sq), _dot(n, dgap)
+    @f.defjvp
+    def f_jvp(primals, tangents):
+        code = materialize([candidates(*primals)[1]])[0]
+        return jax.jvp(expression(*primals, code), primals, tangents)
 
-    return distance
+    return f
+
+
+def _gap(witness: Callable, point_a: Callable, point_b: Callable) -> Callable:
+    """The distance ``|x_b - x_a|`` of the closest points of candidate ``code``, each moving with its shape.
+
+    ``witness(a, b, code)`` locates the closest point on each shape (coordinates in the shape: a
+    capsule's segment parameter, a box's local point in units of its half extents), which is then
+    held fixed: the derivative is ``n . (dx_b - dx_a)``, ``n`` the unit vector between the closest
+    points (the envelope theorem, exact wherever the closest points are unique).
+    """
+
+    def expression(a, b, code):
+        leaves, tree = jax.tree.flatten(witness(a, b, code))
+        wa, wb = jax.tree.unflatten(tree, list(materialize(leaves)))  # computed once, as the code
+        return lambda a, b: _norm(_sub(point_b(b, wb), point_a(a, wa)))
+
+    return expression
 
 
 def _in_units(local: Vec, h: Vec) -> Vec:
@@ -190,7 +256,7 @@ def _box_point(box: Box, units: Vec) -> Vec:
 
 def _capsule_point(capsule: Capsule, t: jax.Array) -> Vec:
     """The point ``a + t (b - a)`` of the capsule's segment."""
-    return tuple(capsule.a[..., i] + t * (capsule.b[..., i] - capsule.a[..., i]) for i in range(3))  # type: ignore[return-value]
+    return _lerp(_vec(capsule.a), _vec(capsule.b), t)
 
 
 # ---------------------------------------------------------------------------------- capsule-box
@@ -204,45 +270,72 @@ def _segment_in_box(a: Capsule, b: Box) -> tuple[Vec, Vec, Vec, Vec]:
     return p, q, _sub(q, p), _vec(b.half_extents)
 
 
-def _segment_box_separation(a: Capsule, b: Box) -> jax.Array:
-    """The largest separation along the box's axes and ``e_i x u``."""
+def _segment_box_separations(a: Capsule, b: Box) -> tuple[jax.Array, jax.Array]:
+    """The largest separation along the box's axes ``e_i`` (code ``i``) and ``e_i x u`` (``3 + i``), and its code."""
     p, q, u, h = _segment_in_box(a, b)
     mid = tuple(0.5 * (p[i] + q[i]) for i in range(3))
-    seps = [jnp.abs(mid[i]) - 0.5 * jnp.abs(u[i]) - h[i] for i in range(3)]
+    seps = [(jnp.abs(mid[i]) - 0.5 * jnp.abs(u[i]) - h[i], i) for i in range(3)]
     for i in range(3):
         n, ok = _unit(_cross_axis(i, u))
         sep = jnp.abs(_dot(n, mid)) - sum(jnp.abs(n[m]) * h[m] for m in range(3))
-        seps.append(jnp.where(ok, sep, -jnp.inf))
+        seps.append((jnp.where(ok, sep, -jnp.inf), 3 + i))
     return _best(seps, jnp.greater)
 
 
-def _segment_box_closest(a: Capsule, b: Box):
-    """The closest points of the segment and the box when apart: the parameter ``t`` on the segment, the box's point.
+def _segment_box_axis(a: Capsule, b: Box, code: jax.Array) -> Callable:
+    """The separation along axis ``code`` (:func:`_segment_box_separations`) as a function of the shapes."""
+    e = _axis(code % 3, a.radius.dtype)
 
-    Candidates: an end point and the box, a box corner and the segment, or the segment and a box
-    edge along a common normal ``e_i x u`` (the box's support edges in that direction).
+    def separation(a, b):
+        p, q, u, h = _segment_in_box(a, b)
+        mid = tuple(0.5 * (p[i] + q[i]) for i in range(3))
+        n = _unit(_where(code < 3, e, _cross(e, u)))[0]
+        return jnp.abs(_dot(n, mid)) - 0.5 * jnp.abs(_dot(n, u)) - sum(jnp.abs(n[m]) * h[m] for m in range(3))
+
+    return separation
+
+
+_segment_box_separation = _chosen(_segment_box_separations, _segment_box_axis)
+
+
+def _segment_box_closest(a: Capsule, b: Box) -> tuple[jax.Array, jax.Array]:
+    """The distance of the segment and the box when apart, and the code of the nearest candidate.
+
+    Candidates: an end point and the box (codes 0, 1), a box corner and the segment (2 + the
+    corner's), or the segment and a box edge along a common normal ``e_i x u`` (the box's support
+    edges in that direction; 10 + the edge's).
     """
     p, q, u, h = _segment_in_box(a, b)
     mid = tuple(0.5 * (p[i] + q[i]) for i in range(3))
     uu = _dot(u, u)
-    (sq_p, on_p), (sq_q, on_q) = _clamp(p, h), _clamp(q, h)
-    candidates = [(sq_p, jnp.zeros_like(uu), on_p), (sq_q, jnp.ones_like(uu), on_q)]
+    candidates = [(_clamp(p, h)[0], 0), (_clamp(q, h)[0], 1)]
     for signs in itertools.product((-1, 1), repeat=3):
-        corner = tuple(signs[m] * h[m] for m in range(3))
-        pv = _sub(p, corner)
+        pv = _sub(p, tuple(signs[m] * h[m] for m in range(3)))
         t = jnp.clip(safe_div(-_dot(pv, u), uu), 0, 1)
-        candidates.append((sum(jnp.square(pv[m] + t * u[m]) for m in range(3)), t, corner))
+        candidates.append((sum(jnp.square(pv[m] + t * u[m]) for m in range(3)), 2 + _corner_code(signs)))
     for i in range(3):
         n, _ = _unit(_cross_axis(i, u))
         towards = _sign(_dot(n, mid))
         for edge in _support_edges(tuple(towards * n[m] for m in range(3)), i, h):
-            sq, s, t = _segment_edge(_sub(p, edge), u, uu, i, h[i])
-            candidates.append((sq, s, _with(edge, i, t)))
-    sq, t, on_box = _best(candidates, jnp.less)
-    return sq, t, _in_units(on_box, h)
+            candidates.append((_segment_edge(_sub(p, edge), u, uu, i, h[i]), 10 + _edge_code(edge, i)))
+    sq, code = _best(candidates, jnp.less)
+    return _sqrt(sq), code
 
 
-_segment_box_apart = _apart(_segment_box_closest, _capsule_point, _box_point)
+def _segment_box_witness(a: Capsule, b: Box, code: jax.Array) -> tuple[jax.Array, Vec]:
+    """The closest points of candidate ``code`` (:func:`_segment_box_closest`): ``t`` on the segment, the box's."""
+    p, q, u, h = _segment_in_box(a, b)
+    dtype = u[0].dtype
+    end = _where(code == 0, p, q)
+    on_box = _clamp(end, h)[1]
+    corner = _corner(code - 2, dtype)
+    feature = _where(code < 10, (corner, corner), _edge(code - 10, dtype))  # a corner or an edge, in units
+    t, s = _segments(p, q, _scale(feature[0], h), _scale(feature[1], h))
+    ends = code < 2
+    return jnp.where(ends, code.astype(dtype), t), _where(ends, _in_units(on_box, h), _lerp(*feature, s))
+
+
+_segment_box_apart = _chosen(_segment_box_closest, _gap(_segment_box_witness, _capsule_point, _box_point))
 
 
 def capsule_box(a: Capsule, b: Box) -> jax.Array:
@@ -262,26 +355,46 @@ def _relative(a: Box, b: Box) -> tuple[Vec, Vec, tuple[Vec, Vec, Vec], Vec]:
     return _vec(a.half_extents), _vec(b.half_extents), cols, c  # type: ignore[return-value]
 
 
-def _box_box_separation(a: Box, b: Box) -> jax.Array:
-    """The largest separation along the axes ``e_i``, ``b_m`` and ``e_i x b_m`` (frame of ``a``)."""
+def _box_box_separations(a: Box, b: Box) -> tuple[jax.Array, jax.Array]:
+    """The largest separation along the axes ``e_i`` (code ``i``), ``b_m`` (``3 + m``) and ``e_i x b_m``
+    (``6 + 3 i + m``) (frame of ``a``), and its code."""
     ha, hb, cols, c = _relative(a, b)
     cb = _to_frame(cols, c)  # b's centre in b's frame
     absR = [[jnp.abs(cols[m][i]) for m in range(3)] for i in range(3)]  # |e_i . b_m|
-    seps = [jnp.abs(c[i]) - ha[i] - sum(absR[i][m] * hb[m] for m in range(3)) for i in range(3)]
-    seps += [jnp.abs(cb[m]) - sum(absR[i][m] * ha[i] for i in range(3)) - hb[m] for m in range(3)]
+    seps = [(jnp.abs(c[i]) - ha[i] - sum(absR[i][m] * hb[m] for m in range(3)), i) for i in range(3)]
+    seps += [(jnp.abs(cb[m]) - sum(absR[i][m] * ha[i] for i in range(3)) - hb[m], 3 + m) for m in range(3)]
     for i, m in itertools.product(range(3), repeat=2):
         n, ok = _unit(_cross_axis(i, cols[m]))
         rb = sum(jnp.abs(_dot(n, cols[k])) * hb[k] for k in range(3))
         sep = jnp.abs(_dot(n, c)) - sum(jnp.abs(n[k]) * ha[k] for k in range(3)) - rb
-        seps.append(jnp.where(ok, sep, -jnp.inf))
+        seps.append((jnp.where(ok, sep, -jnp.inf), 6 + 3 * i + m))
     return _best(seps, jnp.greater)
 
 
-def _box_box_closest(a: Box, b: Box):
-    """The closest points of two boxes when apart, each in units of its box (:func:`_in_units`).
+def _box_box_axis(a: Box, b: Box, code: jax.Array) -> Callable:
+    """The separation along axis ``code`` (:func:`_box_box_separations`) as a function of the boxes."""
+    e = _axis(jnp.where(code < 6, code, (code - 6) // 3), a.pose.dtype)
+    m = jnp.where(code < 6, code - 3, (code - 6) % 3)
 
-    Candidates: a corner of one and the other box, or an edge of each along a common normal
-    ``e_i x b_m`` (the support edges of ``a`` towards ``b`` and of ``b`` towards ``a``).
+    def separation(a, b):
+        ha, hb, cols, c = _relative(a, b)
+        b_m = _where(m == 0, cols[0], _where(m == 1, cols[1], cols[2]))
+        n = _unit(_where(code < 3, e, _where(code < 6, b_m, _cross(e, b_m))))[0]
+        rb = sum(jnp.abs(_dot(n, cols[k])) * hb[k] for k in range(3))
+        return jnp.abs(_dot(n, c)) - sum(jnp.abs(n[k]) * ha[k] for k in range(3)) - rb
+
+    return separation
+
+
+_box_box_separation = _chosen(_box_box_separations, _box_box_axis)
+
+
+def _box_box_closest(a: Box, b: Box) -> tuple[jax.Array, jax.Array]:
+    """The distance of two boxes when apart, and the code of the nearest candidate.
+
+    Candidates: a corner of ``b`` and box ``a`` (twice the corner's code), a corner of ``a`` and box
+    ``b`` (one more), or an edge of each along a common normal ``e_i x b_m``: the support edges of
+    ``a`` towards ``b`` and of ``b`` towards ``a`` (16 + 12 ``a``'s edge's + ``b``'s).
     """
     ha, hb, cols, c = _relative(a, b)
     cb = _to_frame(cols, c)
@@ -289,10 +402,9 @@ def _box_box_closest(a: Box, b: Box):
     candidates = []
     for s in itertools.product((-1, 1), repeat=3):
         corner_b = tuple(c[k] + s[0] * g[0][k] + s[1] * g[1][k] + s[2] * g[2][k] for k in range(3))
-        candidates.append((*_clamp(corner_b, ha), tuple(s[m] * hb[m] for m in range(3))))
+        candidates.append((_clamp(corner_b, ha)[0], 2 * _corner_code(s)))
         corner_a = tuple(sum(s[i] * ha[i] * cols[m][i] for i in range(3)) - cb[m] for m in range(3))  # in b's frame
-        sq, on_b = _clamp(corner_a, hb)
-        candidates.append((sq, tuple(s[i] * ha[i] for i in range(3)), on_b))
+        candidates.append((_clamp(corner_a, hb)[0], 2 * _corner_code(s) + 1))
     for i, m in itertools.product(range(3), repeat=2):
         n, _ = _unit(_cross_axis(i, cols[m]))
         n = tuple(_sign(_dot(n, c)) * n[k] for k in range(3))  # from a towards b
@@ -306,13 +418,29 @@ def _box_box_closest(a: Box, b: Box):
                     c[k] + sum(edge_b[l] * cols[l][k] for l in range(3) if l != m) - g[m][k] - edge_a[k]
                     for k in range(3)
                 )
-                sq, s, t = _segment_edge(start, u, uu, i, ha[i])
-                candidates.append((sq, _with(edge_a, i, t), _with(edge_b, m, (2 * s - 1) * hb[m])))
-    sq, on_a, on_b = _best(candidates, jnp.less)
-    return sq, _in_units(on_a, ha), _in_units(on_b, hb)
+                code = 16 + 12 * _edge_code(edge_a, i) + _edge_code(edge_b, m)
+                candidates.append((_segment_edge(start, u, uu, i, ha[i]), code))
+    sq, code = _best(candidates, jnp.less)
+    return _sqrt(sq), code
 
 
-_box_box_apart = _apart(_box_box_closest, _box_point, _box_point)
+def _box_box_witness(a: Box, b: Box, code: jax.Array) -> tuple[Vec, Vec]:
+    """The closest points of candidate ``code`` (:func:`_box_box_closest`), each in units of its box."""
+    ha, hb, cols, c = _relative(a, b)
+    dtype = c[0].dtype
+    corner = _corner(code // 2, dtype)
+    in_a = tuple(c[k] + sum(corner[m] * hb[m] * cols[m][k] for m in range(3)) for k in range(3))  # b's corner
+    in_b = _to_frame(cols, _sub(_scale(corner, ha), c))  # a's corner
+    corner_b = (_in_units(_clamp(in_a, ha)[1], ha), corner)
+    corner_a = (corner, _in_units(_clamp(in_b, hb)[1], hb))
+    edge_a, edge_b = _edge((code - 16) // 12, dtype), _edge((code - 16) % 12, dtype)
+    ends_b = [tuple(c[k] + sum(e[m] * hb[m] * cols[m][k] for m in range(3)) for k in range(3)) for e in edge_b]
+    s, t = _segments(_scale(edge_a[0], ha), _scale(edge_a[1], ha), *ends_b)
+    edges = (_lerp(*edge_a, s), _lerp(*edge_b, t))
+    return _where(code < 16, _where(code % 2 == 0, corner_b, corner_a), edges)
+
+
+_box_box_apart = _chosen(_box_box_closest, _gap(_box_box_witness, _box_point, _box_point))
 
 
 def box_box(a: Box, b: Box) -> jax.Array:

@@ -36,15 +36,13 @@ def point_segment(p: jax.Array, a: jax.Array, b: jax.Array) -> jax.Array:
     return norm(p - a - t[..., None] * d)
 
 
-def segment_segment(p1: jax.Array, q1: jax.Array, p2: jax.Array, q2: jax.Array) -> jax.Array:
-    """``(...,)`` distance between the segments ``p1``-``q1`` and ``p2``-``q2``.
+def segment_params(p1: jax.Array, q1: jax.Array, p2: jax.Array, q2: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """``(...,)`` each: the parameters ``s`` (on ``p1``-``q1``) and ``t`` (on ``p2``-``q2``) of a closest pair.
 
-    The closest parameters ``s`` (on the first) and ``t`` (on the second) of the clamped
-    least-squares problem (Ericson, *Real-Time Collision Detection*, 5.1.9): ``s`` from the
-    unconstrained optimum clamped to ``[0, 1]``, ``t`` as the optimum for that ``s``; if ``t`` leaves
-    ``[0, 1]`` it is clamped and ``s`` recomputed. Parallel segments (``a e - b^2 = 0``) take
-    ``s = 0``; zero-length segments are points. The distance is exact: every branch ends at a
-    closest pair.
+    The clamped least-squares problem (Ericson, *Real-Time Collision Detection*, 5.1.9): ``s`` from
+    the unconstrained optimum clamped to ``[0, 1]``, ``t`` as the optimum for that ``s``; if ``t``
+    leaves ``[0, 1]`` it is clamped and ``s`` recomputed. Parallel segments (``a e - b^2 = 0``) take
+    ``s = 0``; zero-length segments are points. Exact: every branch ends at a closest pair.
     """
     d1, d2, r = q1 - p1, q2 - p2, p1 - p2
     a, e, f = dot(d1, d1), dot(d2, d2), dot(d2, r)
@@ -56,8 +54,13 @@ def segment_segment(p1: jax.Array, q1: jax.Array, p2: jax.Array, q2: jax.Array) 
     s_low = jnp.clip(safe_div(-c, a), 0, 1)  # t clamped to 0
     s_high = jnp.clip(safe_div(b - c, a), 0, 1)  # t clamped to 1
     s = jnp.where(t < 0, s_low, jnp.where(t > 1, s_high, s))
-    t = jnp.clip(t, 0, 1)
-    return norm(r + s[..., None] * d1 - t[..., None] * d2)
+    return s, jnp.clip(t, 0, 1)
+
+
+def segment_segment(p1: jax.Array, q1: jax.Array, p2: jax.Array, q2: jax.Array) -> jax.Array:
+    """``(...,)`` distance between the segments ``p1``-``q1`` and ``p2``-``q2`` (:func:`segment_params`)."""
+    s, t = segment_params(p1, q1, p2, q2)
+    return norm(p1 - p2 + s[..., None] * (q1 - p1) - t[..., None] * (q2 - p2))
 
 
 def point_box(p: jax.Array, h: jax.Array) -> jax.Array:
