@@ -101,18 +101,19 @@ def opaque_index(index: jax.Array, bound: jax.Array) -> jax.Array:
     return jax.lax.rem(index, bound)
 
 
-def in_steps(fn: Callable[..., tuple[jax.Array, ...]], inputs: tuple[jax.Array, ...], step: int):
+def in_steps(fn: Callable[..., tuple[jax.Array, ...]], inputs: tuple[jax.Array, ...], step: int, axis: int = 0):
     """``fn(*inputs)`` over the leading axis of ``inputs`` (``n >= step`` problems), ``step`` problems at a time.
 
-    ``fn`` maps inputs with a leading axis of ``step`` to a tuple of outputs with that leading
-    axis. The last step overlaps the one before it (every step has the same shape), so some
-    problems are solved twice, with the same result. A step's intermediates then stay in cache,
-    and XLA's temporary buffer stays small (a buffer above glibc's mmap threshold takes fresh,
-    page-faulted memory on every call): ``dk.srs.ik`` in float64 about 2x faster; in float32 the
-    steps did not pay, and are kept for the memory bound.
+    ``fn`` maps inputs with a leading axis of ``step`` to a tuple of outputs with that axis at
+    ``axis`` (an output with the problems last is written by loops that run along them: XLA's CPU
+    loops vectorise the innermost axis). The last step overlaps the one before it (every step has
+    the same shape), so some problems are solved twice, with the same result. A step's
+    intermediates then stay in cache, and XLA's temporary buffer stays small (a buffer above
+    glibc's mmap threshold takes fresh, page-faulted memory on every call): ``dk.srs.ik`` in float64
+    about 2x faster; in float32 the steps did not pay, and are kept for the memory bound.
 
     Returns:
-        The outputs of ``fn``, each with a leading axis of ``n``.
+        The outputs of ``fn``, each with an axis of ``n`` at ``axis``.
     """
     n = inputs[0].shape[0]
     shapes = jax.eval_shape(fn, *(jax.ShapeDtypeStruct((step,) + x.shape[1:], x.dtype) for x in inputs))
@@ -120,7 +121,12 @@ def in_steps(fn: Callable[..., tuple[jax.Array, ...]], inputs: tuple[jax.Array, 
     def body(i, out):
         start = jnp.minimum(i * step, n - step)
         results = fn(*(jax.lax.dynamic_slice_in_dim(x, start, step) for x in inputs))
-        return tuple(jax.lax.dynamic_update_slice_in_dim(o, r, start, 0) for o, r in zip(out, results, strict=True))
+        return tuple(jax.lax.dynamic_update_slice_in_dim(o, r, start, axis) for o, r in zip(out, results, strict=True))
 
-    init = tuple(jnp.zeros((n,) + s.shape[1:], s.dtype) for s in shapes)
+    def full(shape):
+        dims = list(shape)
+        dims[axis] = n
+        return tuple(dims)
+
+    init = tuple(jnp.zeros(full(s.shape), s.dtype) for s in shapes)
     return jax.lax.fori_loop(0, -(-n // step), body, init)

@@ -367,19 +367,18 @@ def brute_apart(kind_a: str, fa: dict, fb: dict) -> np.ndarray:
     edges_b = _place(Tb, _EDGES * hb[:, None, None])
     if kind_a == "capsule":
         a, b = jnp.asarray(fa["a"])[:, None], jnp.asarray(fa["b"])[:, None]
-        ends = jnp.min(cl.point_box(_in_frame(Tb, jnp.concatenate([a, b], 1)), hb[:, None]), axis=1)
-        edges = jnp.min(cl.segment_segment(a, b, edges_b[:, :, 0], edges_b[:, :, 1]), axis=1)
+        ends = jnp.min(cl.point_box(cl.vec(_in_frame(Tb, jnp.concatenate([a, b], 1))), cl.vec(hb[:, None])), axis=1)
+        edges = jnp.min(cl.segment_segment(*(cl.vec(x) for x in (a, b, edges_b[:, :, 0], edges_b[:, :, 1]))), axis=1)
         return np.asarray(jnp.minimum(ends, edges)) - fa["radius"]
     Ta, ha = fa["pose"], fa["half_extents"]
     corners_a, corners_b = _place(Ta, _CORNERS * ha[:, None]), _place(Tb, _CORNERS * hb[:, None])
     corners = jnp.minimum(
-        jnp.min(cl.point_box(_in_frame(Tb, corners_a), hb[:, None]), axis=1),
-        jnp.min(cl.point_box(_in_frame(Ta, corners_b), ha[:, None]), axis=1),
+        jnp.min(cl.point_box(cl.vec(_in_frame(Tb, corners_a)), cl.vec(hb[:, None])), axis=1),
+        jnp.min(cl.point_box(cl.vec(_in_frame(Ta, corners_b)), cl.vec(ha[:, None])), axis=1),
     )
     edges_a = _place(Ta, _EDGES * ha[:, None, None])
-    edges = cl.segment_segment(
-        edges_a[:, :, None, 0], edges_a[:, :, None, 1], edges_b[:, None, :, 0], edges_b[:, None, :, 1]
-    )
+    ends = (edges_a[:, :, None, 0], edges_a[:, :, None, 1], edges_b[:, None, :, 0], edges_b[:, None, :, 1])
+    edges = cl.segment_segment(*(cl.vec(x) for x in ends))
     return np.asarray(jnp.minimum(corners, jnp.min(edges, axis=(1, 2))))
 
 

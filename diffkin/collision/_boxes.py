@@ -9,12 +9,10 @@ the box axes and the cross products of the generators.
   edge pair can only be closest along its common normal ``e_i x b_m``: the candidates are the
   corners of each shape against the other, and per axis pair the support edges of each shape
   along that normal. Every candidate is a distance between a point of each shape, so the smallest
-  is the distance. Its derivative comes from the closest points (:func:`_apart`), not from
+  is the distance. Its derivative comes from the closest points (:func:`_gap`), not from
   differentiating the candidates.
 
-Vectors are tuples of three arrays (one per coordinate) of broadcastable batch shapes: the
-arithmetic is entry by entry, which XLA's CPU backend fuses into one loop over the batch (as the
-rigid transforms of :mod:`diffkin._rigid`), instead of tiny batched matrix products.
+Vectors in structure of arrays (:mod:`diffkin.collision._closest`).
 """
 
 from __future__ import annotations
@@ -27,32 +25,20 @@ import jax
 import jax.numpy as jnp
 
 from diffkin._xla import materialize
-from diffkin.collision._closest import safe_div, segment_params
+from diffkin.collision._closest import (
+    Vec,
+    dot,
+    lerp,
+    norm,
+    rotation,
+    safe_div,
+    segment_params,
+    sqrt0,
+    sub,
+    to_frame,
+    vec,
+)
 from diffkin.collision._shapes import Box, Capsule
-
-Vec = tuple[jax.Array, jax.Array, jax.Array]
-
-
-def _vec(x: jax.Array) -> Vec:
-    return (x[..., 0], x[..., 1], x[..., 2])
-
-
-def _rotation(pose: jax.Array) -> tuple[Vec, Vec, Vec]:
-    """The columns of the rotation of ``pose (..., 4, 4)``: the box's axes in the outer frame."""
-    return tuple((pose[..., 0, j], pose[..., 1, j], pose[..., 2, j]) for j in range(3))  # type: ignore[return-value]
-
-
-def _dot(u: Vec, v: Vec) -> jax.Array:
-    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
-
-
-def _sub(u: Vec, v: Vec) -> Vec:
-    return (u[0] - v[0], u[1] - v[1], u[2] - v[2])
-
-
-def _to_frame(axes: tuple[Vec, Vec, Vec], v: Vec) -> Vec:
-    """``R^T v`` for the rotation of columns ``axes``."""
-    return (_dot(axes[0], v), _dot(axes[1], v), _dot(axes[2], v))
 
 
 def _sign(x: jax.Array) -> jax.Array:
@@ -60,19 +46,9 @@ def _sign(x: jax.Array) -> jax.Array:
     return jnp.where(x >= 0, 1, -1).astype(x.dtype)
 
 
-def _sqrt(sq: jax.Array) -> jax.Array:
-    """``sqrt`` with a zero (not NaN) derivative at 0."""
-    ok = sq > 0
-    return jnp.where(ok, jnp.sqrt(jnp.where(ok, sq, 1)), 0)
-
-
-def _norm(v: Vec) -> jax.Array:
-    return _sqrt(_dot(v, v))
-
-
 def _unit(v: Vec) -> tuple[Vec, jax.Array]:
     """``v / |v|`` and a mask of the axes in use (``|v|`` not vanishingly small)."""
-    sq = _dot(v, v)
+    sq = dot(v, v)
     ok = sq > jnp.sqrt(jnp.finfo(sq.dtype).tiny)
     inv = 1 / jnp.sqrt(jnp.where(ok, sq, 1))
     return (v[0] * inv, v[1] * inv, v[2] * inv), ok
@@ -103,16 +79,22 @@ def _clamp(p: Vec, h: Vec) -> tuple[jax.Array, Vec]:
     return sum(jnp.square(p[i] - closest[i]) for i in range(3)), closest  # type: ignore[return-value]
 
 
-def _segment_edge(r: Vec, u: Vec, uu: jax.Array, i: int, h: jax.Array) -> jax.Array:
+def _inverse(x: jax.Array) -> jax.Array:
+    """``1 / x`` where ``x > 0``, else 0: a division shared by several candidates becomes products."""
+    ok = x > 0
+    return jnp.where(ok, 1 / jnp.where(ok, x, 1), 0)
+
+
+def _segment_edge(r: Vec, u: Vec, inv_uu: jax.Array, i: int, h: jax.Array) -> jax.Array:
     """The squared distance between the segment ``r + s u`` (``0 <= s <= 1``) and the axis-aligned segment
     ``t e_i`` (``|t| <= h``): Ericson's clamped least squares (:func:`diffkin.collision._closest.segment_params`),
-    written for an edge along a coordinate axis."""
+    written for an edge along a coordinate axis. ``inv_uu``: :func:`_inverse` of ``|u|^2``."""
     j, k = (i + 1) % 3, (i + 2) % 3
-    perp = u[j] * u[j] + u[k] * u[k]  # |u|^2 - u_i^2, the denominator of the unclamped optimum
-    s = jnp.clip(safe_div(-(r[j] * u[j] + r[k] * u[k]), perp), 0, 1)
+    inv_perp = _inverse(u[j] * u[j] + u[k] * u[k])  # |u|^2 - u_i^2, the denominator of the unclamped optimum
+    s = jnp.clip(-(r[j] * u[j] + r[k] * u[k]) * inv_perp, 0, 1)
     t = r[i] + s * u[i]
     clamped = jnp.clip(t, -h, h)
-    s = jnp.where(t == clamped, s, jnp.clip(safe_div(clamped * u[i] - _dot(r, u), uu), 0, 1))
+    s = jnp.where(t == clamped, s, jnp.clip((clamped * u[i] - dot(r, u)) * inv_uu, 0, 1))
     w = [r[0] + s * u[0], r[1] + s * u[1], r[2] + s * u[2]]
     w[i] = w[i] - clamped
     return w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
@@ -183,19 +165,6 @@ def _edge(code: jax.Array, dtype) -> tuple[Vec, Vec]:
     return ends[0], ends[1]
 
 
-def _stack(v: Vec) -> jax.Array:
-    return jnp.stack(jnp.broadcast_arrays(*v), axis=-1)
-
-
-def _segments(p1: Vec, q1: Vec, p2: Vec, q2: Vec) -> tuple[jax.Array, jax.Array]:
-    """The closest parameters of two segments (:func:`diffkin.collision._closest.segment_params`)."""
-    return segment_params(_stack(p1), _stack(q1), _stack(p2), _stack(q2))
-
-
-def _lerp(p: Vec, q: Vec, t: jax.Array) -> Vec:
-    return tuple(p[k] + t * (q[k] - p[k]) for k in range(3))  # type: ignore[return-value]
-
-
 def _scale(v: Vec, h: Vec) -> Vec:
     return (v[0] * h[0], v[1] * h[1], v[2] * h[2])
 
@@ -237,7 +206,7 @@ def _gap(witness: Callable, point_a: Callable, point_b: Callable) -> Callable:
     def expression(a, b, code):
         leaves, tree = jax.tree.flatten(witness(a, b, code))
         wa, wb = jax.tree.unflatten(tree, list(materialize(leaves)))  # computed once, as the code
-        return lambda a, b: _norm(_sub(point_b(b, wb), point_a(a, wa)))
+        return lambda a, b: norm(sub(point_b(b, wb), point_a(a, wa)))
 
     return expression
 
@@ -249,14 +218,14 @@ def _in_units(local: Vec, h: Vec) -> Vec:
 
 def _box_point(box: Box, units: Vec) -> Vec:
     """The point ``units`` (:func:`_in_units`) of ``box``, moving with its pose and its half extents."""
-    h = _vec(box.half_extents)
-    axes = _rotation(box.pose)
+    h = vec(box.half_extents)
+    axes = rotation(box.pose)
     return tuple(box.pose[..., i, 3] + sum(axes[k][i] * h[k] * units[k] for k in range(3)) for i in range(3))  # type: ignore[return-value]
 
 
 def _capsule_point(capsule: Capsule, t: jax.Array) -> Vec:
     """The point ``a + t (b - a)`` of the capsule's segment."""
-    return _lerp(_vec(capsule.a), _vec(capsule.b), t)
+    return lerp(vec(capsule.a), vec(capsule.b), t)
 
 
 # ---------------------------------------------------------------------------------- capsule-box
@@ -264,10 +233,10 @@ def _capsule_point(capsule: Capsule, t: jax.Array) -> Vec:
 
 def _segment_in_box(a: Capsule, b: Box) -> tuple[Vec, Vec, Vec, Vec]:
     """In the box frame: the capsule's end points ``p``, ``q``, its direction ``u = q - p``; the half extents."""
-    axes = _rotation(b.pose)
-    c = _vec(b.pose[..., :3, 3])
-    p, q = _to_frame(axes, _sub(_vec(a.a), c)), _to_frame(axes, _sub(_vec(a.b), c))
-    return p, q, _sub(q, p), _vec(b.half_extents)
+    axes = rotation(b.pose)
+    c = vec(b.pose[..., :3, 3])
+    p, q = to_frame(axes, sub(vec(a.a), c)), to_frame(axes, sub(vec(a.b), c))
+    return p, q, sub(q, p), vec(b.half_extents)
 
 
 def _segment_box_separations(a: Capsule, b: Box) -> tuple[jax.Array, jax.Array]:
@@ -277,7 +246,7 @@ def _segment_box_separations(a: Capsule, b: Box) -> tuple[jax.Array, jax.Array]:
     seps = [(jnp.abs(mid[i]) - 0.5 * jnp.abs(u[i]) - h[i], i) for i in range(3)]
     for i in range(3):
         n, ok = _unit(_cross_axis(i, u))
-        sep = jnp.abs(_dot(n, mid)) - sum(jnp.abs(n[m]) * h[m] for m in range(3))
+        sep = jnp.abs(dot(n, mid)) - sum(jnp.abs(n[m]) * h[m] for m in range(3))
         seps.append((jnp.where(ok, sep, -jnp.inf), 3 + i))
     return _best(seps, jnp.greater)
 
@@ -290,7 +259,7 @@ def _segment_box_axis(a: Capsule, b: Box, code: jax.Array) -> Callable:
         p, q, u, h = _segment_in_box(a, b)
         mid = tuple(0.5 * (p[i] + q[i]) for i in range(3))
         n = _unit(_where(code < 3, e, _cross(e, u)))[0]
-        return jnp.abs(_dot(n, mid)) - 0.5 * jnp.abs(_dot(n, u)) - sum(jnp.abs(n[m]) * h[m] for m in range(3))
+        return jnp.abs(dot(n, mid)) - 0.5 * jnp.abs(dot(n, u)) - sum(jnp.abs(n[m]) * h[m] for m in range(3))
 
     return separation
 
@@ -307,19 +276,19 @@ def _segment_box_closest(a: Capsule, b: Box) -> tuple[jax.Array, jax.Array]:
     """
     p, q, u, h = _segment_in_box(a, b)
     mid = tuple(0.5 * (p[i] + q[i]) for i in range(3))
-    uu = _dot(u, u)
+    inv_uu = _inverse(dot(u, u))
     candidates = [(_clamp(p, h)[0], 0), (_clamp(q, h)[0], 1)]
     for signs in itertools.product((-1, 1), repeat=3):
-        pv = _sub(p, tuple(signs[m] * h[m] for m in range(3)))
-        t = jnp.clip(safe_div(-_dot(pv, u), uu), 0, 1)
+        pv = sub(p, tuple(signs[m] * h[m] for m in range(3)))
+        t = jnp.clip(-dot(pv, u) * inv_uu, 0, 1)
         candidates.append((sum(jnp.square(pv[m] + t * u[m]) for m in range(3)), 2 + _corner_code(signs)))
     for i in range(3):
         n, _ = _unit(_cross_axis(i, u))
-        towards = _sign(_dot(n, mid))
+        towards = _sign(dot(n, mid))
         for edge in _support_edges(tuple(towards * n[m] for m in range(3)), i, h):
-            candidates.append((_segment_edge(_sub(p, edge), u, uu, i, h[i]), 10 + _edge_code(edge, i)))
+            candidates.append((_segment_edge(sub(p, edge), u, inv_uu, i, h[i]), 10 + _edge_code(edge, i)))
     sq, code = _best(candidates, jnp.less)
-    return _sqrt(sq), code
+    return sqrt0(sq), code
 
 
 def _segment_box_witness(a: Capsule, b: Box, code: jax.Array) -> tuple[jax.Array, Vec]:
@@ -330,9 +299,9 @@ def _segment_box_witness(a: Capsule, b: Box, code: jax.Array) -> tuple[jax.Array
     on_box = _clamp(end, h)[1]
     corner = _corner(code - 2, dtype)
     feature = _where(code < 10, (corner, corner), _edge(code - 10, dtype))  # a corner or an edge, in units
-    t, s = _segments(p, q, _scale(feature[0], h), _scale(feature[1], h))
+    t, s = segment_params(p, q, _scale(feature[0], h), _scale(feature[1], h))
     ends = code < 2
-    return jnp.where(ends, code.astype(dtype), t), _where(ends, _in_units(on_box, h), _lerp(*feature, s))
+    return jnp.where(ends, code.astype(dtype), t), _where(ends, _in_units(on_box, h), lerp(*feature, s))
 
 
 _segment_box_apart = _chosen(_segment_box_closest, _gap(_segment_box_witness, _capsule_point, _box_point))
@@ -349,24 +318,24 @@ def capsule_box(a: Capsule, b: Box) -> jax.Array:
 
 def _relative(a: Box, b: Box) -> tuple[Vec, Vec, tuple[Vec, Vec, Vec], Vec]:
     """Half extents of ``a`` and ``b``, ``b``'s axes and centre in the frame of ``a``."""
-    axes_a = _rotation(a.pose)
-    cols = tuple(_to_frame(axes_a, col) for col in _rotation(b.pose))
-    c = _to_frame(axes_a, _sub(_vec(b.pose[..., :3, 3]), _vec(a.pose[..., :3, 3])))
-    return _vec(a.half_extents), _vec(b.half_extents), cols, c  # type: ignore[return-value]
+    axes_a = rotation(a.pose)
+    cols = tuple(to_frame(axes_a, col) for col in rotation(b.pose))
+    c = to_frame(axes_a, sub(vec(b.pose[..., :3, 3]), vec(a.pose[..., :3, 3])))
+    return vec(a.half_extents), vec(b.half_extents), cols, c  # type: ignore[return-value]
 
 
 def _box_box_separations(a: Box, b: Box) -> tuple[jax.Array, jax.Array]:
     """The largest separation along the axes ``e_i`` (code ``i``), ``b_m`` (``3 + m``) and ``e_i x b_m``
     (``6 + 3 i + m``) (frame of ``a``), and its code."""
     ha, hb, cols, c = _relative(a, b)
-    cb = _to_frame(cols, c)  # b's centre in b's frame
+    cb = to_frame(cols, c)  # b's centre in b's frame
     absR = [[jnp.abs(cols[m][i]) for m in range(3)] for i in range(3)]  # |e_i . b_m|
     seps = [(jnp.abs(c[i]) - ha[i] - sum(absR[i][m] * hb[m] for m in range(3)), i) for i in range(3)]
     seps += [(jnp.abs(cb[m]) - sum(absR[i][m] * ha[i] for i in range(3)) - hb[m], 3 + m) for m in range(3)]
     for i, m in itertools.product(range(3), repeat=2):
         n, ok = _unit(_cross_axis(i, cols[m]))
-        rb = sum(jnp.abs(_dot(n, cols[k])) * hb[k] for k in range(3))
-        sep = jnp.abs(_dot(n, c)) - sum(jnp.abs(n[k]) * ha[k] for k in range(3)) - rb
+        rb = sum(jnp.abs(dot(n, cols[k])) * hb[k] for k in range(3))
+        sep = jnp.abs(dot(n, c)) - sum(jnp.abs(n[k]) * ha[k] for k in range(3)) - rb
         seps.append((jnp.where(ok, sep, -jnp.inf), 6 + 3 * i + m))
     return _best(seps, jnp.greater)
 
@@ -380,8 +349,8 @@ def _box_box_axis(a: Box, b: Box, code: jax.Array) -> Callable:
         ha, hb, cols, c = _relative(a, b)
         b_m = _where(m == 0, cols[0], _where(m == 1, cols[1], cols[2]))
         n = _unit(_where(code < 3, e, _where(code < 6, b_m, _cross(e, b_m))))[0]
-        rb = sum(jnp.abs(_dot(n, cols[k])) * hb[k] for k in range(3))
-        return jnp.abs(_dot(n, c)) - sum(jnp.abs(n[k]) * ha[k] for k in range(3)) - rb
+        rb = sum(jnp.abs(dot(n, cols[k])) * hb[k] for k in range(3))
+        return jnp.abs(dot(n, c)) - sum(jnp.abs(n[k]) * ha[k] for k in range(3)) - rb
 
     return separation
 
@@ -397,7 +366,7 @@ def _box_box_closest(a: Box, b: Box) -> tuple[jax.Array, jax.Array]:
     ``a`` towards ``b`` and of ``b`` towards ``a`` (16 + 12 ``a``'s edge's + ``b``'s).
     """
     ha, hb, cols, c = _relative(a, b)
-    cb = _to_frame(cols, c)
+    cb = to_frame(cols, c)
     g = [tuple(hb[m] * cols[m][k] for k in range(3)) for m in range(3)]  # b's half axes in a's frame
     candidates = []
     for s in itertools.product((-1, 1), repeat=3):
@@ -407,10 +376,10 @@ def _box_box_closest(a: Box, b: Box) -> tuple[jax.Array, jax.Array]:
         candidates.append((_clamp(corner_a, hb)[0], 2 * _corner_code(s) + 1))
     for i, m in itertools.product(range(3), repeat=2):
         n, _ = _unit(_cross_axis(i, cols[m]))
-        n = tuple(_sign(_dot(n, c)) * n[k] for k in range(3))  # from a towards b
-        n_b = tuple(-_dot(cols[k], n) for k in range(3))  # from b towards a, in b's frame (n_b[m] = 0)
+        n = tuple(_sign(dot(n, c)) * n[k] for k in range(3))  # from a towards b
+        n_b = tuple(-dot(cols[k], n) for k in range(3))  # from b towards a, in b's frame (n_b[m] = 0)
         u = tuple(2 * g[m][k] for k in range(3))
-        uu = 4 * hb[m] * hb[m]
+        inv_uu = _inverse(4 * hb[m] * hb[m])
         for edge_a in _support_edges(n, i, ha):
             for edge_b in _support_edges(n_b, m, hb):
                 # b's edge from its start point (in a's frame), relative to a's edge midpoint
@@ -419,9 +388,9 @@ def _box_box_closest(a: Box, b: Box) -> tuple[jax.Array, jax.Array]:
                     for k in range(3)
                 )
                 code = 16 + 12 * _edge_code(edge_a, i) + _edge_code(edge_b, m)
-                candidates.append((_segment_edge(start, u, uu, i, ha[i]), code))
+                candidates.append((_segment_edge(start, u, inv_uu, i, ha[i]), code))
     sq, code = _best(candidates, jnp.less)
-    return _sqrt(sq), code
+    return sqrt0(sq), code
 
 
 def _box_box_witness(a: Box, b: Box, code: jax.Array) -> tuple[Vec, Vec]:
@@ -430,13 +399,13 @@ def _box_box_witness(a: Box, b: Box, code: jax.Array) -> tuple[Vec, Vec]:
     dtype = c[0].dtype
     corner = _corner(code // 2, dtype)
     in_a = tuple(c[k] + sum(corner[m] * hb[m] * cols[m][k] for m in range(3)) for k in range(3))  # b's corner
-    in_b = _to_frame(cols, _sub(_scale(corner, ha), c))  # a's corner
+    in_b = to_frame(cols, sub(_scale(corner, ha), c))  # a's corner
     corner_b = (_in_units(_clamp(in_a, ha)[1], ha), corner)
     corner_a = (corner, _in_units(_clamp(in_b, hb)[1], hb))
     edge_a, edge_b = _edge((code - 16) // 12, dtype), _edge((code - 16) % 12, dtype)
     ends_b = [tuple(c[k] + sum(e[m] * hb[m] * cols[m][k] for m in range(3)) for k in range(3)) for e in edge_b]
-    s, t = _segments(_scale(edge_a[0], ha), _scale(edge_a[1], ha), *ends_b)
-    edges = (_lerp(*edge_a, s), _lerp(*edge_b, t))
+    s, t = segment_params(_scale(edge_a[0], ha), _scale(edge_a[1], ha), *ends_b)
+    edges = (lerp(*edge_a, s), lerp(*edge_b, t))
     return _where(code < 16, _where(code % 2 == 0, corner_b, corner_a), edges)
 
 

@@ -24,40 +24,41 @@ from diffkin.collision._boxes import box_box, capsule_box
 from diffkin.collision._shapes import SHAPES, Box, Capsule, Plane, Sphere
 
 
-def _local(box: Box, p: jax.Array) -> jax.Array:
-    """Points ``p (..., 3)`` in the frame of ``box``: ``R^T (p - c)``."""
-    R, c = box.pose[..., :3, :3], box.pose[..., :3, 3]
-    return jnp.einsum("...ji,...j->...i", R, p - c)
+def _local(box: Box, p: cl.Vec) -> cl.Vec:
+    """Points ``p`` in the frame of ``box``: ``R^T (p - c)``."""
+    return cl.to_frame(cl.rotation(box.pose), cl.sub(p, cl.vec(box.pose[..., :3, 3])))
 
 
 def sphere_sphere(a: Sphere, b: Sphere) -> jax.Array:
-    return cl.norm(a.center - b.center) - a.radius - b.radius
+    return cl.norm(cl.sub(cl.vec(a.center), cl.vec(b.center))) - a.radius - b.radius
 
 
 def sphere_capsule(a: Sphere, b: Capsule) -> jax.Array:
-    return cl.point_segment(a.center, b.a, b.b) - a.radius - b.radius
+    return cl.point_segment(cl.vec(a.center), cl.vec(b.a), cl.vec(b.b)) - a.radius - b.radius
 
 
 def capsule_capsule(a: Capsule, b: Capsule) -> jax.Array:
-    return cl.segment_segment(a.a, a.b, b.a, b.b) - a.radius - b.radius
+    return cl.segment_segment(cl.vec(a.a), cl.vec(a.b), cl.vec(b.a), cl.vec(b.b)) - a.radius - b.radius
 
 
 def sphere_box(a: Sphere, b: Box) -> jax.Array:
-    return cl.point_box(_local(b, a.center), b.half_extents) - a.radius
+    return cl.point_box(_local(b, cl.vec(a.center)), cl.vec(b.half_extents)) - a.radius
 
 
 def sphere_plane(a: Sphere, b: Plane) -> jax.Array:
-    return cl.dot(b.normal, a.center) - b.offset - a.radius
+    return cl.dot(cl.vec(b.normal), cl.vec(a.center)) - b.offset - a.radius
 
 
 def capsule_plane(a: Capsule, b: Plane) -> jax.Array:
-    return jnp.minimum(cl.dot(b.normal, a.a), cl.dot(b.normal, a.b)) - b.offset - a.radius
+    n = cl.vec(b.normal)
+    return jnp.minimum(cl.dot(n, cl.vec(a.a)), cl.dot(n, cl.vec(a.b))) - b.offset - a.radius
 
 
 def box_plane(a: Box, b: Plane) -> jax.Array:
-    R, c = a.pose[..., :3, :3], a.pose[..., :3, 3]
-    n_box = jnp.einsum("...ji,...j->...i", R, b.normal)  # the normal in the box frame
-    return cl.dot(b.normal, c) - cl.dot(jnp.abs(n_box), a.half_extents) - b.offset
+    n = cl.vec(b.normal)
+    n_box = cl.to_frame(cl.rotation(a.pose), n)  # the normal in the box frame
+    h = cl.vec(a.half_extents)
+    return cl.dot(n, cl.vec(a.pose[..., :3, 3])) - sum(jnp.abs(n_box[i]) * h[i] for i in range(3)) - b.offset
 
 
 def plane_plane(a: Plane, b: Plane) -> jax.Array:
@@ -65,7 +66,7 @@ def plane_plane(a: Plane, b: Plane) -> jax.Array:
     or minus the thickness of the common slab); otherwise they share an unbounded wedge and no
     translation separates them: the most negative finite number of the dtype."""
     d = -(a.offset + b.offset)
-    opposite = cl.dot(a.normal, b.normal) <= -1 + 4 * jnp.finfo(d.dtype).eps
+    opposite = cl.dot(cl.vec(a.normal), cl.vec(b.normal)) <= -1 + 4 * jnp.finfo(d.dtype).eps
     return jnp.where(opposite, d, jnp.finfo(d.dtype).min)
 
 
