@@ -283,7 +283,7 @@ def _segment_box_closest(a: Capsule, b: Box) -> tuple[jax.Array, jax.Array]:
         t = jnp.clip(-dot(pv, u) * inv_uu, 0, 1)
         candidates.append((sum(jnp.square(pv[m] + t * u[m]) for m in range(3)), 2 + _corner_code(signs)))
     for i in range(3):
-        n, _ = _unit(_cross_axis(i, u))
+        n = _cross_axis(i, u)  # (only its direction matters: no need to normalise)
         towards = _sign(dot(n, mid))
         for edge in _support_edges(tuple(towards * n[m] for m in range(3)), i, h):
             candidates.append((_segment_edge(sub(p, edge), u, inv_uu, i, h[i]), 10 + _edge_code(edge, i)))
@@ -375,7 +375,7 @@ def _box_box_closest(a: Box, b: Box) -> tuple[jax.Array, jax.Array]:
         corner_a = tuple(sum(s[i] * ha[i] * cols[m][i] for i in range(3)) - cb[m] for m in range(3))  # in b's frame
         candidates.append((_clamp(corner_a, hb)[0], 2 * _corner_code(s) + 1))
     for i, m in itertools.product(range(3), repeat=2):
-        n, _ = _unit(_cross_axis(i, cols[m]))
+        n = _cross_axis(i, cols[m])  # (only its direction matters: no need to normalise)
         n = tuple(_sign(dot(n, c)) * n[k] for k in range(3))  # from a towards b
         n_b = tuple(-dot(cols[k], n) for k in range(3))  # from b towards a, in b's frame (n_b[m] = 0)
         u = tuple(2 * g[m][k] for k in range(3))
