@@ -10,6 +10,8 @@ The measurements that justify them are in docs/performance.md, "XLA CPU tricks".
 - :func:`opaque_index`: an index that feeds several scatters is computed once.
 - :func:`in_steps`: a large batch goes through a function in fixed-size steps, so that each
   step's intermediates stay in cache and the temporary buffer stays small.
+- :func:`blocks_in_place`: blocks of a result written into their places, not concatenated, so
+  that each block is a loop of its own, vectorised along its innermost axis.
 - :data:`SOLVER_COMPILE` and :func:`solver_jit`: the IK solvers are compiled by XLA's classic CPU
   kernel emitter, which compiles in two thirds of the time of the newer MLIR emitters (see there).
 
@@ -99,6 +101,26 @@ def opaque_index(index: jax.Array, bound: jax.Array) -> jax.Array:
     scatter and per index array (a reachability map: a small gain, ~4 %).
     """
     return jax.lax.rem(index, bound)
+
+
+def blocks_in_place(blocks: list[list[jax.Array]], n: int) -> jax.Array:
+    """The blocks ``(rows_i, cols_j, n or 1)`` side by side: ``(sum rows, sum cols, n)``.
+
+    Each block is written into its place (``dynamic_update_slice``), not concatenated: XLA's CPU
+    backend fuses a concatenation with everything that computes its operands into one loop over
+    the whole output that branches per entry, where a block written in place is its own loop,
+    vectorised along ``n``.
+    """
+    rows = [row[0].shape[0] for row in blocks]
+    cols = [block.shape[1] for block in blocks[0]]
+    dtype = jnp.result_type(*(block for row in blocks for block in row))
+    out = jnp.zeros((sum(rows), sum(cols), n), dtype)
+    for i, row in enumerate(blocks):
+        for j, block in enumerate(row):
+            if block.size:
+                block = jnp.broadcast_to(block, (*block.shape[:2], n)).astype(dtype)
+                out = jax.lax.dynamic_update_slice(out, block, (sum(rows[:i]), sum(cols[:j]), 0))
+    return out
 
 
 def in_steps(fn: Callable[..., tuple[jax.Array, ...]], inputs: tuple[jax.Array, ...], step: int, axis: int = 0):

@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffkin._xla import in_steps
+from diffkin._xla import blocks_in_place, in_steps
 from diffkin.collision._distance import distance
 from diffkin.collision._geometry import KINDS, Geometry, placed
 from diffkin.collision._shapes import SHAPES, Box, Capsule, Plane, Sphere, unchecked
@@ -213,26 +213,7 @@ def _world_distances(robot: Robot, geom: Geometry, q, world: World, base) -> jax
     for shape in _batch_last(placed(robot, geom, q, base)):
         expanded = _map(shape, lambda v, r: jnp.expand_dims(v, 1))  # (n_kind, 1, N, ...)
         blocks.append([distance(expanded, o) for o in obstacles])  # (n_kind, n_obstacles, N) each
-    return _assemble(blocks, q.shape[0])
-
-
-def _assemble(blocks: list[list[jax.Array]], n: int) -> jax.Array:
-    """The blocks ``(rows_i, cols_j, N or 1)`` side by side: ``(sum rows, sum cols, N)``.
-
-    Each block is written into its place (``dynamic_update_slice``), not concatenated: XLA fuses a
-    concatenation with everything that computes its operands, one loop over the whole output that
-    branches per entry, where a block written in place is its own loop, vectorised along ``N``.
-    """
-    rows = [b[0].shape[0] for b in blocks]
-    cols = [b.shape[1] for b in blocks[0]]
-    dtype = jnp.result_type(*(b for row in blocks for b in row))
-    out = jnp.zeros((sum(rows), sum(cols), n), dtype)
-    for i, row in enumerate(blocks):
-        for j, block in enumerate(row):
-            if block.size:
-                block = jnp.broadcast_to(block, (*block.shape[:2], n)).astype(dtype)
-                out = jax.lax.dynamic_update_slice(out, block, (sum(rows[:i]), sum(cols[:j]), 0))
-    return out
+    return blocks_in_place(blocks, q.shape[0])
 
 
 def clearance(robot: Robot, geom: Geometry, q, world: World | None = None, base=None) -> jax.Array:
