@@ -10,6 +10,8 @@ The measurements that justify them are in docs/performance.md, "XLA CPU tricks".
 - :func:`opaque_index`: an index that feeds several scatters is computed once.
 - :func:`in_steps`: a large batch goes through a function in fixed-size steps, so that each
   step's intermediates stay in cache and the temporary buffer stays small.
+- :func:`blocks_in_place`: blocks of a result written into their places, not concatenated, so
+  that each block is a loop of its own, vectorised along its innermost axis.
 - :data:`SOLVER_COMPILE` and :func:`solver_jit`: the IK solvers are compiled by XLA's classic CPU
   kernel emitter, which compiles in two thirds of the time of the newer MLIR emitters (see there).
 
@@ -101,18 +103,39 @@ def opaque_index(index: jax.Array, bound: jax.Array) -> jax.Array:
     return jax.lax.rem(index, bound)
 
 
-def in_steps(fn: Callable[..., tuple[jax.Array, ...]], inputs: tuple[jax.Array, ...], step: int):
+def blocks_in_place(blocks: list[list[jax.Array]], n: int) -> jax.Array:
+    """The blocks ``(rows_i, cols_j, n or 1)`` side by side: ``(sum rows, sum cols, n)``.
+
+    Each block is written into its place (``dynamic_update_slice``), not concatenated: XLA's CPU
+    backend fuses a concatenation with everything that computes its operands into one loop over
+    the whole output that branches per entry, where a block written in place is its own loop,
+    vectorised along ``n``.
+    """
+    rows = [row[0].shape[0] for row in blocks]
+    cols = [block.shape[1] for block in blocks[0]]
+    dtype = jnp.result_type(*(block for row in blocks for block in row))
+    out = jnp.zeros((sum(rows), sum(cols), n), dtype)
+    for i, row in enumerate(blocks):
+        for j, block in enumerate(row):
+            if block.size:
+                block = jnp.broadcast_to(block, (*block.shape[:2], n)).astype(dtype)
+                out = jax.lax.dynamic_update_slice(out, block, (sum(rows[:i]), sum(cols[:j]), 0))
+    return out
+
+
+def in_steps(fn: Callable[..., tuple[jax.Array, ...]], inputs: tuple[jax.Array, ...], step: int, axis: int = 0):
     """``fn(*inputs)`` over the leading axis of ``inputs`` (``n >= step`` problems), ``step`` problems at a time.
 
-    ``fn`` maps inputs with a leading axis of ``step`` to a tuple of outputs with that leading
-    axis. The last step overlaps the one before it (every step has the same shape), so some
-    problems are solved twice, with the same result. A step's intermediates then stay in cache,
-    and XLA's temporary buffer stays small (a buffer above glibc's mmap threshold takes fresh,
-    page-faulted memory on every call): ``dk.srs.ik`` in float64 about 2x faster; in float32 the
-    steps did not pay, and are kept for the memory bound.
+    ``fn`` maps inputs with a leading axis of ``step`` to a tuple of outputs with that axis at
+    ``axis`` (an output with the problems last is written by loops that run along them: XLA's CPU
+    loops vectorise the innermost axis). The last step overlaps the one before it (every step has
+    the same shape), so some problems are solved twice, with the same result. A step's
+    intermediates then stay in cache, and XLA's temporary buffer stays small (a buffer above
+    glibc's mmap threshold takes fresh, page-faulted memory on every call): ``dk.srs.ik`` in float64
+    about 2x faster; in float32 the steps did not pay, and are kept for the memory bound.
 
     Returns:
-        The outputs of ``fn``, each with a leading axis of ``n``.
+        The outputs of ``fn``, each with an axis of ``n`` at ``axis``.
     """
     n = inputs[0].shape[0]
     shapes = jax.eval_shape(fn, *(jax.ShapeDtypeStruct((step,) + x.shape[1:], x.dtype) for x in inputs))
@@ -120,7 +143,12 @@ def in_steps(fn: Callable[..., tuple[jax.Array, ...]], inputs: tuple[jax.Array, 
     def body(i, out):
         start = jnp.minimum(i * step, n - step)
         results = fn(*(jax.lax.dynamic_slice_in_dim(x, start, step) for x in inputs))
-        return tuple(jax.lax.dynamic_update_slice_in_dim(o, r, start, 0) for o, r in zip(out, results, strict=True))
+        return tuple(jax.lax.dynamic_update_slice_in_dim(o, r, start, axis) for o, r in zip(out, results, strict=True))
 
-    init = tuple(jnp.zeros((n,) + s.shape[1:], s.dtype) for s in shapes)
+    def full(shape):
+        dims = list(shape)
+        dims[axis] = n
+        return tuple(dims)
+
+    init = tuple(jnp.zeros(full(s.shape), s.dtype) for s in shapes)
     return jax.lax.fori_loop(0, -(-n // step), body, init)

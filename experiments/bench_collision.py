@@ -4,9 +4,11 @@ diffkin's ``self_distances`` + ``world_distances`` (one jitted function, forward
 included) against a Python loop of coal's ``distance`` on the same primitives (the shapes placed
 by diffkin's poses beforehand: coal's time is the distances alone). Batch 1, 1,000 and 100,000,
 float32 and float64; the coal loop is timed on 200 configurations and reported per configuration
-times the batch. Medians of 5 warm calls.
+times the batch. Medians of 5 warm calls. ``--compile``: instead, the seconds to trace, lower and
+compile (at batch 1,000) the value of ``self_distances`` + ``world_distances`` and the gradient of
+their sum with respect to ``q`` (what IK and the tests differentiate).
 
-    python experiments/bench_collision.py [--quick]
+    python experiments/bench_collision.py [--quick] [--compile] [--dtype float32|float64|both]
 """
 
 from __future__ import annotations
@@ -91,10 +93,31 @@ def coal_per_config(robot, geom, world, q):
     return (time.perf_counter() - start) / len(q)
 
 
+def distances(robot, geom, world, dtype):
+    """``q -> (self_distances, world_distances)`` with every model number cast to ``dtype``."""
+    r, g, w = (jax.tree.map(lambda x: x.astype(dtype), m) for m in (robot, geom, world))
+    return lambda q: (dk.collision.self_distances(r, g, q), dk.collision.world_distances(r, g, q, w))
+
+
+def compile_times(robot, geom, world, q, dtypes) -> int:
+    """Print the seconds to trace, lower and compile the value and the gradient (of the sum of every distance)."""
+    print("| dtype | what | compile (s) |")
+    print("| --- | --- | --- |")
+    for dtype in dtypes:
+        f = distances(robot, geom, world, dtype)
+        total = lambda q, f=f: sum(jax.numpy.sum(d) for d in f(q))  # noqa: E731
+        for what, fn in (("value", f), ("gradient", jax.grad(total))):
+            start = time.perf_counter()
+            jax.jit(fn).lower(q.astype(dtype)).compile()
+            print(f"| {np.dtype(dtype).name} | {what} | {time.perf_counter() - start:.1f} |", flush=True)
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="batches 1 and 1,000 only")
     parser.add_argument("--dtype", choices=("float32", "float64", "both"), default="both")
+    parser.add_argument("--compile", action="store_true", help="compile times of the value and the gradient only")
     args = parser.parse_args(argv)
     robot, urdf, srdf = panda()
     t = time.perf_counter()
@@ -107,16 +130,14 @@ def main(argv=None) -> int:
     print(f"# load (mesh fits) {load_s:.1f} s; jax {jax.__version__}, {cpu}, {os.cpu_count()} CPUs")
     rng = np.random.default_rng(1)
     lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
+    dtypes = {"float32": (np.float32,), "float64": (np.float64,), "both": (np.float32, np.float64)}[args.dtype]
+    if args.compile:
+        return compile_times(robot, geom, world, rng.uniform(lo, hi, (1000, robot.dof)), dtypes)
     coal_s = coal_per_config(robot, geom, world, rng.uniform(lo, hi, (200, robot.dof)))
     print("| dtype | batch | diffkin (s) | coal loop (s, per config x batch) | speed-up |")
     print("| --- | --- | --- | --- | --- |")
-    for dtype in {"float32": (np.float32,), "float64": (np.float64,), "both": (np.float32, np.float64)}[args.dtype]:
-        g = jax.tree.map(lambda x, dtype=dtype: x.astype(dtype), geom)
-        w = jax.tree.map(lambda x, dtype=dtype: x.astype(dtype), world)
-        r = jax.tree.map(lambda x, dtype=dtype: x.astype(dtype), robot)
-        f = jax.jit(
-            lambda q, r=r, g=g, w=w: (dk.collision.self_distances(r, g, q), dk.collision.world_distances(r, g, q, w))
-        )
+    for dtype in dtypes:
+        f = jax.jit(distances(robot, geom, world, dtype))
         for batch in (1, 1000) if args.quick else (1, 1000, 100_000):
             q = rng.uniform(lo, hi, (batch, robot.dof)).astype(dtype)
             s = median_seconds(f, q, repeats=5, warmup=1, min_time=0.0)

@@ -7,12 +7,8 @@ pair is computed exactly (to rounding):
   distance between the points/segments minus the radii (the Minkowski difference of two segments
   is flat, so this holds inside as well as outside).
 - A half-space against a convex shape: the lowest point of the shape along the normal.
-- Boxes: a box and a segment (or a box) have a zonotope as Minkowski difference, whose facet
-  normals are the box axes and the cross products of the generators. Overlapping: the
-  separating-axis test over exactly those axes gives the depth (the largest separation, which is
-  negative). Apart: the distance between the two convex sets is attained vertex-to-solid or
-  edge-to-edge, so it is the smallest of the corner-to-box distances and the edge-to-edge segment
-  distances (computed in the first box's frame).
+- Box-box and capsule-box: the separating-axis depth when overlapping, the closest features when
+  apart (:mod:`diffkin.collision._boxes`).
 """
 
 from __future__ import annotations
@@ -24,43 +20,45 @@ import jax
 import jax.numpy as jnp
 
 from diffkin.collision import _closest as cl
+from diffkin.collision._boxes import box_box, capsule_box
 from diffkin.collision._shapes import SHAPES, Box, Capsule, Plane, Sphere
 
 
-def _local(box: Box, p: jax.Array) -> jax.Array:
-    """Points ``p (..., 3)`` in the frame of ``box``: ``R^T (p - c)``."""
-    R, c = box.pose[..., :3, :3], box.pose[..., :3, 3]
-    return jnp.einsum("...ji,...j->...i", R, p - c)
+def _local(box: Box, p: cl.Vec) -> cl.Vec:
+    """Points ``p`` in the frame of ``box``: ``R^T (p - c)``."""
+    return cl.to_frame(cl.rotation(box.pose), cl.sub(p, cl.vec(box.pose[..., :3, 3])))
 
 
 def sphere_sphere(a: Sphere, b: Sphere) -> jax.Array:
-    return cl.norm(a.center - b.center) - a.radius - b.radius
+    return cl.norm(cl.sub(cl.vec(a.center), cl.vec(b.center))) - a.radius - b.radius
 
 
 def sphere_capsule(a: Sphere, b: Capsule) -> jax.Array:
-    return cl.point_segment(a.center, b.a, b.b) - a.radius - b.radius
+    return cl.point_segment(cl.vec(a.center), cl.vec(b.a), cl.vec(b.b)) - a.radius - b.radius
 
 
 def capsule_capsule(a: Capsule, b: Capsule) -> jax.Array:
-    return cl.segment_segment(a.a, a.b, b.a, b.b) - a.radius - b.radius
+    return cl.segment_segment(cl.vec(a.a), cl.vec(a.b), cl.vec(b.a), cl.vec(b.b)) - a.radius - b.radius
 
 
 def sphere_box(a: Sphere, b: Box) -> jax.Array:
-    return cl.point_box(_local(b, a.center), b.half_extents) - a.radius
+    return cl.point_box(_local(b, cl.vec(a.center)), cl.vec(b.half_extents)) - a.radius
 
 
 def sphere_plane(a: Sphere, b: Plane) -> jax.Array:
-    return cl.dot(b.normal, a.center) - b.offset - a.radius
+    return cl.dot(cl.vec(b.normal), cl.vec(a.center)) - b.offset - a.radius
 
 
 def capsule_plane(a: Capsule, b: Plane) -> jax.Array:
-    return jnp.minimum(cl.dot(b.normal, a.a), cl.dot(b.normal, a.b)) - b.offset - a.radius
+    n = cl.vec(b.normal)
+    return jnp.minimum(cl.dot(n, cl.vec(a.a)), cl.dot(n, cl.vec(a.b))) - b.offset - a.radius
 
 
 def box_plane(a: Box, b: Plane) -> jax.Array:
-    R, c = a.pose[..., :3, :3], a.pose[..., :3, 3]
-    n_box = jnp.einsum("...ji,...j->...i", R, b.normal)  # the normal in the box frame
-    return cl.dot(b.normal, c) - cl.dot(jnp.abs(n_box), a.half_extents) - b.offset
+    n = cl.vec(b.normal)
+    n_box = cl.to_frame(cl.rotation(a.pose), n)  # the normal in the box frame
+    h = cl.vec(a.half_extents)
+    return cl.dot(n, cl.vec(a.pose[..., :3, 3])) - sum(jnp.abs(n_box[i]) * h[i] for i in range(3)) - b.offset
 
 
 def plane_plane(a: Plane, b: Plane) -> jax.Array:
@@ -68,65 +66,8 @@ def plane_plane(a: Plane, b: Plane) -> jax.Array:
     or minus the thickness of the common slab); otherwise they share an unbounded wedge and no
     translation separates them: the most negative finite number of the dtype."""
     d = -(a.offset + b.offset)
-    opposite = cl.dot(a.normal, b.normal) <= -1 + 4 * jnp.finfo(d.dtype).eps
+    opposite = cl.dot(cl.vec(a.normal), cl.vec(b.normal)) <= -1 + 4 * jnp.finfo(d.dtype).eps
     return jnp.where(opposite, d, jnp.finfo(d.dtype).min)
-
-
-def capsule_box(a: Capsule, b: Box) -> jax.Array:
-    """Segment against box in the box frame (see the module docstring), minus the capsule's radius."""
-    h = b.half_extents
-    p, q = _local(b, a.a), _local(b, a.b)
-    # overlap: separating axes = the box's axes and u x e_i (u: the segment's direction)
-    u = 0.5 * (q - p)
-    eye = jnp.eye(3, dtype=u.dtype)
-    crossed, ok = cl.unit_axes(jnp.cross(u[..., None, :], eye))
-    axes = jnp.concatenate([jnp.broadcast_to(eye, crossed.shape), crossed], axis=-2)
-    ok = jnp.concatenate([jnp.ones(ok.shape, bool), ok], axis=-1)
-    sat = cl.separation(
-        axes,
-        ok,
-        0.5 * (p + q),
-        lambda n: jnp.abs(jnp.sum(n * u[..., None, :], axis=-1)) + jnp.sum(jnp.abs(n) * h[..., None, :], axis=-1),
-    )
-    # apart: end points against the box, the segment against the 12 edges
-    ends = jnp.minimum(cl.point_box(p, h), cl.point_box(q, h))
-    e0, e1 = cl.box_edges(h)
-    edges = jnp.min(cl.segment_segment(p[..., None, :], q[..., None, :], e0, e1), axis=-1)
-    apart = jnp.minimum(ends, edges)
-    return jnp.where(sat > 0, apart, sat) - a.radius
-
-
-def box_box(a: Box, b: Box) -> jax.Array:
-    """Box against box in the frame of ``a`` (see the module docstring)."""
-    ha, hb = a.half_extents, b.half_extents
-    Ra, ca = a.pose[..., :3, :3], a.pose[..., :3, 3]
-    R = jnp.einsum("...ji,...jk->...ik", Ra, b.pose[..., :3, :3])  # R_a_b: b's axes (columns) in a's frame
-    c = jnp.einsum("...ji,...j->...i", Ra, b.pose[..., :3, 3] - ca)  # b's centre in a's frame
-    eye = jnp.eye(3, dtype=R.dtype)
-    Rb = jnp.swapaxes(R, -1, -2)  # rows: b's axes in a's frame
-    crossed, ok = cl.unit_axes(jnp.cross(eye[:, None, :], Rb[..., None, :, :]).reshape(*Rb.shape[:-2], 9, 3))
-    axes = jnp.concatenate([jnp.broadcast_to(eye, Rb.shape), Rb, crossed], axis=-2)
-    ok = jnp.concatenate([jnp.ones((*ok.shape[:-1], 6), bool), ok], axis=-1)
-
-    def radii(n):
-        ra = jnp.sum(jnp.abs(n) * ha[..., None, :], axis=-1)
-        rb = jnp.sum(jnp.abs(jnp.einsum("...kj,...ij->...ki", n, Rb)) * hb[..., None, :], axis=-1)
-        return ra + rb
-
-    sat = cl.separation(axes, ok, c, radii)
-    # apart: corners of each against the other, and edge against edge
-    vb = c[..., None, :] + jnp.einsum("...ij,...kj->...ki", R, cl.box_vertices(hb))  # b's corners in a's frame
-    va = jnp.einsum("...ji,...kj->...ki", R, cl.box_vertices(ha) - c[..., None, :])  # a's corners in b's frame
-    corners = jnp.minimum(
-        jnp.min(cl.point_box(vb, ha[..., None, :]), axis=-1), jnp.min(cl.point_box(va, hb[..., None, :]), axis=-1)
-    )
-    a0, a1 = cl.box_edges(ha)
-    b0, b1 = cl.box_edges(hb)
-    b0 = c[..., None, :] + jnp.einsum("...ij,...kj->...ki", R, b0)
-    b1 = c[..., None, :] + jnp.einsum("...ij,...kj->...ki", R, b1)
-    edges = cl.segment_segment(a0[..., :, None, :], a1[..., :, None, :], b0[..., None, :, :], b1[..., None, :, :])
-    apart = jnp.minimum(corners, jnp.min(edges, axis=(-1, -2)))
-    return jnp.where(sat > 0, apart, sat)
 
 
 _PAIRS: dict[tuple[type, type], Callable[[Any, Any], jax.Array]] = {

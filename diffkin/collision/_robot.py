@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffkin._xla import in_steps
+from diffkin._xla import blocks_in_place, in_steps
 from diffkin.collision._distance import distance
 from diffkin.collision._geometry import KINDS, Geometry, placed
 from diffkin.collision._shapes import SHAPES, Box, Capsule, Plane, Sphere, unchecked
@@ -118,22 +118,26 @@ def _check(robot, geom) -> None:
 def _in_steps(fn, q, base) -> jax.Array:
     """``fn(q, base)`` for a batch of configurations, :data:`STEP` at a time when the batch is large.
 
-    The batch axes of ``q`` and ``base`` are broadcast and flattened; small batches (at most twice
-    the step) are evaluated in one go. Values and derivatives are those of ``fn`` itself.
+    The batch axes of ``q`` and ``base`` are broadcast and flattened to ``(N,)``; ``fn`` takes
+    them so and returns its distances with the configurations last, ``(..., N)`` (see
+    :func:`_batch_last`). Small batches (at most twice the step) are evaluated in one go. Values
+    and derivatives are those of ``fn`` itself.
+
+    Returns:
+        ``(*batch, ...)``.
     """
     q = jnp.asarray(q)
     batch = jnp.broadcast_shapes(q.shape[:-1], jnp.shape(base)[:-2] if base is not None else ())
     n = int(np.prod(batch, dtype=np.int64))
+    inputs = [jnp.broadcast_to(q, (*batch, q.shape[-1])).reshape(n, q.shape[-1])]
+    if base is not None:
+        inputs.append(jnp.broadcast_to(jnp.asarray(base), (*batch, 4, 4)).reshape(n, 4, 4))
+    call = lambda q_, base_=None: fn(q_, base_)  # noqa: E731
     if n <= 2 * STEP:
-        return fn(q, base)
-    flat_q = jnp.broadcast_to(q, (*batch, q.shape[-1])).reshape(n, q.shape[-1])
-    if base is None:
-        (out,) = in_steps(lambda q_: (fn(q_, None),), (flat_q,), STEP)
+        out = call(*inputs)
     else:
-        base = jnp.asarray(base)
-        flat_base = jnp.broadcast_to(base, (*batch, 4, 4)).reshape(n, 4, 4)
-        (out,) = in_steps(lambda q_, b_: (fn(q_, b_),), (flat_q, flat_base), STEP)
-    return out.reshape(*batch, *out.shape[1:])
+        (out,) = in_steps(lambda *x: (call(*x),), tuple(inputs), STEP, axis=-1)
+    return jnp.moveaxis(out, -1, 0).reshape(*batch, *out.shape[:-1])
 
 
 def self_distances(robot: Robot, geom: Geometry, q, base=None) -> jax.Array:
@@ -152,8 +156,18 @@ def self_distances(robot: Robot, geom: Geometry, q, base=None) -> jax.Array:
     return _in_steps(lambda q_, base_: _self_distances(robot, geom, q_, base_), q, base)
 
 
+def _batch_last(shapes) -> list:
+    """Placed shapes of one flat batch ``(N, n_kind)`` as ``(n_kind, N)`` (a field that does not move: ``(n_kind, 1)``).
+
+    The pair functions are entry by entry over the broadcast batch, and XLA's CPU loops vectorise
+    the innermost axis: with the configurations last it is long (not the few obstacles or pairs).
+    """
+    return [_map(shape, lambda v, r: jnp.moveaxis(v if jnp.ndim(v) - r > 1 else v[None], 0, 1)) for shape in shapes]
+
+
 def _self_distances(robot: Robot, geom: Geometry, q, base) -> jax.Array:
-    shapes = placed(robot, geom, q, base)
+    """``(P, N)`` for ``q (N, dof)``."""
+    shapes = _batch_last(placed(robot, geom, q, base))
     counts = geom.counts
     starts = np.cumsum((0, *counts))
     pairs = geom.pairs
@@ -165,16 +179,14 @@ def _self_distances(robot: Robot, geom: Geometry, q, base) -> jax.Array:
             if rows is None or len(rows) == 0:
                 continue
             ia, ib = pairs[rows, 0] - starts[ka], pairs[rows, 1] - starts[kb]
-            pick = lambda s, idx: _map(s, lambda v, r, idx=idx: jnp.take(v, idx, axis=jnp.ndim(v) - r - 1))  # noqa: E731
-            pieces.append(distance(pick(shapes[ka], ia), pick(shapes[kb], ib)))
+            pick = lambda s, idx: _map(s, lambda v, r, idx=idx: jnp.take(v, idx, axis=0))  # noqa: E731
+            pieces.append(distance(pick(shapes[ka], ia), pick(shapes[kb], ib)))  # (rows, N)
             order.append(rows)
     if not pieces:
-        batch = jnp.broadcast_shapes(jnp.shape(q)[:-1], jnp.shape(base)[:-2] if base is not None else ())
-        return jnp.zeros((*batch, 0), jnp.result_type(float))
-    batch = jnp.broadcast_shapes(*(p.shape[:-1] for p in pieces))
-    out = jnp.concatenate([jnp.broadcast_to(p, (*batch, p.shape[-1])) for p in pieces], axis=-1)
+        return jnp.zeros((0, q.shape[0]), jnp.result_type(float))
+    out = jnp.concatenate([jnp.broadcast_to(p, (p.shape[0], q.shape[0])) for p in pieces], axis=0)
     inverse = np.argsort(np.concatenate(order))
-    return out[..., inverse] if not np.array_equal(inverse, np.arange(len(inverse))) else out
+    return out[inverse] if not np.array_equal(inverse, np.arange(len(inverse))) else out
 
 
 def world_distances(robot: Robot, geom: Geometry, q, world: World, base=None) -> jax.Array:
@@ -195,15 +207,13 @@ def world_distances(robot: Robot, geom: Geometry, q, world: World, base=None) ->
 
 
 def _world_distances(robot: Robot, geom: Geometry, q, world: World, base) -> jax.Array:
-    shapes = placed(robot, geom, q, base)
-    rows: list[jax.Array] = []
-    for shape in shapes:
-        expanded = _map(shape, lambda v, r: jnp.expand_dims(v, jnp.ndim(v) - r))  # (..., n_kind, 1, ...)
-        cols = [distance(expanded, obstacle) for obstacle in world.kinds()]
-        rows.append(jnp.concatenate(cols, axis=-1))
-    batch = jnp.broadcast_shapes(*(r.shape[:-2] for r in rows))
-    rows = [jnp.broadcast_to(r, (*batch, *r.shape[-2:])) for r in rows]
-    return jnp.concatenate(rows, axis=-2)
+    """``(S, W, N)`` for ``q (N, dof)``."""
+    obstacles = [_map(o, lambda v, r: jnp.expand_dims(v, 1)) for o in world.kinds()]  # (n_obstacles, 1, ...)
+    blocks = []
+    for shape in _batch_last(placed(robot, geom, q, base)):
+        expanded = _map(shape, lambda v, r: jnp.expand_dims(v, 1))  # (n_kind, 1, N, ...)
+        blocks.append([distance(expanded, o) for o in obstacles])  # (n_kind, n_obstacles, N) each
+    return blocks_in_place(blocks, q.shape[0])
 
 
 def clearance(robot: Robot, geom: Geometry, q, world: World | None = None, base=None) -> jax.Array:

@@ -1,0 +1,418 @@
+"""Box-box and capsule-box signed distances, from the closest-feature candidates.
+
+A box and a segment (or a box) have a zonotope as Minkowski difference, whose facet normals are
+the box axes and the cross products of the generators.
+
+- Overlapping: the separating-axis test over exactly those axes gives the depth (the largest
+  separation, which is negative). Its derivative is that of the winning axis' expression.
+- Apart: the distance between two convex sets is attained vertex-to-solid or edge-to-edge, and an
+  edge pair can only be closest along its common normal ``e_i x b_m``: the candidates are the
+  corners of each shape against the other, and per axis pair the support edges of each shape
+  along that normal. Every candidate is a distance between a point of each shape, so the smallest
+  is the distance. Its derivative comes from the closest points (:func:`_gap`), not from
+  differentiating the candidates.
+
+Vectors in structure of arrays (:mod:`diffkin.collision._closest`).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from diffkin._xla import materialize
+from diffkin.collision._closest import (
+    Vec,
+    dot,
+    lerp,
+    norm,
+    rotation,
+    safe_div,
+    segment_params,
+    sqrt0,
+    sub,
+    to_frame,
+    vec,
+)
+from diffkin.collision._shapes import Box, Capsule
+
+
+def _sign(x: jax.Array) -> jax.Array:
+    """``+1`` where ``x >= 0``, else ``-1`` (never 0: a tie picks a side)."""
+    return jnp.where(x >= 0, 1, -1).astype(x.dtype)
+
+
+def _unit(v: Vec) -> tuple[Vec, jax.Array]:
+    """``v / |v|`` and a mask of the axes in use (``|v|`` not vanishingly small)."""
+    sq = dot(v, v)
+    ok = sq > jnp.sqrt(jnp.finfo(sq.dtype).tiny)
+    inv = 1 / jnp.sqrt(jnp.where(ok, sq, 1))
+    return (v[0] * inv, v[1] * inv, v[2] * inv), ok
+
+
+def _cross_axis(i: int, v: Vec) -> Vec:
+    """``e_i x v``."""
+    zero = jnp.zeros_like(v[0])
+    if i == 0:
+        return (zero, -v[2], v[1])
+    if i == 1:
+        return (v[2], zero, -v[0])
+    return (-v[1], v[0], zero)
+
+
+def _cross(u: Vec, v: Vec) -> Vec:
+    return (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+
+
+def _axis(i: jax.Array, dtype) -> Vec:
+    """``e_i`` for an array of axis numbers ``i``."""
+    return tuple((i == k).astype(dtype) for k in range(3))  # type: ignore[return-value]
+
+
+def _clamp(p: Vec, h: Vec) -> tuple[jax.Array, Vec]:
+    """The squared distance from points ``p`` (box frame) to a box of half extents ``h``, and the closest point."""
+    closest = tuple(jnp.clip(p[i], -h[i], h[i]) for i in range(3))
+    return sum(jnp.square(p[i] - closest[i]) for i in range(3)), closest  # type: ignore[return-value]
+
+
+def _inverse(x: jax.Array) -> jax.Array:
+    """``1 / x`` where ``x > 0``, else 0: a division shared by several candidates becomes products."""
+    ok = x > 0
+    return jnp.where(ok, 1 / jnp.where(ok, x, 1), 0)
+
+
+def _segment_edge(r: Vec, u: Vec, inv_uu: jax.Array, i: int, h: jax.Array) -> jax.Array:
+    """The squared distance between the segment ``r + s u`` (``0 <= s <= 1``) and the axis-aligned segment
+    ``t e_i`` (``|t| <= h``): Ericson's clamped least squares (:func:`diffkin.collision._closest.segment_params`),
+    written for an edge along a coordinate axis. ``inv_uu``: :func:`_inverse` of ``|u|^2``."""
+    j, k = (i + 1) % 3, (i + 2) % 3
+    inv_perp = _inverse(u[j] * u[j] + u[k] * u[k])  # |u|^2 - u_i^2, the denominator of the unclamped optimum
+    s = jnp.clip(-(r[j] * u[j] + r[k] * u[k]) * inv_perp, 0, 1)
+    t = r[i] + s * u[i]
+    clamped = jnp.clip(t, -h, h)
+    s = jnp.where(t == clamped, s, jnp.clip((clamped * u[i] - dot(r, u)) * inv_uu, 0, 1))
+    w = [r[0] + s * u[0], r[1] + s * u[1], r[2] + s * u[2]]
+    w[i] = w[i] - clamped
+    return w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
+
+
+def _support_edges(n: Vec, i: int, h: Vec) -> list[Vec]:
+    """Midpoints of the edges along axis ``i`` of a box of half extents ``h`` that may be closest in direction ``n``.
+
+    The edge whose normal cone holds ``n`` (``n_i = 0``): the signs of ``n_j`` and ``n_k``. The sign of
+    the larger of the two is sure; the smaller one may be a tie (``n`` along a face normal, a face
+    parallel to the other shape), so both edges on that side are returned.
+    """
+    j, k = (i + 1) % 3, (i + 2) % 3
+    big_j = jnp.abs(n[j]) >= jnp.abs(n[k])
+    sj, sk = _sign(n[j]) * h[j], _sign(n[k]) * h[k]
+    zero = jnp.zeros_like(sj)
+    out = []
+    for side in (1, -1):
+        mid = [zero, zero, zero]
+        mid[j] = jnp.where(big_j, sj, side * h[j])
+        mid[k] = jnp.where(big_j, side * h[k], sk)
+        out.append(tuple(mid))
+    return out
+
+
+def _best(candidates: list, better: Callable) -> Any:
+    """The candidate whose key (its first leaf) is ``better`` than the others', the first on ties.
+
+    Chosen by selects, so its derivative is the chosen candidate's: the derivative of a chain of
+    ``jnp.maximum`` compares the maximum with each operand, and XLA's CPU backend can round an
+    operand differently in two fusions (seen: every weight zero, a zero derivative). Where only the
+    key is used, XLA drops the rest.
+    """
+    best = candidates[0]
+    for candidate in candidates[1:]:
+        take = better(jax.tree.leaves(candidate)[0], jax.tree.leaves(best)[0])
+        best = jax.tree.map(lambda new, old, take=take: jnp.where(take, new, old), candidate, best)
+    return best
+
+
+# Candidates are numbered, so that the nearest is one integer (its code) and its closest points are
+# computed afterwards from it alone. A corner is numbered by its signs, an edge of a box by its
+# axis and the signs of its other two coordinates (the 12 edges).
+
+
+def _corner_code(signs: tuple[int, int, int]) -> int:
+    return 4 * (signs[0] > 0) + 2 * (signs[1] > 0) + (signs[2] > 0)
+
+
+def _corner(code: jax.Array, dtype) -> Vec:
+    """The corner of number ``code`` (:func:`_corner_code`) in units of the half extents."""
+    return tuple((2 * ((code >> (2 - k)) & 1) - 1).astype(dtype) for k in range(3))  # type: ignore[return-value]
+
+
+def _edge_code(mid: Vec, i: int) -> jax.Array:
+    """The number (0 to 11) of the edge along axis ``i`` of midpoint ``mid``."""
+    j, k = (i + 1) % 3, (i + 2) % 3
+    return 4 * i + 2 * (mid[j] > 0) + (mid[k] > 0)
+
+
+def _edge(code: jax.Array, dtype) -> tuple[Vec, Vec]:
+    """The end points of the edge of number ``code`` (:func:`_edge_code`) in units of the half extents."""
+    i, sj, sk = code // 4, 2 * ((code >> 1) & 1) - 1, 2 * (code & 1) - 1
+    ends = []
+    for end in (-1, 1):
+        # coordinate c is the edge's axis (i = c), its j = i + 1 (i = c - 1) or its k = i + 2 (i = c + 1)
+        ends.append(tuple(jnp.where(i == c, end, jnp.where(i == (c + 2) % 3, sj, sk)).astype(dtype) for c in range(3)))
+    return ends[0], ends[1]
+
+
+def _scale(v: Vec, h: Vec) -> Vec:
+    return (v[0] * h[0], v[1] * h[1], v[2] * h[2])
+
+
+def _where(condition: jax.Array, x, y):
+    return jax.tree.map(lambda x, y: jnp.where(condition, x, y), x, y)
+
+
+def _chosen(candidates: Callable, expression: Callable) -> Callable:
+    """``f(a, b)``: the best of ``candidates(a, b) -> (value, code of the best)``, with the derivative
+    of ``expression(a, b, code)``, a function of the two shapes whose value is the chosen candidate's.
+
+    Only the chosen candidate is differentiated, so a gradient compiles in seconds where the
+    derivative of every candidate compiled for minutes; and the code is computed once
+    (:func:`diffkin._xla.materialize`), or XLA recomputes the candidates in every consumer.
+    """
+
+    @jax.custom_jvp
+    def f(a, b):
+        return candidates(a, b)[0]
+
+    @f.defjvp
+    def f_jvp(primals, tangents):
+        code = materialize([candidates(*primals)[1]])[0]
+        return jax.jvp(expression(*primals, code), primals, tangents)
+
+    return f
+
+
+def _gap(witness: Callable, point_a: Callable, point_b: Callable) -> Callable:
+    """The distance ``|x_b - x_a|`` of the closest points of candidate ``code``, each moving with its shape.
+
+    ``witness(a, b, code)`` locates the closest point on each shape (coordinates in the shape: a
+    capsule's segment parameter, a box's local point in units of its half extents), which is then
+    held fixed: the derivative is ``n . (dx_b - dx_a)``, ``n`` the unit vector between the closest
+    points (the envelope theorem, exact wherever the closest points are unique).
+    """
+
+    def expression(a, b, code):
+        leaves, tree = jax.tree.flatten(witness(a, b, code))
+        wa, wb = jax.tree.unflatten(tree, list(materialize(leaves)))  # computed once, as the code
+        return lambda a, b: norm(sub(point_b(b, wb), point_a(a, wa)))
+
+    return expression
+
+
+def _in_units(local: Vec, h: Vec) -> Vec:
+    """A box's local point in units of its half extents (``[-1, 1]`` each; 0 along a flat axis)."""
+    return tuple(safe_div(local[k], h[k]) for k in range(3))  # type: ignore[return-value]
+
+
+def _box_point(box: Box, units: Vec) -> Vec:
+    """The point ``units`` (:func:`_in_units`) of ``box``, moving with its pose and its half extents."""
+    h = vec(box.half_extents)
+    axes = rotation(box.pose)
+    return tuple(box.pose[..., i, 3] + sum(axes[k][i] * h[k] * units[k] for k in range(3)) for i in range(3))  # type: ignore[return-value]
+
+
+def _capsule_point(capsule: Capsule, t: jax.Array) -> Vec:
+    """The point ``a + t (b - a)`` of the capsule's segment."""
+    return lerp(vec(capsule.a), vec(capsule.b), t)
+
+
+# ---------------------------------------------------------------------------------- capsule-box
+
+
+def _segment_in_box(a: Capsule, b: Box) -> tuple[Vec, Vec, Vec, Vec]:
+    """In the box frame: the capsule's end points ``p``, ``q``, its direction ``u = q - p``; the half extents."""
+    axes = rotation(b.pose)
+    c = vec(b.pose[..., :3, 3])
+    p, q = to_frame(axes, sub(vec(a.a), c)), to_frame(axes, sub(vec(a.b), c))
+    return p, q, sub(q, p), vec(b.half_extents)
+
+
+def _segment_box_separations(a: Capsule, b: Box) -> tuple[jax.Array, jax.Array]:
+    """The largest separation along the box's axes ``e_i`` (code ``i``) and ``e_i x u`` (``3 + i``), and its code."""
+    p, q, u, h = _segment_in_box(a, b)
+    mid = tuple(0.5 * (p[i] + q[i]) for i in range(3))
+    seps = [(jnp.abs(mid[i]) - 0.5 * jnp.abs(u[i]) - h[i], i) for i in range(3)]
+    for i in range(3):
+        n, ok = _unit(_cross_axis(i, u))
+        sep = jnp.abs(dot(n, mid)) - sum(jnp.abs(n[m]) * h[m] for m in range(3))
+        seps.append((jnp.where(ok, sep, -jnp.inf), 3 + i))
+    return _best(seps, jnp.greater)
+
+
+def _segment_box_axis(a: Capsule, b: Box, code: jax.Array) -> Callable:
+    """The separation along axis ``code`` (:func:`_segment_box_separations`) as a function of the shapes."""
+    e = _axis(code % 3, a.radius.dtype)
+
+    def separation(a, b):
+        p, q, u, h = _segment_in_box(a, b)
+        mid = tuple(0.5 * (p[i] + q[i]) for i in range(3))
+        n = _unit(_where(code < 3, e, _cross(e, u)))[0]
+        return jnp.abs(dot(n, mid)) - 0.5 * jnp.abs(dot(n, u)) - sum(jnp.abs(n[m]) * h[m] for m in range(3))
+
+    return separation
+
+
+_segment_box_separation = _chosen(_segment_box_separations, _segment_box_axis)
+
+
+def _segment_box_closest(a: Capsule, b: Box) -> tuple[jax.Array, jax.Array]:
+    """The distance of the segment and the box when apart, and the code of the nearest candidate.
+
+    Candidates: an end point and the box (codes 0, 1), a box corner and the segment (2 + the
+    corner's), or the segment and a box edge along a common normal ``e_i x u`` (the box's support
+    edges in that direction; 10 + the edge's).
+    """
+    p, q, u, h = _segment_in_box(a, b)
+    mid = tuple(0.5 * (p[i] + q[i]) for i in range(3))
+    inv_uu = _inverse(dot(u, u))
+    candidates = [(_clamp(p, h)[0], 0), (_clamp(q, h)[0], 1)]
+    for signs in itertools.product((-1, 1), repeat=3):
+        pv = sub(p, tuple(signs[m] * h[m] for m in range(3)))
+        t = jnp.clip(-dot(pv, u) * inv_uu, 0, 1)
+        candidates.append((sum(jnp.square(pv[m] + t * u[m]) for m in range(3)), 2 + _corner_code(signs)))
+    for i in range(3):
+        n = _cross_axis(i, u)  # (only its direction matters: no need to normalise)
+        towards = _sign(dot(n, mid))
+        for edge in _support_edges(tuple(towards * n[m] for m in range(3)), i, h):
+            candidates.append((_segment_edge(sub(p, edge), u, inv_uu, i, h[i]), 10 + _edge_code(edge, i)))
+    sq, code = _best(candidates, jnp.less)
+    return sqrt0(sq), code
+
+
+def _segment_box_witness(a: Capsule, b: Box, code: jax.Array) -> tuple[jax.Array, Vec]:
+    """The closest points of candidate ``code`` (:func:`_segment_box_closest`): ``t`` on the segment, the box's."""
+    p, q, u, h = _segment_in_box(a, b)
+    dtype = u[0].dtype
+    end = _where(code == 0, p, q)
+    on_box = _clamp(end, h)[1]
+    corner = _corner(code - 2, dtype)
+    feature = _where(code < 10, (corner, corner), _edge(code - 10, dtype))  # a corner or an edge, in units
+    t, s = segment_params(p, q, _scale(feature[0], h), _scale(feature[1], h))
+    ends = code < 2
+    return jnp.where(ends, code.astype(dtype), t), _where(ends, _in_units(on_box, h), lerp(*feature, s))
+
+
+_segment_box_apart = _chosen(_segment_box_closest, _gap(_segment_box_witness, _capsule_point, _box_point))
+
+
+def capsule_box(a: Capsule, b: Box) -> jax.Array:
+    """Segment against box in the box frame (see the module docstring), minus the capsule's radius."""
+    sat = _segment_box_separation(a, b)
+    return jnp.where(sat > 0, _segment_box_apart(a, b), sat) - a.radius
+
+
+# ---------------------------------------------------------------------------------- box-box
+
+
+def _relative(a: Box, b: Box) -> tuple[Vec, Vec, tuple[Vec, Vec, Vec], Vec]:
+    """Half extents of ``a`` and ``b``, ``b``'s axes and centre in the frame of ``a``."""
+    axes_a = rotation(a.pose)
+    cols = tuple(to_frame(axes_a, col) for col in rotation(b.pose))
+    c = to_frame(axes_a, sub(vec(b.pose[..., :3, 3]), vec(a.pose[..., :3, 3])))
+    return vec(a.half_extents), vec(b.half_extents), cols, c  # type: ignore[return-value]
+
+
+def _box_box_separations(a: Box, b: Box) -> tuple[jax.Array, jax.Array]:
+    """The largest separation along the axes ``e_i`` (code ``i``), ``b_m`` (``3 + m``) and ``e_i x b_m``
+    (``6 + 3 i + m``) (frame of ``a``), and its code."""
+    ha, hb, cols, c = _relative(a, b)
+    cb = to_frame(cols, c)  # b's centre in b's frame
+    absR = [[jnp.abs(cols[m][i]) for m in range(3)] for i in range(3)]  # |e_i . b_m|
+    seps = [(jnp.abs(c[i]) - ha[i] - sum(absR[i][m] * hb[m] for m in range(3)), i) for i in range(3)]
+    seps += [(jnp.abs(cb[m]) - sum(absR[i][m] * ha[i] for i in range(3)) - hb[m], 3 + m) for m in range(3)]
+    for i, m in itertools.product(range(3), repeat=2):
+        n, ok = _unit(_cross_axis(i, cols[m]))
+        rb = sum(jnp.abs(dot(n, cols[k])) * hb[k] for k in range(3))
+        sep = jnp.abs(dot(n, c)) - sum(jnp.abs(n[k]) * ha[k] for k in range(3)) - rb
+        seps.append((jnp.where(ok, sep, -jnp.inf), 6 + 3 * i + m))
+    return _best(seps, jnp.greater)
+
+
+def _box_box_axis(a: Box, b: Box, code: jax.Array) -> Callable:
+    """The separation along axis ``code`` (:func:`_box_box_separations`) as a function of the boxes."""
+    e = _axis(jnp.where(code < 6, code, (code - 6) // 3), a.pose.dtype)
+    m = jnp.where(code < 6, code - 3, (code - 6) % 3)
+
+    def separation(a, b):
+        ha, hb, cols, c = _relative(a, b)
+        b_m = _where(m == 0, cols[0], _where(m == 1, cols[1], cols[2]))
+        n = _unit(_where(code < 3, e, _where(code < 6, b_m, _cross(e, b_m))))[0]
+        rb = sum(jnp.abs(dot(n, cols[k])) * hb[k] for k in range(3))
+        return jnp.abs(dot(n, c)) - sum(jnp.abs(n[k]) * ha[k] for k in range(3)) - rb
+
+    return separation
+
+
+_box_box_separation = _chosen(_box_box_separations, _box_box_axis)
+
+
+def _box_box_closest(a: Box, b: Box) -> tuple[jax.Array, jax.Array]:
+    """The distance of two boxes when apart, and the code of the nearest candidate.
+
+    Candidates: a corner of ``b`` and box ``a`` (twice the corner's code), a corner of ``a`` and box
+    ``b`` (one more), or an edge of each along a common normal ``e_i x b_m``: the support edges of
+    ``a`` towards ``b`` and of ``b`` towards ``a`` (16 + 12 ``a``'s edge's + ``b``'s).
+    """
+    ha, hb, cols, c = _relative(a, b)
+    cb = to_frame(cols, c)
+    g = [tuple(hb[m] * cols[m][k] for k in range(3)) for m in range(3)]  # b's half axes in a's frame
+    candidates = []
+    for s in itertools.product((-1, 1), repeat=3):
+        corner_b = tuple(c[k] + s[0] * g[0][k] + s[1] * g[1][k] + s[2] * g[2][k] for k in range(3))
+        candidates.append((_clamp(corner_b, ha)[0], 2 * _corner_code(s)))
+        corner_a = tuple(sum(s[i] * ha[i] * cols[m][i] for i in range(3)) - cb[m] for m in range(3))  # in b's frame
+        candidates.append((_clamp(corner_a, hb)[0], 2 * _corner_code(s) + 1))
+    for i, m in itertools.product(range(3), repeat=2):
+        n = _cross_axis(i, cols[m])  # (only its direction matters: no need to normalise)
+        n = tuple(_sign(dot(n, c)) * n[k] for k in range(3))  # from a towards b
+        n_b = tuple(-dot(cols[k], n) for k in range(3))  # from b towards a, in b's frame (n_b[m] = 0)
+        u = tuple(2 * g[m][k] for k in range(3))
+        inv_uu = _inverse(4 * hb[m] * hb[m])
+        for edge_a in _support_edges(n, i, ha):
+            for edge_b in _support_edges(n_b, m, hb):
+                # b's edge from its start point (in a's frame), relative to a's edge midpoint
+                start = tuple(
+                    c[k] + sum(edge_b[l] * cols[l][k] for l in range(3) if l != m) - g[m][k] - edge_a[k]
+                    for k in range(3)
+                )
+                code = 16 + 12 * _edge_code(edge_a, i) + _edge_code(edge_b, m)
+                candidates.append((_segment_edge(start, u, inv_uu, i, ha[i]), code))
+    sq, code = _best(candidates, jnp.less)
+    return sqrt0(sq), code
+
+
+def _box_box_witness(a: Box, b: Box, code: jax.Array) -> tuple[Vec, Vec]:
+    """The closest points of candidate ``code`` (:func:`_box_box_closest`), each in units of its box."""
+    ha, hb, cols, c = _relative(a, b)
+    dtype = c[0].dtype
+    corner = _corner(code // 2, dtype)
+    in_a = tuple(c[k] + sum(corner[m] * hb[m] * cols[m][k] for m in range(3)) for k in range(3))  # b's corner
+    in_b = to_frame(cols, sub(_scale(corner, ha), c))  # a's corner
+    corner_b = (_in_units(_clamp(in_a, ha)[1], ha), corner)
+    corner_a = (corner, _in_units(_clamp(in_b, hb)[1], hb))
+    edge_a, edge_b = _edge((code - 16) // 12, dtype), _edge((code - 16) % 12, dtype)
+    ends_b = [tuple(c[k] + sum(e[m] * hb[m] * cols[m][k] for m in range(3)) for k in range(3)) for e in edge_b]
+    s, t = segment_params(_scale(edge_a[0], ha), _scale(edge_a[1], ha), *ends_b)
+    edges = (lerp(*edge_a, s), lerp(*edge_b, t))
+    return _where(code < 16, _where(code % 2 == 0, corner_b, corner_a), edges)
+
+
+_box_box_apart = _chosen(_box_box_closest, _gap(_box_box_witness, _box_point, _box_point))
+
+
+def box_box(a: Box, b: Box) -> jax.Array:
+    """Box against box in the frame of ``a`` (see the module docstring)."""
+    sat = _box_box_separation(a, b)
+    return jnp.where(sat > 0, _box_box_apart(a, b), sat)
