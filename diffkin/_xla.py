@@ -123,6 +123,35 @@ def blocks_in_place(blocks: list[list[jax.Array]], n: int) -> jax.Array:
     return out
 
 
+def configurations_in_steps(fn: Callable, q, base, step: int, last: bool = False) -> jax.Array:
+    """``fn(q, base)`` for a batch of configurations, ``step`` at a time when the batch is large (:func:`in_steps`).
+
+    The batch axes of ``q (..., dof)`` and ``base (..., 4, 4)`` (or ``None``) are broadcast and
+    flattened to ``(N,)``; ``fn`` takes them so and returns one array with the configurations first,
+    ``(N, ...)``, or last, ``(..., N)``, with ``last``. Batches of at most ``2 step`` go in one call.
+    The memory then stays bounded whatever the batch, and a step's intermediates stay in cache (a
+    whole robot's pass over 100,000 configurations is memory-bound). Values and derivatives are
+    those of ``fn``.
+
+    Returns:
+        ``(*batch, ...)``.
+    """
+    q = jnp.asarray(q)
+    batch = jnp.broadcast_shapes(q.shape[:-1], jnp.shape(base)[:-2] if base is not None else ())
+    n = int(np.prod(batch, dtype=np.int64))
+    inputs = [jnp.broadcast_to(q, (*batch, q.shape[-1])).reshape(n, q.shape[-1])]
+    if base is not None:
+        inputs.append(jnp.broadcast_to(jnp.asarray(base), (*batch, 4, 4)).reshape(n, 4, 4))
+    call = lambda q_, base_=None: fn(q_, base_)  # noqa: E731
+    if n <= 2 * step:
+        out = call(*inputs)
+    else:
+        (out,) = in_steps(lambda *x: (call(*x),), tuple(inputs), step, axis=-1 if last else 0)
+    if last:
+        out = jnp.moveaxis(out, -1, 0)
+    return out.reshape(*batch, *out.shape[1:])
+
+
 def in_steps(fn: Callable[..., tuple[jax.Array, ...]], inputs: tuple[jax.Array, ...], step: int, axis: int = 0):
     """``fn(*inputs)`` over the leading axis of ``inputs`` (``n >= step`` problems), ``step`` problems at a time.
 

@@ -12,6 +12,7 @@ from jax.typing import ArrayLike
 
 from diffkin import _rigid as rg
 from diffkin._static import is_concrete
+from diffkin._xla import configurations_in_steps
 from diffkin.models import forward
 from diffkin.models.forward import Model
 from diffkin.models.robot import Robot
@@ -274,6 +275,11 @@ def massive(model: Model) -> Robot:
     return model
 
 
+#: Centre-of-mass batches above twice this go in steps of this many configurations
+#: (:func:`diffkin._xla.configurations_in_steps`: a whole robot's pass is memory-bound at 100,000).
+COM_STEP = 1024
+
+
 def com(robot: Robot, q: ArrayLike, *, base=None) -> jax.Array:
     """The robot's centre of mass in the world: ``sum_b m_b p_b / sum_b m_b`` over every body.
 
@@ -293,9 +299,8 @@ def com(robot: Robot, q: ArrayLike, *, base=None) -> jax.Array:
         TypeError: a chain (it has no masses).
         ValueError: a massless robot, or masses the file does not determine (named).
     """
-    kin, shape, dtype = _pass(massive(robot), q, base)
-    c, _ = kin.com(velocities=False)
-    return rg.stack(list(c), shape, dtype)
+    q, base = _checked(robot, q, base)
+    return configurations_in_steps(lambda q_, b_: _centre(robot, q_, b_, False), q, base, COM_STEP)
 
 
 def com_jacobian(robot: Robot, q: ArrayLike, *, base=None, include_base: bool = False) -> jax.Array:
@@ -315,8 +320,24 @@ def com_jacobian(robot: Robot, q: ArrayLike, *, base=None, include_base: bool = 
     Raises:
         TypeError, ValueError: as :func:`com`.
     """
-    kin, shape, dtype = _pass(massive(robot), q, base)
-    c, columns = kin.com()
+    q, base = _checked(robot, q, base)
+    return configurations_in_steps(lambda q_, b_: _centre(robot, q_, b_, True, bool(include_base)), q, base, COM_STEP)
+
+
+def _checked(robot: Robot, q, base) -> tuple:
+    """``(q, base)`` of a centre-of-mass call, checked on the host (see :func:`com`)."""
+    massive(robot)
+    q = forward.joint_values(robot, q)
+    _base(robot, base)
+    return q, base
+
+
+def _centre(robot: Robot, q, base, jacobian: bool, include_base: bool = False) -> jax.Array:
+    """The centre of mass ``(N, 3)``, or its Jacobian ``(N, 3, columns)``, of flat configurations."""
+    kin, shape, dtype = _pass(robot, q, base)
+    c, columns = kin.com(velocities=jacobian)
+    if not jacobian:
+        return rg.stack(list(c), shape, dtype)
     if include_base:
         columns = [v for v, _ in rg.world_from_space(rg.root_screws(_base(robot, base)), c)] + columns
     rows = [column[i] for i in range(3) for column in columns]

@@ -35,8 +35,9 @@ MAX_STEP = 0.1
 
 
 def talos():
-    import pinocchio as pin
     from importlib import metadata
+
+    import pinocchio as pin
 
     root = metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data/robots")
     path = os.path.join(str(root), "talos_data/robots/talos_full_v2.urdf")
@@ -145,8 +146,9 @@ def main() -> None:
     print(f"jax {jax.__version__}, {' '.join(sys.argv)}\n")
     print("| robot | batch | diffkin com + com_jacobian (ms) | Pinocchio loop (ms) | speed-up | compile (s) |")
     print("| --- | --- | --- | --- | --- | --- |")
-    for row in bench_com(batch):
-        print(row, flush=True)
+    for b in sorted({1_000, batch}):
+        for row in bench_com(b):
+            print(row, flush=True)
     print()
     print(
         "| Panda paths, float32 | waypoints | warm (s) | compile (s) | waypoint success | paths all solved | "

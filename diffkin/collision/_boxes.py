@@ -140,7 +140,7 @@ def _best(candidates: list, better: Callable) -> Any:
 # axis and the signs of its other two coordinates (the 12 edges).
 
 
-def _corner_code(signs: tuple[int, int, int]) -> int:
+def _corner_code(signs: tuple[int, ...]) -> int:
     return 4 * (signs[0] > 0) + 2 * (signs[1] > 0) + (signs[2] > 0)
 
 
@@ -277,7 +277,7 @@ def _segment_box_closest(a: Capsule, b: Box) -> tuple[jax.Array, jax.Array]:
     p, q, u, h = _segment_in_box(a, b)
     mid = tuple(0.5 * (p[i] + q[i]) for i in range(3))
     inv_uu = _inverse(dot(u, u))
-    candidates = [(_clamp(p, h)[0], 0), (_clamp(q, h)[0], 1)]
+    candidates: list[tuple[Any, Any]] = [(_clamp(p, h)[0], 0), (_clamp(q, h)[0], 1)]
     for signs in itertools.product((-1, 1), repeat=3):
         pv = sub(p, tuple(signs[m] * h[m] for m in range(3)))
         t = jnp.clip(-dot(pv, u) * inv_uu, 0, 1)
@@ -301,7 +301,7 @@ def _segment_box_witness(a: Capsule, b: Box, code: jax.Array) -> tuple[jax.Array
     feature = _where(code < 10, (corner, corner), _edge(code - 10, dtype))  # a corner or an edge, in units
     t, s = segment_params(p, q, _scale(feature[0], h), _scale(feature[1], h))
     ends = code < 2
-    return jnp.where(ends, code.astype(dtype), t), _where(ends, _in_units(on_box, h), lerp(*feature, s))
+    return jnp.where(ends, code.astype(dtype), t), _where(ends, _in_units(on_box, h), lerp(feature[0], feature[1], s))
 
 
 _segment_box_apart = _chosen(_segment_box_closest, _gap(_segment_box_witness, _capsule_point, _box_point))
@@ -368,7 +368,7 @@ def _box_box_closest(a: Box, b: Box) -> tuple[jax.Array, jax.Array]:
     ha, hb, cols, c = _relative(a, b)
     cb = to_frame(cols, c)
     g = [tuple(hb[m] * cols[m][k] for k in range(3)) for m in range(3)]  # b's half axes in a's frame
-    candidates = []
+    candidates: list[tuple[Any, Any]] = []
     for s in itertools.product((-1, 1), repeat=3):
         corner_b = tuple(c[k] + s[0] * g[0][k] + s[1] * g[1][k] + s[2] * g[2][k] for k in range(3))
         candidates.append((_clamp(corner_b, ha)[0], 2 * _corner_code(s)))

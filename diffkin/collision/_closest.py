@@ -14,7 +14,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-Vec = tuple[jax.Array, jax.Array, jax.Array]
+Vec = tuple[jax.Array, ...]  # three entries (x, y, z), each an array of the batch
 
 
 def vec(x: jax.Array) -> Vec:

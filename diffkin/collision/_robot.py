@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffkin._xla import blocks_in_place, in_steps
+from diffkin._xla import blocks_in_place, configurations_in_steps
 from diffkin.collision._distance import distance
 from diffkin.collision._geometry import KINDS, Geometry, placed
 from diffkin.collision._shapes import SHAPES, Box, Capsule, Plane, Sphere, unchecked
@@ -116,28 +116,9 @@ def _check(robot, geom) -> None:
 
 
 def _in_steps(fn, q, base) -> jax.Array:
-    """``fn(q, base)`` for a batch of configurations, :data:`STEP` at a time when the batch is large.
-
-    The batch axes of ``q`` and ``base`` are broadcast and flattened to ``(N,)``; ``fn`` takes
-    them so and returns its distances with the configurations last, ``(..., N)`` (see
-    :func:`_batch_last`). Small batches (at most twice the step) are evaluated in one go. Values
-    and derivatives are those of ``fn`` itself.
-
-    Returns:
-        ``(*batch, ...)``.
-    """
-    q = jnp.asarray(q)
-    batch = jnp.broadcast_shapes(q.shape[:-1], jnp.shape(base)[:-2] if base is not None else ())
-    n = int(np.prod(batch, dtype=np.int64))
-    inputs = [jnp.broadcast_to(q, (*batch, q.shape[-1])).reshape(n, q.shape[-1])]
-    if base is not None:
-        inputs.append(jnp.broadcast_to(jnp.asarray(base), (*batch, 4, 4)).reshape(n, 4, 4))
-    call = lambda q_, base_=None: fn(q_, base_)  # noqa: E731
-    if n <= 2 * STEP:
-        out = call(*inputs)
-    else:
-        (out,) = in_steps(lambda *x: (call(*x),), tuple(inputs), STEP, axis=-1)
-    return jnp.moveaxis(out, -1, 0).reshape(*batch, *out.shape[:-1])
+    """``fn(q, base)`` of flat configurations (distances with the configurations last), :data:`STEP` at
+    a time when the batch is large; ``(*batch, ...)``."""
+    return configurations_in_steps(fn, q, base, STEP, last=True)
 
 
 def self_distances(robot: Robot, geom: Geometry, q, base=None) -> jax.Array:
