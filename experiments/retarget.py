@@ -1,7 +1,7 @@
 """Motion retargeting: Talos following keypoint trajectories (hands, feet, pelvis) with its root solved.
 
-A synthetic motion (2 s at 30 frames per second): the pelvis sways 6 cm left and right and squats
-8 cm, the feet stay planted, the left hand draws a 12 cm circle in front of the body and the
+A synthetic motion (2 s at 30 frames per second): the pelvis sways 5 cm left and right and squats
+5 cm, the feet stay planted, the left hand draws a 12 cm circle in front of the body and the
 right hand reaches 10 cm forward and back. The keypoints are position targets (as motion capture gives
 them); ``dk.ik.solve_path`` solves frame 0 from the standing posture, then each frame from the
 last with every joint moving at most 0.15 rad per frame, float64. Re-checked by FK, drawn as a
@@ -43,8 +43,8 @@ def keypoints(talos) -> dict[str, np.ndarray]:
     phase = 2 * np.pi * t / (FRAMES / FPS)
     out = {name: np.tile(at[name], (FRAMES, 1)) for name in FEET}
     pelvis = np.tile(at[PELVIS], (FRAMES, 1))
-    pelvis[:, 1] += 0.06 * np.sin(phase)
-    pelvis[:, 2] -= 0.04 * (1 - np.cos(phase))
+    pelvis[:, 1] += 0.05 * np.sin(phase)
+    pelvis[:, 2] -= 0.025 * (1 - np.cos(phase))
     out[PELVIS] = pelvis
     ahead = np.array([0.25, 0.0, 0.25])  # the hands raised in front of the body
     out[HANDS[0]] = at[HANDS[0]] + ahead + 0.06 * np.stack([np.zeros_like(t), np.cos(phase) - 1, np.sin(phase)], -1)
