@@ -10,6 +10,7 @@ path is reported not ok. The waypoints are a ``lax.scan``: one compiled step ser
 from __future__ import annotations
 
 import functools
+import inspect
 from collections.abc import Mapping
 from typing import NamedTuple
 
@@ -126,33 +127,19 @@ def solve_path(model, targets, *, q0=None, max_step=None, **solve_kwargs) -> Pat
     unknown = sorted(set(solve_kwargs) - set(_PASSED))
     if unknown:
         raise TypeError(f"solve_path: unexpected arguments {unknown}; expected those of dk.ik.solve: {list(_PASSED)}")
-    kw = {name: solve_kwargs.get(name) for name in _PASSED}
-    relative, com = kw["relative"], kw["com"]
-    _, arrays, path_batch = terms_of(model, targets, relative, kw["weights"], com)
+    defaults = {name: p.default for name, p in inspect.signature(solve).parameters.items() if name in _PASSED}
+    kw = {name: solve_kwargs.get(name, defaults[name]) for name in _PASSED}
+    _, arrays, path_batch = terms_of(model, targets, kw["relative"], kw["weights"], kw["com"])
     if not path_batch or path_batch[-1] == 0:
         raise ValueError(
             f"targets: expected a path axis with at least one waypoint before the pose axes ((..., T, 4, 4) or "
             f"(..., T, 3)), got batch shape {path_batch}"
         )
     bound = _max_step(max_step, model.dof)
-    first_kw = {name: value for name, value in kw.items() if value is not None}
-    first_kw.update(relative=_waypoint(relative, 0), com=_waypoint(com, 0))
-    defaults = dict(num_seeds=32, method="lm", max_iters=None, pos_tol=1e-5, rot_tol=1e-4, solve_base=False)
-    checked = plan(
-        model,
-        _waypoint(targets, 0),
-        q0=q0,
-        optimizer=kw["optimizer"],
-        weights=kw["weights"],
-        locked=kw["locked"],
-        rest=None,
-        secondary=None,
-        base=kw["base"],
-        relative=first_kw["relative"],
-        com=first_kw["com"],
-        **{name: kw[name] if kw[name] is not None else value for name, value in defaults.items()},
-    )
-    first = solve(model, _waypoint(targets, 0), q0=q0, **{k: v for k, v in first_kw.items() if v is not None})
+    first_kw = dict(kw, relative=_waypoint(kw["relative"], 0), com=_waypoint(kw["com"], 0))
+    del first_kw["key"], first_kw["respect_limits"]  # (not arguments of plan)
+    checked = plan(model, _waypoint(targets, 0), q0=q0, rest=None, secondary=None, **first_kw)
+    first = solve(model, _waypoint(targets, 0), q0=q0, key=kw["key"], respect_limits=kw["respect_limits"], **first_kw)
     dtype = checked.dtype
     static, traced = partition(model)
     return _follow(
@@ -162,13 +149,13 @@ def solve_path(model, targets, *, q0=None, max_step=None, **solve_kwargs) -> Pat
         None if kw["base"] is None else jnp.asarray(kw["base"], dtype),
         None if checked.locked_q is None else jnp.asarray(checked.locked_q, dtype),
         jnp.asarray(bound, dtype),
-        _args.tolerance(1e-5 if kw["pos_tol"] is None else kw["pos_tol"], dtype),
-        _args.tolerance(1e-4 if kw["rot_tol"] is None else kw["rot_tol"], dtype),
+        _args.tolerance(kw["pos_tol"], dtype),
+        _args.tolerance(kw["rot_tol"], dtype),
         static=static,
         spec=checked.spec,
-        method=kw["method"] or "lm",
+        method=kw["method"],
         max_iters=checked.max_iters,
-        respect_limits=True if kw["respect_limits"] is None else bool(kw["respect_limits"]),
+        respect_limits=bool(kw["respect_limits"]),
         optimizer=kw["optimizer"],
         batch=path_batch,
     )
