@@ -24,7 +24,7 @@ URDF_ROBOTS = {
     "panda": (os.path.join(DATA, "panda.urdf"), "panda_link8"),
     "ur5": (os.path.join(DATA, "ur5.urdf"), "tool0"),
 }
-BUILTIN = ("iiwa7", "iiwa14", "panda", "ur5", "puma560")
+BUILTIN = dk.robots.BUILTIN
 
 
 @contextlib.contextmanager

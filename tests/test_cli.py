@@ -46,6 +46,13 @@ def test_help_subprocess():
         assert command in res.stdout
 
 
+def test_the_cli_names_the_built_in_robots():
+    """The CLI keeps its own list (its --help imports no JAX): the same as dk.robots.BUILTIN."""
+    from diffkin.cli import _robots
+
+    assert _robots.ROBOTS == dk.robots.BUILTIN
+
+
 def test_version_has_one_source(capsys):
     """pyproject.toml reads the version from ``diffkin.__version__``, and ``diffkin --version`` prints it."""
     import tomllib

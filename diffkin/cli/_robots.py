@@ -8,7 +8,7 @@ from pathlib import Path
 
 from diffkin.cli._errors import CLIError
 
-ROBOTS = ("iiwa7", "iiwa14", "panda", "ur5", "puma560")
+ROBOTS = ("iiwa7", "iiwa14", "panda", "ur5", "puma560")  # dk.robots.BUILTIN, without importing JAX (--help)
 SRS_ROBOTS = ("iiwa7", "iiwa14")
 
 

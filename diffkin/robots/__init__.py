@@ -11,6 +11,8 @@ from diffkin.models.dh import DHChain
 _PI2 = np.pi / 2
 _IIWA_LIMITS_DEG = np.array([170.0, 120.0, 170.0, 120.0, 170.0, 120.0, 175.0])
 _URDFS = ("iiwa7", "iiwa14")
+#: The built-in robots by name (``dk.robots.<name>()``: the CLI's and the viewer's robot names).
+BUILTIN = ("iiwa7", "iiwa14", "panda", "ur5", "puma560")
 
 
 def _iiwa(d_bs: float, d_se: float, d_ew: float, d_wf: float, name: str) -> DHChain:

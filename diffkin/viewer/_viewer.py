@@ -23,7 +23,7 @@ from diffkin.viewer._results import check_results, describe
 GC_OPTIONS = tuple(" ".join(f"{s:+d}" for s in signs) for signs in itertools.product((1, -1), repeat=3))
 IIWA_READY = np.array([0.0, 0.5, 0.0, -1.2, 0.0, 0.7, 0.0])  # a bent pose: the arm angle is defined
 _ARM_NAMES = ("iiwa7", "iiwa14")
-BUILTIN = ("iiwa7", "iiwa14", "panda", "ur5", "puma560")
+BUILTIN = dk.robots.BUILTIN
 FPS_RANGE = (0.1, 1000.0)  # playback rates of batch results, results per second
 
 
@@ -71,18 +71,6 @@ def _pose(position, wxyz) -> np.ndarray:
     T[:3, :3] = vtf.SO3(np.asarray(wxyz, dtype=np.float64)).as_matrix()
     T[:3, 3] = position
     return T
-
-
-def _z_to(direction: np.ndarray) -> np.ndarray:
-    """The quaternion ``wxyz`` of a rotation taking the z axis to ``direction``."""
-    n = np.linalg.norm(direction)
-    if n < 1e-12:
-        return np.array([1.0, 0, 0, 0])
-    z = direction / n
-    helper = np.array([1.0, 0, 0]) if abs(z[0]) < 0.9 else np.array([0, 1.0, 0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    return _wxyz(np.column_stack([x, np.cross(z, x), z]))
 
 
 def _intervals_text(intervals: np.ndarray, mask: np.ndarray) -> str:
@@ -245,7 +233,7 @@ class Viewer:
                     handle.height = max(length, 1e-6)
                     self._lengths[names[f]] = length
                 handle.position = (a + b) / 2
-                handle.wxyz = _z_to(b - a)
+                handle.wxyz = _wxyz(_visuals.z_to(b - a))
 
     # ------------------------------------------------------------------------------------- gui
 

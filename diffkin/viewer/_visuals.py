@@ -160,7 +160,7 @@ def mjcf_visuals(root: ET.Element, base_dir: str | None) -> list[Visual]:
                 axis = ends[3:] - ends[:3]
                 length = float(np.linalg.norm(axis))
                 p = (ends[:3] + ends[3:]) / 2
-                R = _z_to(axis)
+                R = z_to(axis)
             mesh = geom.get("mesh", "")
             if kind == "mesh" and mesh in meshes:
                 file, path, scale = meshes[mesh]
@@ -181,7 +181,7 @@ def mjcf_visuals(root: ET.Element, base_dir: str | None) -> list[Visual]:
     return visuals
 
 
-def _z_to(direction: np.ndarray) -> np.ndarray:
+def z_to(direction: np.ndarray) -> np.ndarray:
     """A rotation taking the z axis to ``direction`` (the identity for a zero vector)."""
     n = np.linalg.norm(direction)
     if n < 1e-12:
