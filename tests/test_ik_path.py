@@ -108,6 +108,10 @@ def test_a_robot_path_with_a_locked_joint(urdf_chains):
     assert np.all(np.asarray(res.q[:, 7]) == np.float32(0.02))
     reached = np.asarray(dk.fk(robot, np.asarray(res.q, np.float64), "panda_link8"))[:, :3, 3]
     assert np.linalg.norm(reached - line, axis=-1).max() <= 1e-5
+    # a non-finite root pose: every waypoint fails, with finite values
+    nan_base = jnp.eye(4, dtype=jnp.float32).at[0, 3].set(jnp.nan)
+    bad = dk.ik.solve_path(robot, {"panda_link8": jnp.asarray(line, jnp.float32)}, base=nan_base, max_step=0.1)
+    assert not bool(jnp.any(bad.success)) and all(bool(jnp.all(jnp.isfinite(x))) for x in (bad.q, bad.max_step))
 
 
 def test_bad_arguments_raise():

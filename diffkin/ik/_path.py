@@ -219,8 +219,11 @@ def _follow(
     )
     root = rg.IDENTITY
     base_flat = None
-    if base is not None and not spec.solve_base:
+    if base is not None and not spec.solve_base:  # a non-finite root pose fails (as in solve), the identity solved
         base_flat = jnp.broadcast_to(base, paths + (4, 4)).reshape(n, 4, 4)
+        base_ok = jnp.all(jnp.isfinite(base_flat.reshape(n, 16)), axis=-1)
+        valid = valid & base_ok
+        base_flat = jnp.where(base_ok[:, None, None], base_flat, jnp.eye(4, dtype=dtype))
         root = rg.from_matrix(detach(base_flat))
     x0 = jax.lax.stop_gradient(first.q.reshape(n, dof).T)
     if spec.solve_base:
