@@ -313,9 +313,10 @@ MASS_BODY = """
     ],
     ids=["auto", "from-geoms", "group-range", "bound-and-total"],
 )
-def test_masses_and_centres_of_mass_as_mujoco_compiles_them(compiler):
+def test_masses_and_centres_of_mass_as_mujoco_compiles_them(compiler, tmp_path, monkeypatch):
     """Inertials, geom volumes (fromto, every primitive), mass and density from classes, group ranges,
     boundmass and settotalmass: the centre of mass and its Jacobian against MuJoCo's."""
+    monkeypatch.chdir(tmp_path)  # MuJoCo logs its deprecation warning to ./MUJOCO_LOG.TXT
     head = compiler + '<default><default class="heavy"><geom density="3000"/></default></default>'
     robot = dk.load_robot(mjcf(MASS_BODY, head))
     assert np.sum(robot.masses) > 0 and not robot.unknown_masses

@@ -16,6 +16,7 @@ import os
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -203,18 +204,23 @@ def placed(robot: Robot, geom: Geometry, q, base=None) -> tuple[Sphere, Capsule,
     """The shapes in the world at ``q``: each kind with batch axes ``(..., n_kind)``."""
     from diffkin.kinematics import link_poses
 
-    T = link_poses(robot, q, base=base)  # (..., F, 4, 4)
+    return moved(geom, link_poses(robot, q, base=base), geom.shape_frames)
+
+
+def moved(geom: Geometry, T_world_frames: jax.Array, slots) -> tuple[Sphere, Capsule, Box]:
+    """The shapes placed by their frames' poses ``T_world_frames`` ``(..., F, 4, 4)``, shape ``s`` by
+    ``T_world_frames[..., slots[s]]``: each kind with batch axes ``(..., n_kind)``."""
+    T = T_world_frames
     ns, nc, _ = geom.counts
-    idx = np.asarray(geom.shape_frames, dtype=np.int64)
+    idx = np.asarray(slots, dtype=np.int64)
     Ts, Tc, Tb = T[..., idx[:ns], :, :], T[..., idx[ns : ns + nc], :, :], T[..., idx[ns + nc :], :, :]
 
     def move(T, p):
         return jnp.einsum("...ij,...j->...i", T[..., :3, :3], p) + T[..., :3, 3]
 
     s, c, b = geom.spheres, geom.capsules, geom.boxes
-    moved = (move(Ts, s.center), move(Tc, c.a), move(Tc, c.b), Tb @ b.pose)
     return (
-        unchecked(Sphere, center=moved[0], radius=s.radius),
-        unchecked(Capsule, a=moved[1], b=moved[2], radius=c.radius),
-        unchecked(Box, pose=moved[3], half_extents=b.half_extents),
+        unchecked(Sphere, center=move(Ts, s.center), radius=s.radius),
+        unchecked(Capsule, a=move(Tc, c.a), b=move(Tc, c.b), radius=c.radius),
+        unchecked(Box, pose=Tb @ b.pose, half_extents=b.half_extents),
     )

@@ -106,13 +106,19 @@ class World:
         return obj
 
 
-def _check(robot, geom) -> None:
+def check_geometry(robot, geom) -> None:
+    """Raise unless ``robot`` is a Robot and ``geom`` a Geometry loaded for it."""
     if not isinstance(robot, Robot):
         raise TypeError(f"robot: expected a diffkin.Robot, got {type(robot).__name__}")
     if not isinstance(geom, Geometry):
         raise TypeError(f"geom: expected a diffkin.collision.Geometry (dk.collision.load), got {type(geom).__name__}")
-    if geom.shape_frames and max(geom.shape_frames) >= len(robot.frame_names):
-        raise ValueError("geom: its shapes are on frames this robot does not have (load it with this robot)")
+    names = robot.frame_names
+    for frame, link in zip(geom.shape_frames, geom.shape_links, strict=True):
+        if frame >= len(names) or names[frame] != link:
+            raise ValueError(
+                f"geom: its shape on {link!r} is not on a frame of robot {robot.name!r} of that name "
+                "(load the geometry with this robot: dk.collision.load(source, robot))"
+            )
 
 
 def _in_steps(fn, q, base) -> jax.Array:
@@ -133,11 +139,11 @@ def self_distances(robot: Robot, geom: Geometry, q, base=None) -> jax.Array:
     Returns:
         ``(..., P)``, metres, in ``geom.pairs`` order.
     """
-    _check(robot, geom)
+    check_geometry(robot, geom)
     return _in_steps(lambda q_, base_: _self_distances(robot, geom, q_, base_), q, base)
 
 
-def _batch_last(shapes) -> list:
+def batch_last(shapes) -> list:
     """Placed shapes of one flat batch ``(N, n_kind)`` as ``(n_kind, N)`` (a field that does not move: ``(n_kind, 1)``).
 
     The pair functions are entry by entry over the broadcast batch, and XLA's CPU loops vectorise
@@ -148,25 +154,38 @@ def _batch_last(shapes) -> list:
 
 def _self_distances(robot: Robot, geom: Geometry, q, base) -> jax.Array:
     """``(P, N)`` for ``q (N, dof)``."""
-    shapes = _batch_last(placed(robot, geom, q, base))
+    return self_of_placed(geom, batch_last(placed(robot, geom, q, base)), q.shape[0])
+
+
+def pair_blocks(geom: Geometry) -> list[tuple[np.ndarray, int, int, np.ndarray, np.ndarray]]:
+    """The self-collision pairs grouped by the kinds of their two shapes: per group, ``(rows, kind_a,
+    kind_b, index_a, index_b)``: the rows of ``geom.pairs`` and each side's index within its kind."""
     counts = geom.counts
     starts = np.cumsum((0, *counts))
     pairs = geom.pairs
     kind_of = np.searchsorted(starts, np.arange(sum(counts)), side="right") - 1
-    pieces, order = [], []
+    out = []
     for ka in range(3):
         for kb in range(ka, 3):
             rows = np.flatnonzero((kind_of[pairs[:, 0]] == ka) & (kind_of[pairs[:, 1]] == kb)) if len(pairs) else None
-            if rows is None or len(rows) == 0:
-                continue
-            ia, ib = pairs[rows, 0] - starts[ka], pairs[rows, 1] - starts[kb]
-            pick = lambda s, idx: _map(s, lambda v, r, idx=idx: jnp.take(v, idx, axis=0))  # noqa: E731
-            pieces.append(distance(pick(shapes[ka], ia), pick(shapes[kb], ib)))  # (rows, N)
-            order.append(rows)
-    if not pieces:
-        return jnp.zeros((0, q.shape[0]), jnp.result_type(float))
-    out = jnp.concatenate([jnp.broadcast_to(p, (p.shape[0], q.shape[0])) for p in pieces], axis=0)
-    inverse = np.argsort(np.concatenate(order))
+            if rows is not None and len(rows):
+                out.append((rows, ka, kb, pairs[rows, 0] - starts[ka], pairs[rows, 1] - starts[kb]))
+    return out
+
+
+def take(shape, idx):
+    """The shapes ``idx`` of a batch-last kind (:func:`batch_last`)."""
+    return _map(shape, lambda v, r: jnp.take(v, idx, axis=0))
+
+
+def self_of_placed(geom: Geometry, shapes, n: int) -> jax.Array:
+    """``(P, n)`` the self-collision distances (``geom.pairs`` order) of shapes placed batch-last."""
+    blocks = pair_blocks(geom)
+    if not blocks:
+        return jnp.zeros((0, n), jnp.result_type(float))
+    pieces = [distance(take(shapes[ka], ia), take(shapes[kb], ib)) for _, ka, kb, ia, ib in blocks]
+    out = jnp.concatenate([jnp.broadcast_to(p, (p.shape[0], n)) for p in pieces], axis=0)
+    inverse = np.argsort(np.concatenate([rows for rows, *_ in blocks]))
     return out[inverse] if not np.array_equal(inverse, np.arange(len(inverse))) else out
 
 
@@ -181,7 +200,7 @@ def world_distances(robot: Robot, geom: Geometry, q, world: World, base=None) ->
         ``(..., S, W)``, metres: shapes in :attr:`Geometry.shape_names` order, obstacles in the
         world's order (spheres, capsules, boxes, half-spaces).
     """
-    _check(robot, geom)
+    check_geometry(robot, geom)
     if not isinstance(world, World):
         raise TypeError(f"world: expected a diffkin.collision.World, got {type(world).__name__}")
     return _in_steps(lambda q_, base_: _world_distances(robot, geom, q_, world, base_), q, base)
@@ -189,12 +208,17 @@ def world_distances(robot: Robot, geom: Geometry, q, world: World, base=None) ->
 
 def _world_distances(robot: Robot, geom: Geometry, q, world: World, base) -> jax.Array:
     """``(S, W, N)`` for ``q (N, dof)``."""
+    return world_of_placed(batch_last(placed(robot, geom, q, base)), world, q.shape[0])
+
+
+def world_of_placed(shapes, world: World, n: int) -> jax.Array:
+    """``(S, W, n)`` the distances of shapes placed batch-last (:func:`batch_last`) to the obstacles."""
     obstacles = [_map(o, lambda v, r: jnp.expand_dims(v, 1)) for o in world.kinds()]  # (n_obstacles, 1, ...)
     blocks = []
-    for shape in _batch_last(placed(robot, geom, q, base)):
+    for shape in shapes:
         expanded = _map(shape, lambda v, r: jnp.expand_dims(v, 1))  # (n_kind, 1, N, ...)
         blocks.append([distance(expanded, o) for o in obstacles])  # (n_kind, n_obstacles, N) each
-    return blocks_in_place(blocks, q.shape[0])
+    return blocks_in_place(blocks, n)
 
 
 def clearance(robot: Robot, geom: Geometry, q, world: World | None = None, base=None) -> jax.Array:

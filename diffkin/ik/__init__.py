@@ -7,5 +7,6 @@ a :class:`PathResult` (each waypoint from the previous solution, joint steps bou
 from diffkin.ik._path import PathResult, solve_path
 from diffkin.ik._result import IKResult
 from diffkin.ik._solve import solve
+from diffkin.ik._terms.avoid import Avoid
 
-__all__ = ["IKResult", "PathResult", "solve", "solve_path"]
+__all__ = ["Avoid", "IKResult", "PathResult", "solve", "solve_path"]

@@ -42,13 +42,16 @@ class Eval(NamedTuple):
 class Entries(NamedTuple):
     """The fields of an :class:`Eval` before they are computed into arrays: one entry (an array of
     the problem shape, or a folded Python float) per value, ``J`` row by row; ``pos_err`` and
-    ``rot_err`` one entry per term (see :func:`settle`)."""
+    ``rot_err`` one entry per term (see :func:`settle`). Rows that terms give as blocks
+    (:class:`diffkin.ik._terms.Rows`) are ``blocks``: ``(r (m_b, P), J (m_b, n, P))``, stacked after
+    the entries' rows; ``cost`` counts them."""
 
     r: list
     J: list
     cost: rg.Entry
     pos_err: list
     rot_err: list
+    blocks: tuple[jax.Array, jax.Array] | None = None
 
 
 class Kinematics:
@@ -57,7 +60,7 @@ class Kinematics:
     ``pose(frame)``: the frame's world pose; ``columns(frame)``: per column of the state, the
     space twist of the frame's motion: one per joint (zero for a locked joint), then, when the
     root is solved, the six of the root's body twist; ``com()``: a robot's centre of mass and its
-    velocity per column. ``dtype``: the solver's dtype.
+    velocity per column. ``dtype``, ``shape``: the solver's dtype and the problems' shape ``(P,)``.
     """
 
     def __init__(self, problem: Problem, x: jax.Array):
@@ -66,6 +69,7 @@ class Kinematics:
         self.locked = problem.locked
         self.root_columns = rg.root_screws(root) if problem.solve_base else []
         self.dtype = x.dtype
+        self.shape = x.shape[1:]
 
     def pose(self, frame: int | None) -> rg.Rigid:
         return self.kin.pose(frame)
@@ -151,14 +155,18 @@ class Problem(NamedTuple):
     def residual(self, x: jax.Array, jacobian: bool = True) -> Entries:
         """The entries of every term's residual, Jacobian and errors at ``x``, from one forward pass."""
         kin = Kinematics(self, x)
-        r, J, pos_err, rot_err = [], [], [], []
+        r, J, pos_err, rot_err, blocks = [], [], [], [], []
         for term, bound in zip(self.terms, self.bound, strict=True):
             rows = term.rows(kin, bound, jacobian)
             r += rows.r
             J += rows.J
             pos_err.append(rows.pos_err)
             rot_err.append(rows.rot_err)
-        return Entries(r, J, rg.add(*(rg.mul(e, e) for e in r)), pos_err, rot_err)
+            if rows.block is not None:
+                blocks.append(rows.block)
+        cost = rg.add(*(rg.mul(e, e) for e in r), *(jnp.sum(b**2, axis=0) for b, _ in blocks))
+        stacked = (jnp.concatenate([b for b, _ in blocks]), jnp.concatenate([j for _, j in blocks])) if blocks else None
+        return Entries(r, J, cost, pos_err, rot_err, stacked)
 
     def evaluate(self, x: jax.Array, jacobian: bool = True) -> Eval:
         """Residual, Jacobian and per-term errors ``(k, P)`` at ``x``, from one forward pass."""
@@ -184,11 +192,15 @@ def _head(entries: Entries) -> list:
     return [*entries.r, entries.cost, *entries.pos_err, *entries.rot_err]
 
 
-def _arrays(entries: Entries, head, J) -> Eval:
-    """An :class:`Eval` of arrays from ``head`` (:func:`_head`, stacked) and ``J`` ``(m * n, P)``."""
-    m, n = len(entries.r), len(entries.J[0]) if len(entries.J) else 0
-    k = len(entries.pos_err)
-    return Eval(head[:m], J.reshape((m, n) + head.shape[1:]), head[m], head[m + 1 : m + 1 + k], head[m + 1 + k :])
+def _arrays(entries: Entries, head, J, blocks=None) -> Eval:
+    """An :class:`Eval` of arrays from ``head`` (:func:`_head`, stacked), ``J`` ``(m * n, P)`` and the
+    row blocks (``entries.blocks``, or ones chosen from them)."""
+    m, k = len(entries.r), len(entries.pos_err)
+    n = len(entries.J[0]) if len(entries.J) else 0 if blocks is None else blocks[1].shape[1]
+    r, J = head[:m], J.reshape((m, n) + head.shape[1:])
+    if blocks is not None:
+        r, J = jnp.concatenate([r, blocks[0]]), jnp.concatenate([J, blocks[1]])
+    return Eval(r, J, head[m], head[m + 1 : m + 1 + k], head[m + 1 + k :])
 
 
 def _computed(J: list) -> np.ndarray:
@@ -215,7 +227,7 @@ def settle(entries: Entries) -> Eval:
     # Materialised: XLA's CPU fusion would otherwise recompute the whole forward pass inside
     # every kernel of the solver that consumes these entries (20x slower).
     done = materialize(head + [J[i] for i in computed])
-    return _arrays(entries, done[: len(head)], _jacobian(J, computed, done[len(head) :]))
+    return _arrays(entries, done[: len(head)], _jacobian(J, computed, done[len(head) :]), entries.blocks)
 
 
 def settle_choosing(entries: Entries, old: Eval, choose) -> tuple[Eval, jax.Array, object]:
@@ -233,13 +245,24 @@ def settle_choosing(entries: Entries, old: Eval, choose) -> tuple[Eval, jax.Arra
     take = materialize([take])[0]
     shape = take.shape
     old_head = jnp.concatenate(
-        [old.r, old.cost[None], old.pos_err.reshape((-1,) + shape), old.rot_err.reshape((-1,) + shape)]
+        [
+            old.r[: len(entries.r)],
+            old.cost[None],
+            old.pos_err.reshape((-1,) + shape),
+            old.rot_err.reshape((-1,) + shape),
+        ]
     )
     J_try = [e for row in entries.J for e in row]
     computed = _computed(J_try)
-    J_old = old.J.reshape((-1,) + shape)
+    m = len(entries.r)
+    J_old = old.J[:m].reshape((-1,) + shape)
     J = materialize([jnp.where(take, J_try[i], J_old[i]) for i in computed])
-    return _arrays(entries, jnp.where(take, head_try, old_head), _jacobian(J_try, computed, J)), take, extra
+    blocks = None
+    if entries.blocks is not None:
+        blocks = tuple(
+            jnp.where(take, new, old_b[m:]) for new, old_b in zip(entries.blocks, (old.r, old.J), strict=True)
+        )
+    return _arrays(entries, jnp.where(take, head_try, old_head), _jacobian(J_try, computed, J), blocks), take, extra
 
 
 def gradient(ev: Eval) -> jax.Array:

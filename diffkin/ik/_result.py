@@ -27,6 +27,9 @@ class IKResult(NamedTuple):
             with ``solve_base=True``, else ``None``.
         com_err: ``(...,)`` distance in metres between the centre of mass and its target (over the
             horizontal axes for a horizontal target) when solved with ``com=``, else ``None``.
+        clearance: ``(...,)`` metres, the smallest distance that ``avoid`` checks (self pairs,
+            shapes to obstacles) at ``q``, when solved with ``avoid=``, else ``None``; success then
+            also needs ``clearance >= avoid.margin``.
 
     For a :class:`~diffkin.Robot` with ``k`` targets, ``pos_err`` and ``rot_err`` are ``(..., k)``
     (in the order of the ``targets`` mapping), each measured on the target's weighted axes only,
@@ -40,3 +43,4 @@ class IKResult(NamedTuple):
     iters: jax.Array
     base: jax.Array | None = None
     com_err: jax.Array | None = None
+    clearance: jax.Array | None = None

@@ -18,13 +18,15 @@ from diffkin._checks import instance
 from diffkin._sharding import automatic_axes
 from diffkin._static import ModelKey, combine, partition
 from diffkin._xla import solver_jit
+from diffkin.collision._robot import check_geometry
 from diffkin.ik import _args, _search, _secondary
 from diffkin.ik._implicit import implicit
 from diffkin.ik._methods import METHODS
 from diffkin.ik._prepare import cast, detach, inward, valid_targets
-from diffkin.ik._problem import BASE_ROWS, Problem
+from diffkin.ik._problem import BASE_ROWS, Kinematics, Problem
 from diffkin.ik._result import IKResult
 from diffkin.ik._terms import pose, relative
+from diffkin.ik._terms.avoid import Avoid, AvoidTerm
 from diffkin.ik._terms.com import ComTarget, from_target
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain
@@ -66,6 +68,7 @@ def solve(
     base=None,
     relative=None,
     com=None,
+    avoid=None,
 ) -> IKResult:
     """Inverse kinematics for a batch of targets, from random seeds (and an optional warm start).
 
@@ -128,6 +131,12 @@ def solve(
         com: robots: ``(..., 3)`` the centre of mass in the world, or ``(..., 2)`` its horizontal
             components only (balance over the feet), the batch shape of ``target`` (which may then
             be empty); its error is ``IKResult.com_err`` and success needs it within ``pos_tol``.
+        avoid: robots: a :class:`~diffkin.ik.Avoid` (collision geometry, obstacles, margin): the
+            robot's shapes are kept apart from the obstacles and (``self_collision``) from each
+            other by one-sided residuals (:mod:`diffkin.ik._terms.avoid`), seeds are screened for
+            clearance, and success also needs the exact clearance ``>= margin``
+            (``IKResult.clearance``). The implicit derivative of ``q`` is that of the targets alone:
+            exact where no distance is within ``margin + 0.01`` m of the obstacles.
         weights: robots: ``{frame_name: w}`` (``{(a, b): w}`` for a relative target), ``w`` six
             non-negative weights of the ``[v; w]`` error in the target frame (world axes for a
             position target) or a pair
@@ -174,6 +183,7 @@ def solve(
         base=base,
         relative=relative,
         com=com,
+        avoid=avoid,
     )
     spec, arrays, batch, dtype, max_iters, locked_q = p
     if 0 in batch:  # no targets: empty results of the batch's shape
@@ -188,6 +198,7 @@ def solve(
             empty(dt=jnp.int32),
             empty(4, 4) if solve_base else None,
             empty() if has_com else None,
+            empty() if avoid is not None else None,
         )
     static, traced = partition(chain)
     as_dtype = lambda x: None if x is None else jnp.asarray(x, dtype)  # noqa: E731
@@ -199,6 +210,7 @@ def solve(
         as_dtype(rest),
         as_dtype(base),
         as_dtype(locked_q),
+        avoid,
         _args.tolerance(pos_tol, dtype),
         _args.tolerance(rot_tol, dtype),
         static=static,
@@ -251,6 +263,7 @@ def plan(
     base,
     relative,
     com,
+    avoid=None,
 ) -> Plan:
     """Check every argument of :func:`solve` on the host (see its Raises) and build its :class:`Plan`."""
     instance(chain, (DHChain, PoEChain, Robot), "chain", "a DHChain, PoEChain or Robot")
@@ -268,6 +281,7 @@ def plan(
             ("base", base),
             ("relative", relative),
             ("com", com),
+            ("avoid", avoid),
         ):
             if value is not None:
                 raise ValueError(f"{name}: only for a Robot (solve dk.load_robot(...) with a mapping of targets)")
@@ -297,6 +311,9 @@ def plan(
     mask, locked_q = _args.locked_joints(chain, locked, q0, batch) if is_robot else ((False,) * chain.dof, None)
     if chain.dof == 0 and not solve_base:
         raise ValueError(f"robot: {chain.name!r} has no joints to solve")
+    if avoid is not None:
+        instance(avoid, Avoid, "avoid", "a dk.ik.Avoid(geom, world, margin)")
+        check_geometry(chain, avoid.geom)
     assert max_iters is not None  # (checked by check_settings)
     spec = Spec(terms, mask, _args.secondary_spec(secondary, rest), bool(solve_base), is_robot)
     return Plan(spec, arrays, batch, dtype, max_iters, locked_q)
@@ -368,6 +385,7 @@ def _solve(
     rest,
     base,
     locked_q,
+    avoid,
     pos_tol,
     rot_tol,
     *,
@@ -412,18 +430,22 @@ def _solve(
         base_ok = jnp.all(jnp.isfinite(base_in.reshape(n, -1)), axis=-1)
         base_in = jnp.where(base_ok[:, None, None], base_in, eye)
     base_flat = None if base_in is None else detach(base_in)
+    avoid_term = None if avoid is None else AvoidTerm.of(avoid)
+    terms = spec.terms + (() if avoid_term is None else (avoid_term,))  # the targets' terms, then clearance
+    avoid_arrays = None if avoid is None else detach(avoid.cast(dtype))
+    avoid_bound = () if avoid_arrays is None else (avoid_arrays,)
 
     def build(idx, copies: int) -> Problem:
         def tile(x):  # (n, ...) -> (copies * m, ...)
             x = x[idx]
             return jnp.broadcast_to(x, (copies,) + x.shape).reshape((copies * idx.shape[0],) + x.shape[1:])
 
-        bound = tuple(term.bind(tile(T)) for term, T in zip(spec.terms, fixed, strict=True))
+        bound = tuple(term.bind(tile(T)) for term, T in zip(spec.terms, fixed, strict=True)) + avoid_bound
         root = rg.IDENTITY if base_flat is None else rg.from_matrix(tile(base_flat))
         locked_values = tile(locked_flat).T if locked_flat is not None else jnp.zeros((dof, 1), dtype)
         return Problem(
             model,
-            spec.terms,
+            terms,
             bound,
             lower,
             upper,
@@ -435,7 +457,7 @@ def _solve(
             spec.solve_base,
         )
 
-    moves = _moves(model_in, spec.terms)
+    moves = _moves(model_in, terms)
     still = ~np.any(moves, axis=1)  # joints that move no target
 
     if base_flat is not None:  # the root's guess as state rows (n, 12), for a solved root
@@ -484,7 +506,7 @@ def _solve(
         first,
         facts.steps(optimizer),
         settings,
-        moves=jnp.asarray(moves) if k > 1 else None,
+        moves=jnp.asarray(moves) if len(terms) > 1 else None,
     )
     x, ev = best.x, best.ev
     if spec.secondary:
@@ -493,12 +515,19 @@ def _solve(
     solved_root = base_in if base is not None and not spec.solve_base else None
     x = implicit(spec, cast(model_in, dtype), safe, solved_root, x)
     success = best.success & valid if base_ok is None else best.success & valid & base_ok
-    return result(spec, x, ev.pos_err, ev.rot_err, valid, success, best.iters, batch)
+    clearance = None
+    if avoid_term is not None and avoid_arrays is not None:  # recomputed at the returned states, exactly
+        clearance = avoid_term.clearance(Kinematics(build(jnp.arange(n), 1), x), avoid_arrays)
+        success = success & (clearance >= avoid_arrays.margin)
+    return result(spec, x, ev.pos_err[:k], ev.rot_err[:k], valid, success, best.iters, batch, clearance)
 
 
-def result(spec: Spec, x: jax.Array, pos_err, rot_err, valid, success, iters, batch: tuple[int, ...]) -> IKResult:
+def result(
+    spec: Spec, x: jax.Array, pos_err, rot_err, valid, success, iters, batch: tuple[int, ...], clearance=None
+) -> IKResult:
     """The :class:`IKResult` of states ``x`` ``(n_state, n)`` with per-term errors ``(k, n)`` (the largest
-    float where the targets were not ``valid``), ``success`` and ``iters`` ``(n,)``, shaped ``batch``."""
+    float where the targets were not ``valid``), ``success``, ``iters`` and ``clearance`` (or ``None``)
+    ``(n,)``, shaped ``batch``."""
     dtype, dof, k = x.dtype, x.shape[0] - (BASE_ROWS if spec.solve_base else 0), len(spec.terms)
     n = x.shape[1]
     big = jnp.finfo(dtype).max
@@ -530,4 +559,5 @@ def result(spec: Spec, x: jax.Array, pos_err, rot_err, valid, success, iters, ba
         iters=iters.reshape(batch),
         base=None if T_world_root is None else T_world_root.reshape(batch + (4, 4)),
         com_err=com_err,
+        clearance=None if clearance is None else clearance.reshape(batch),
     )

@@ -26,16 +26,23 @@ from __future__ import annotations
 
 from typing import NamedTuple, Protocol
 
+import jax
+
 from diffkin import _rigid as rg
 
 
 class Rows(NamedTuple):
-    """A term's residual entries ``r``, its Jacobian rows ``J`` (``J[i][c]``) and its errors (metres, radians)."""
+    """A term's residual entries ``r``, its Jacobian rows ``J`` (``J[i][c]``) and its errors (metres, radians).
+
+    A term with many rows computed together gives them as one ``block`` instead: ``(r (m, P),
+    J (m, C, P))`` arrays (``J`` ``(m, 0, P)`` without Jacobian), after the entries.
+    """
 
     r: list[rg.Entry]
     J: list[list[rg.Entry]]
     pos_err: rg.Entry
     rot_err: rg.Entry
+    block: tuple[jax.Array, jax.Array] | None = None
 
 
 class Term(Protocol):

@@ -1,0 +1,187 @@
+"""Collision-aware IK (``dk.ik.solve(..., avoid=dk.ik.Avoid(...))``).
+
+A small arm of capsules for the term's Jacobian (against finite differences of its residual), its
+solutions (every success clear by the margin, re-checked by forward kinematics and the distance
+functions) and the failures that must be reported; the Panda of example-robot-data among a table,
+a shelf and spheres, every success re-checked by coal on the real meshes (marked slow).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from _reference import robot_poses
+
+import diffkin as dk
+from diffkin import _rigid as rg
+from diffkin.collision import Box, Plane, Sphere, World
+from diffkin.ik._problem import Problem
+from diffkin.ik._terms.avoid import BAND, AvoidTerm
+
+ARM = """<robot name="arm">
+  <link name="base"/>
+  <link name="l1"><collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.04" length="0.4"/></geometry>
+    </collision></link>
+  <link name="l2"><collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.04" length="0.4"/></geometry>
+    </collision></link>
+  <link name="l3"><collision><origin xyz="0 0 0.15"/><geometry><capsule radius="0.03" length="0.3"/></geometry>
+    </collision></link>
+  <link name="hand"><collision><geometry><sphere radius="0.05"/></geometry></collision></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.05"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.4"/>
+    <axis xyz="0 1 0"/><limit lower="-2.5" upper="2.5"/></joint>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0 0 0.4"/>
+    <axis xyz="0 1 0"/><limit lower="-2.8" upper="2.8"/></joint>
+  <joint name="tip" type="fixed"><parent link="l3"/><child link="hand"/><origin xyz="0 0 0.3"/></joint>
+</robot>"""
+
+
+def _box(center, half, angle=0.0):
+    T = np.eye(4)
+    c, s = np.cos(angle), np.sin(angle)
+    T[:2, :2] = [[c, -s], [s, c]]
+    T[:3, 3] = center
+    return Box(T, np.asarray(half, float))
+
+
+@pytest.fixture(scope="module")
+def arm():
+    robot = dk.load_robot(ARM)
+    geom = dk.collision.load(ARM, robot)
+    world = World(
+        Sphere(np.array([[0.35, 0.25, 0.55]]), np.array([0.08])),
+        _box([0.45, -0.1, 0.25], [0.12, 0.08, 0.1], 0.4),
+        Plane(np.array([0.0, 0.0, 1.0]), -0.1),
+    )
+    return robot, geom, world
+
+
+def test_rows_match_finite_differences(arm):
+    """The term's residual rows and ``J = d(-r)/dq`` against central differences (float64), at 40
+    random configurations with a margin wide enough that self, sphere, box and plane rows are active."""
+    robot, geom, world = arm
+    avoid = dk.ik.Avoid(geom, world, margin=0.25)
+    term = AvoidTerm.of(avoid)
+    dof = robot.dof
+    lower, upper = np.asarray(robot.lower), np.asarray(robot.upper)
+    problem = Problem(
+        robot, (term,), (avoid.cast(jnp.float64),), lower, upper, np.zeros(dof, bool), False, (False,) * dof,
+        jnp.zeros((dof, 1)), rg.IDENTITY, False,
+    )  # fmt: skip
+    x = np.random.default_rng(3).uniform(lower, upper, (40, dof)).T
+    ev = jax.jit(problem.evaluate)(x)
+    r = jax.jit(lambda x: problem.evaluate(x, jacobian=False).r)
+    assert ev.r.shape == (len(geom.pairs) + len(geom.shape_names), 40)
+    active = np.asarray(ev.r) > 0
+    assert active[: len(geom.pairs)].any() and active[len(geom.pairs) :].mean() > 0.3
+    h = 1e-6
+    for c in range(dof):
+        e = np.zeros((dof, 1))
+        e[c] = h
+        fd = -(np.asarray(r(x + e)) - np.asarray(r(x - e))) / (2 * h)
+        np.testing.assert_allclose(np.asarray(ev.J[:, c]), fd, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(ev.cost), np.sum(np.asarray(ev.r) ** 2, axis=0), rtol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def arm_solutions(arm):
+    """60 hand targets from random configurations that clear everything by the margin + band; each
+    solved with and without ``avoid`` (float64), and one target inside the box."""
+    robot, geom, world = arm
+    margin = 0.02
+    rng = np.random.default_rng(0)
+    q = rng.uniform(np.asarray(robot.lower), np.asarray(robot.upper), (600, robot.dof))
+    clear = np.asarray(dk.collision.clearance(robot, geom, q, world))
+    q = q[clear > margin + BAND][:60]
+    targets = np.asarray(dk.fk(robot, q, "hand"))[:, :3, 3]
+    inside = np.array([[0.45, -0.1, 0.25]])  # the box's centre
+    targets = np.concatenate([targets, inside])
+    avoid = dk.ik.Avoid(geom, world, margin=margin)
+    with_avoid = dk.ik.solve(robot, {"hand": targets}, avoid=avoid)
+    plain = dk.ik.solve(robot, {"hand": targets})
+    return robot, geom, world, margin, targets, with_avoid, plain
+
+
+def test_successes_are_clear_and_on_target(arm_solutions):
+    robot, geom, world, margin, targets, res, plain = arm_solutions
+    ok = np.asarray(res.success[:-1])
+    assert ok.mean() >= 0.95
+    q = np.asarray(res.q)
+    clearance = np.asarray(dk.collision.clearance(robot, geom, q, world))
+    np.testing.assert_allclose(np.asarray(res.clearance), clearance, rtol=0, atol=1e-12)
+    assert np.all(clearance[:-1][ok] >= margin)
+    reached = np.stack([robot_poses(robot, qk)[robot.frame_names.index("hand"), :3, 3] for qk in q])
+    assert np.all(np.linalg.norm(reached - targets, axis=-1)[:-1][ok] <= 1e-5)
+    lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
+    assert np.all((q >= lo) & (q <= hi))
+    # without avoid, some of the same targets (the one inside the box too) are solved through an obstacle
+    plain_clear = np.asarray(dk.collision.clearance(robot, geom, np.asarray(plain.q), world))
+    assert np.sum(np.asarray(plain.success) & (plain_clear < margin)) >= 2
+
+
+def test_target_inside_an_obstacle_fails_finitely(arm_solutions):
+    *_, res, plain = arm_solutions
+    assert bool(plain.success[-1])  # reachable, through the box
+    assert not bool(res.success[-1])
+    for field in (res.q[-1], res.pos_err[-1], res.clearance[-1]):
+        assert np.all(np.isfinite(np.asarray(field)))
+    assert float(res.clearance[-1]) < 0.02
+
+
+def test_floating_locked_secondary_with_avoid(arm):
+    """A floating root solved with ``avoid``, a locked joint and the rest objective: successes clear,
+    on target, the locked joint unmoved (float32)."""
+    robot = dk.load_robot(ARM, floating=True)
+    geom = dk.collision.load(ARM, robot)
+    _, _, world = arm
+    rng = np.random.default_rng(1)
+    q = rng.uniform(np.asarray(robot.lower), np.asarray(robot.upper), (200, robot.dof))
+    clear = np.asarray(dk.collision.clearance(robot, geom, q, world))
+    q = q[clear > 0.05][:16]
+    T = np.asarray(dk.fk(robot, q, "hand"))
+    res = dk.ik.solve(
+        robot,
+        {"hand": jnp.asarray(T, jnp.float32)},
+        avoid=dk.ik.Avoid(geom, world, margin=0.01),
+        solve_base=True,
+        locked={"j1": jnp.asarray(q[:, 0], jnp.float32)},
+        rest=jnp.zeros(robot.dof, jnp.float32),
+    )
+    ok = np.asarray(res.success)
+    assert ok.mean() >= 0.9
+    base = np.asarray(res.base, np.float64)
+    clearance = np.asarray(dk.collision.clearance(robot, geom, np.asarray(res.q, np.float64), world, base=base))
+    assert np.all(clearance[ok] >= 0.01 - 1e-6)
+    reached = np.asarray(dk.fk(robot, np.asarray(res.q, np.float64), "hand", base=base))
+    assert np.all(np.linalg.norm(reached[:, :3, 3] - T[:, :3, 3], axis=-1)[ok] <= 1e-5)
+    np.testing.assert_allclose(np.asarray(res.q)[:, 0], q[:, 0], atol=1e-6)
+
+
+def test_bad_avoid_arguments(arm):
+    robot, geom, world = arm
+    target = {"hand": np.array([0.3, 0.0, 0.5])}
+    with pytest.raises(ValueError, match="Avoid.margin"):
+        dk.ik.Avoid(geom, world, margin=-0.1)
+    with pytest.raises(ValueError, match="Avoid.margin"):
+        dk.ik.Avoid(geom, world, margin=np.zeros(2))
+    with pytest.raises(TypeError, match="Avoid.world"):
+        dk.ik.Avoid(geom, [Sphere(np.zeros(3), 0.1)])
+    with pytest.raises(TypeError, match="Avoid.geom"):
+        dk.ik.Avoid(world)
+    with pytest.raises(ValueError, match="nothing to keep clear"):
+        dk.ik.Avoid(geom, None, self_collision=False)
+    with pytest.raises(TypeError, match="avoid"):
+        dk.ik.solve(robot, target, avoid=geom)
+    chain = dk.load_urdf(ARM, "hand")
+    with pytest.raises(ValueError, match="avoid: only for a Robot"):
+        dk.ik.solve(chain, target["hand"], avoid=dk.ik.Avoid(geom, world))
+    other = dk.load_robot(
+        ARM.replace('name="l3"', 'name="l3x"')
+        .replace('<child link="l3"/>', '<child link="l3x"/>')
+        .replace('<parent link="l3"/>', '<parent link="l3x"/>')
+    )
+    with pytest.raises(ValueError, match="geom"):
+        dk.ik.solve(other, target, avoid=dk.ik.Avoid(dk.collision.load(ARM, robot).replace_pairs([]), world))
