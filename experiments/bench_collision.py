@@ -30,10 +30,15 @@ import diffkin as dk  # noqa: E402
 
 
 def panda():
-    import pinocchio  # noqa: F401  (example-robot-data comes with the validation install)
+    """The Panda of example-robot-data: its robot, URDF and SRDF paths. The files come from
+    ``$EXAMPLE_ROBOT_DATA`` (a copy of its ``robots`` folder) if set, else from the validation install."""
+    robots = os.environ.get("EXAMPLE_ROBOT_DATA")
+    if robots is None:
+        import pinocchio  # example-robot-data comes with the validation install
 
-    root = os.path.join(os.path.dirname(os.path.dirname(pinocchio.__file__)), "..", "..", "..", "share")
-    root = os.path.abspath(os.path.join(root, "example-robot-data", "robots", "panda_description"))
+        share = os.path.join(os.path.dirname(os.path.dirname(pinocchio.__file__)), "..", "..", "..", "share")
+        robots = os.path.join(share, "example-robot-data", "robots")
+    root = os.path.abspath(os.path.join(robots, "panda_description"))
     urdf, srdf = os.path.join(root, "urdf", "panda.urdf"), os.path.join(root, "srdf", "panda.srdf")
     robot = dk.load_robot(urdf)
     return robot, urdf, srdf
@@ -118,6 +123,9 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="batches 1 and 1,000 only")
     parser.add_argument("--dtype", choices=("float32", "float64", "both"), default="both")
     parser.add_argument("--compile", action="store_true", help="compile times of the value and the gradient only")
+    parser.add_argument(
+        "--no-coal", action="store_true", help="diffkin only (no coal loop: a GPU machine)"
+    )
     args = parser.parse_args(argv)
     robot, urdf, srdf = panda()
     t = time.perf_counter()
@@ -133,7 +141,7 @@ def main(argv=None) -> int:
     dtypes = {"float32": (np.float32,), "float64": (np.float64,), "both": (np.float32, np.float64)}[args.dtype]
     if args.compile:
         return compile_times(robot, geom, world, rng.uniform(lo, hi, (1000, robot.dof)), dtypes)
-    coal_s = coal_per_config(robot, geom, world, rng.uniform(lo, hi, (200, robot.dof)))
+    coal_s = np.nan if args.no_coal else coal_per_config(robot, geom, world, rng.uniform(lo, hi, (200, robot.dof)))
     print("| dtype | batch | diffkin (s) | coal loop (s, per config x batch) | speed-up |")
     print("| --- | --- | --- | --- | --- |")
     for dtype in dtypes:

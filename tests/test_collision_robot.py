@@ -335,7 +335,7 @@ def test_mesh_fits_contain_every_vertex(parts):
     trimesh = pytest.importorskip("trimesh")
     coal = pytest.importorskip("coal")
     from diffkin._meshfiles import resolve_mesh
-    from diffkin.collision import _sources
+    from diffkin.models.urdf import rpy_matrix
 
     path = _erd(*parts)
     robot = dk.load_robot(path)
@@ -350,7 +350,7 @@ def test_mesh_fits_contain_every_vertex(parts):
                 T = np.eye(4)
                 origin = c.find("origin")
                 if origin is not None:
-                    T[:3, :3] = _sources._rpy(np.array([float(x) for x in origin.get("rpy", "0 0 0").split()]))
+                    T[:3, :3] = rpy_matrix(np.array([float(x) for x in origin.get("rpy", "0 0 0").split()]))
                     T[:3, 3] = [float(x) for x in origin.get("xyz", "0 0 0").split()]
                 v = trimesh.load(resolve_mesh(mesh.get("filename"), os.path.dirname(path)), force="mesh")
                 meshes[f"{link.get('name')}_{k}"] = (np.asarray(v.vertices) @ T[:3, :3].T + T[:3, 3], v)

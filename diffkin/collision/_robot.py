@@ -173,6 +173,17 @@ def pair_blocks(geom: Geometry) -> list[tuple[np.ndarray, int, int, np.ndarray, 
     return out
 
 
+def expanded(shape):
+    """The shapes with a new axis 1: robot shapes ``(n_kind, 1, N, ...)``, obstacles ``(n_obstacles, 1, ...)``,
+    whose distances broadcast to ``(n_kind, n_obstacles, N)``."""
+    return _map(shape, lambda v, r: jnp.expand_dims(v, 1))
+
+
+def kind_size(shape) -> int:
+    """The number of shapes of a stacked kind (its first batch axis)."""
+    return int(_batch_shape(shape)[0])
+
+
 def take(shape, idx):
     """The shapes ``idx`` of a batch-last kind (:func:`batch_last`)."""
     return _map(shape, lambda v, r: jnp.take(v, idx, axis=0))
@@ -213,11 +224,10 @@ def _world_distances(robot: Robot, geom: Geometry, q, world: World, base) -> jax
 
 def world_of_placed(shapes, world: World, n: int) -> jax.Array:
     """``(S, W, n)`` the distances of shapes placed batch-last (:func:`batch_last`) to the obstacles."""
-    obstacles = [_map(o, lambda v, r: jnp.expand_dims(v, 1)) for o in world.kinds()]  # (n_obstacles, 1, ...)
+    obstacles = [expanded(o) for o in world.kinds()]  # (n_obstacles, 1, ...)
     blocks = []
     for shape in shapes:
-        expanded = _map(shape, lambda v, r: jnp.expand_dims(v, 1))  # (n_kind, 1, N, ...)
-        blocks.append([distance(expanded, o) for o in obstacles])  # (n_kind, n_obstacles, N) each
+        blocks.append([distance(expanded(shape), o) for o in obstacles])  # (n_kind, n_obstacles, N) each
     return blocks_in_place(blocks, n)
 
 

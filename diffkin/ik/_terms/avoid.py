@@ -26,11 +26,13 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
-from diffkin.collision._distance import distance
+from diffkin.collision._distance import distance, motion
 from diffkin.collision._geometry import Geometry, moved
-from diffkin.collision._robot import World, batch_last, pair_blocks, take, world_of_placed
-from diffkin.collision._shapes import Capsule, Sphere
+from diffkin.collision._robot import World, batch_last, expanded, kind_size, pair_blocks, take, world_of_placed
+from diffkin.collision._shapes import Box, Capsule, Sphere
 from diffkin.ik._terms import Rows
+
+ROUND = (Sphere, Capsule)
 
 #: metres above the margin where the residual starts (a centimetre: the size of a gripper finger).
 BAND = 0.01
@@ -91,6 +93,44 @@ def _wrench(shape, grad) -> jax.Array:
     return jnp.concatenate([f, tau], axis=-1)
 
 
+def _pair_wrenches(a, b, weight: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """``(n, P, 6)`` each: ``weight`` ``(n, P)`` times the wrenches of the distances of the shapes ``a``
+    and ``b`` (``(n, P, ...)``): from the closest points for round shapes (:func:`motion`), else by
+    reverse mode through :func:`distance` (boxes)."""
+    if isinstance(a, ROUND) and isinstance(b, ROUND):
+        _, Wa, Wb = motion(a, b)
+        return weight[..., None] * Wa, weight[..., None] * Wb
+    _, pull = jax.vjp(lambda a, b: jnp.broadcast_to(distance(a, b), weight.shape), a, b)
+    ga, gb = pull(weight)
+    return _wrench(a, ga), _wrench(b, gb)
+
+
+def _world_wrenches(shapes, world: World, coef: jax.Array) -> jax.Array:
+    """``(S, P, 6)``: per robot shape, ``sum_o coef[s, o] W_so`` over the obstacles ``o``, ``W_so`` the
+    wrench of the shape's distance to obstacle ``o`` (``coef`` ``(S, W, P)`` in the order of
+    :func:`world_of_placed`)."""
+    rows = np.cumsum((0, *(kind_size(s) for s in shapes)))
+    kinds = world.kinds()
+    cols = np.cumsum((0, *(kind_size(o) for o in kinds)))
+    out = []
+    for kr, shape in enumerate(shapes):
+        total = jnp.zeros((rows[kr + 1] - rows[kr],) + coef.shape[2:] + (6,), coef.dtype)
+        moving = expanded(shape)  # (n_kind, 1, P, ...)
+        for ko, obstacle in enumerate(kinds):
+            if rows[kr + 1] == rows[kr] or cols[ko + 1] == cols[ko]:
+                continue
+            c = coef[rows[kr] : rows[kr + 1], cols[ko] : cols[ko + 1]]  # (n_kind, n_obstacles, P)
+            o = expanded(obstacle)  # (n_obstacles, 1, ...)
+            if isinstance(shape, ROUND) and not isinstance(obstacle, Box):
+                total = total + jnp.sum(c[..., None] * motion(moving, o)[1], axis=1)
+            else:
+                _, pull = jax.vjp(lambda s, o=o, c=c: jnp.broadcast_to(distance(s, o), c.shape), moving)
+                (grad,) = pull(c)
+                total = total + _wrench(moving, grad)[:, 0]
+        out.append(total)
+    return jnp.concatenate(out)
+
+
 @dataclasses.dataclass(frozen=True)
 class AvoidTerm:
     """The clearance term of a problem (static; its arrays are an :class:`Avoid` in the solver's dtype).
@@ -149,17 +189,13 @@ class AvoidTerm:
             slot = np.asarray(self.slots, dtype=np.int64)
             starts = np.cumsum((0, *avoid.geom.counts))
             for (_, ka, kb, ia, ib), (a, b), active in zip(blocks, sides, a_self, strict=True):
-                _, pull = jax.vjp(lambda a, b, shape=active.shape: jnp.broadcast_to(distance(a, b), shape), a, b)
-                ga, gb = pull((active > 0).astype(dtype))
-                Ja = jnp.einsum("npk,nckp->ncp", _wrench(a, ga), twists[slot[starts[ka] + ia]])
-                Jb = jnp.einsum("npk,nckp->ncp", _wrench(b, gb), twists[slot[starts[kb] + ib]])
+                Wa, Wb = _pair_wrenches(a, b, (active > 0).astype(dtype))
+                Ja = jnp.einsum("npk,nckp->ncp", Wa, twists[slot[starts[ka] + ia]])
+                Jb = jnp.einsum("npk,nckp->ncp", Wb, twists[slot[starts[kb] + ib]])
                 J.append(Ja + Jb)
             if avoid.world is not None and d_world is not None:
                 coef = a_world / jnp.where(r_world > 0, r_world, 1.0)[:, None]  # d r_world / d(-d_world)
-                world = avoid.world
-                _, pull = jax.vjp(lambda s: world_of_placed(s, world, kin.shape[0]), shapes)
-                (grads,) = pull(coef)
-                wrench = jnp.concatenate([_wrench(s, g) for s, g in zip(shapes, grads, strict=True)])  # (S, P, 6)
+                wrench = _world_wrenches(shapes, avoid.world, coef)  # (S, P, 6)
                 J.append(jnp.einsum("spk,sckp->scp", wrench, twists[slot]))
         d = d_self + ([] if d_world is None else [d_world.reshape(-1, kin.shape[0])])
         clear = jnp.min(jnp.concatenate(d), axis=0) >= avoid.margin
