@@ -31,6 +31,7 @@ import math
 import os
 import sys
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -138,6 +139,24 @@ def _as_chain(chain):
         return robot.chain(frame)
     instance(chain, (DHChain, PoEChain), "chain", "a DHChain, PoEChain or (Robot, frame_name)")
     return chain
+
+
+def _collision_check(pair, avoid) -> _Collision:
+    """The static collision check of a map of ``pair = (robot, frame_name)`` with ``avoid``, checked on the host."""
+    from diffkin.collision._robot import check_geometry
+    from diffkin.ik import Avoid
+
+    if not (isinstance(pair, tuple) and len(pair) == 2 and isinstance(pair[0], Robot)):
+        raise ValueError("avoid: needs a (robot, frame_name) pair as chain (collision geometry is a robot's)")
+    instance(avoid, Avoid, "avoid", "a dk.ik.Avoid(geom, world, margin)")
+    robot, frame = pair
+    check_geometry(robot, avoid.geom)
+    chain = robot.chain(frame)
+    lo, hi = np.asarray(robot.lower, np.float64), np.asarray(robot.upper, np.float64)
+    middle = np.where(np.isfinite(lo) & np.isfinite(hi), (lo + hi) / 2, np.where(np.isfinite(lo), lo, 0.0))
+    middle = np.where(np.isfinite(hi) & ~np.isfinite(lo), hi, middle)
+    columns = tuple(robot.joint_names.index(name) for name in chain.joint_names)
+    return _Collision(partition(robot)[0], columns, tuple(float(x) for x in middle))
 
 
 def _joint_ranges(chain) -> tuple[np.ndarray, np.ndarray]:
@@ -290,9 +309,27 @@ def _flat_index(p: rg.Vec3, origin, inv_voxel, shape) -> tuple[jax.Array | int, 
     return flat, inside
 
 
+class _Collision(NamedTuple):
+    """How a map's samples are checked for collision (static): the robot, where the chain's joints sit
+    in its ``q``, the values of its other joints."""
+
+    robot: ModelKey
+    columns: tuple[int, ...]
+    others: tuple[float, ...]
+
+
 @functools.lru_cache(maxsize=16)
-def _compiled(chain_key: ModelKey, shape: tuple[int, int, int], n_bins: int, chunk: int, dtype, mesh: Mesh):
-    """Jitted ``(zeros, step, reduce)`` of one map: compiled once per chain, grid shape, chunk and mesh.
+def _compiled(
+    chain_key: ModelKey,
+    shape: tuple[int, int, int],
+    n_bins: int,
+    chunk: int,
+    dtype,
+    mesh: Mesh,
+    collision: _Collision | None = None,
+):
+    """Jitted ``(zeros, step, reduce)`` of one map: compiled once per chain, grid shape, chunk, mesh and
+    collision check (the step's last argument: the :class:`~diffkin.ik.Avoid`, or ``None``).
 
     The state is, per device, ``counts (nvox,)`` int32, ``best (nvox,)`` manipulability and
     ``seen (nvox * n_bins,)`` uint8 flags of the orientation bins reached, stacked on a leading
@@ -310,17 +347,23 @@ def _compiled(chain_key: ModelKey, shape: tuple[int, int, int], n_bins: int, chu
             jnp.zeros((n_dev, nvox * n_bins), jnp.uint8),
         )
 
-    def local_step(counts, best, seen, key, chunk_index, n_full, n_last, origin, inv_voxel, n_slots):
+    def local_step(counts, best, seen, key, chunk_index, n_full, n_last, origin, inv_voxel, n_slots, avoid):
         c = chunk_index[0]  # this device's chunk: no axis_index, so one per-device program for any device count
         n_valid = jnp.where(c < n_full, chunk, jnp.where(c == n_full, n_last, 0))
         q = _uniform(jax.random.fold_in(key, c), lo, hi, chunk, dtype)
+        counted = jnp.arange(chunk) < n_valid
+        if collision is not None:  # only the samples clear of the obstacles (and of the robot itself) count
+            robot = collision.robot.model
+            q_robot = jnp.broadcast_to(jnp.asarray(collision.others, dtype)[:, None], (robot.dof, chunk))
+            q_robot = q_robot.at[np.asarray(collision.columns)].set(q)
+            counted = counted & (avoid.clearance(robot, q_robot.T) >= avoid.margin)
         kin = chain.forward(list(q))
         ee = kin.pose()
         p = [jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in ee.p]
         R = tuple(tuple(jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in row) for row in ee.R)
         flat, inside = _flat_index(p, origin, inv_voxel, shape)
         slot = jnp.where(
-            inside & (jnp.arange(chunk) < n_valid), flat * n_bins + _orientation_bin(R, n_bins // 6), n_slots
+            inside & counted, flat * n_bins + _orientation_bin(R, n_bins // 6), n_slots
         )  # out of range: dropped by the scatters
         slot = opaque_index(slot, n_slots + 1)  # one forward pass for the three scatters, not one per scatter
         m = _manipulability(kin, chain.dof).astype(dtype)
@@ -333,7 +376,7 @@ def _compiled(chain_key: ModelKey, shape: tuple[int, int, int], n_bins: int, chu
         jax.shard_map(
             local_step,
             mesh=mesh,
-            in_specs=(P(_AXIS),) * 3 + (P(), P(_AXIS)) + (P(),) * 5,
+            in_specs=(P(_AXIS),) * 3 + (P(), P(_AXIS)) + (P(),) * 6,
             out_specs=(P(_AXIS),) * 3 + (P(),),
             check_vma=False,
         ),
@@ -377,6 +420,7 @@ def reachability(
     orientation_bins: int = 48,
     dtype=None,
     progress: bool | None = None,
+    avoid=None,
 ) -> ReachabilityMap:
     """Reachability, best manipulability and dexterity of ``chain`` on a voxel grid.
 
@@ -407,6 +451,11 @@ def reachability(
         dtype: float dtype of the computation; default the default float (float32, or float64
             with x64).
         progress: show a tqdm progress bar; ``None`` (default): only on a terminal.
+        avoid: for a ``(robot, frame_name)`` pair, a :class:`~diffkin.ik.Avoid` (the robot's collision
+            geometry, obstacles, margin): only samples whose clearance is at least the margin count
+            (in every map; ``n_outside`` then also counts the colliding samples). The robot's joints
+            off the frame's path are held at the middle of their limits (a one-sided limit's bound, 0
+            where unlimited).
 
     Returns:
         The :class:`ReachabilityMap`.
@@ -414,6 +463,7 @@ def reachability(
     Raises:
         ValueError, TypeError: bad arguments (named in the message).
     """
+    collision = None if avoid is None else _collision_check(chain, avoid)
     chain = _as_chain(chain)
     n_samples = positive_int(n_samples, "n_samples")
     chunk = positive_int(chunk, "chunk")
@@ -451,7 +501,7 @@ def reachability(
             f"voxel_size, smaller bounds or fewer orientation_bins"
         )
     mesh = Mesh(np.array(devices), (_AXIS,))
-    zeros, step, reduce = _compiled(partition(chain)[0], shape, orientation_bins, chunk, dtype, mesh)
+    zeros, step, reduce = _compiled(partition(chain)[0], shape, orientation_bins, chunk, dtype, mesh, collision)
 
     n_full, n_last = divmod(n_samples, chunk)
     n_steps = -(-(n_full + (n_last > 0)) // len(devices))
@@ -462,6 +512,7 @@ def reachability(
         jnp.asarray(origin, dtype),
         jnp.asarray(1.0 / voxel_size, dtype),
         jnp.asarray(n_slots, jnp.int32),
+        jnp.zeros((), dtype) if avoid is None else avoid.cast(dtype),
     )
     sharded = NamedSharding(mesh, P(_AXIS))
     state, counts, bar = zeros(), np.zeros(shape, np.int64), _progress(n_samples, progress)

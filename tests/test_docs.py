@@ -1,6 +1,7 @@
 """Every ```python block of README.md and docs/*.md runs, so that the examples cannot rot.
 
-The blocks of one page run in order in one fresh interpreter (a page reads as one session), with
+The blocks of one page run in order in one fresh interpreter (a page reads as one session; a page
+may start new sessions with the line :data:`SESSION`, run as tests of their own), with
 the working directory and ``HOME`` in a temporary folder (files the examples write land there),
 warnings as errors, and a persistent compilation cache shared by the pages (pages that solve the
 same problem compile it once). A page whose examples need the validation install (example-robot-data, dm_control, viser)
@@ -25,9 +26,18 @@ BLOCK = re.compile(r"^```python\n(.*?)^```\s*$", re.MULTILINE | re.DOTALL)
 SLOW = {"docs/models.md", "docs/ik.md", "docs/srs.md", "docs/workspace.md", "docs/viewer.md"}
 
 
+#: A line that starts a new session of a page: the blocks after it run in an interpreter of their own.
+SESSION = "<!-- the examples below run on their own -->"
+
+
 def blocks(page: Path) -> list[str]:
     """The ```python blocks of a markdown page, in order."""
     return BLOCK.findall(page.read_text())
+
+
+def sessions(page: Path) -> list[list[str]]:
+    """The ```python blocks of a page, per session (:data:`SESSION`)."""
+    return [found for part in page.read_text().split(SESSION) if (found := BLOCK.findall(part))]
 
 
 def _name(page: Path) -> str:
@@ -51,11 +61,18 @@ def test_block_pattern_finds_the_examples():
 
 
 @pytest.mark.parametrize(
-    "page",
-    [pytest.param(p, id=_name(p), marks=[pytest.mark.slow] if _name(p) in SLOW else []) for p in RUNNABLE],
-)
-def test_examples_run(page: Path, tmp_path: Path, compilation_cache: str):
-    code = "\n\n".join(blocks(page))
+    ("page", "session"),
+    [
+        pytest.param(
+            p, k, id=_name(p) if len(sessions(p)) == 1 else f"{_name(p)}#{k + 1}",
+            marks=[pytest.mark.slow] if _name(p) in SLOW else [],
+        )
+        for p in RUNNABLE
+        for k in range(len(sessions(p)))
+    ],
+)  # fmt: skip
+def test_examples_run(page: Path, session: int, tmp_path: Path, compilation_cache: str):
+    code = "\n\n".join(sessions(page)[session])
     env = dict(
         os.environ,
         HOME=str(tmp_path),

@@ -192,6 +192,29 @@ def test_bad_avoid_arguments(arm):
         dk.ik.solve(other, target, avoid=dk.ik.Avoid(dk.collision.load(ARM, robot).replace_pairs([]), world))
 
 
+def test_reachability_counts_only_clear_samples(arm):
+    """A map with ``avoid`` against a brute-force count of the same samples (one chunk: key
+    ``fold_in(key, 0)``) that clear the obstacles and the robot itself by the margin, float64."""
+    robot, geom, world = arm
+    key, n = jax.random.key(4), 3000
+    avoid = dk.ik.Avoid(geom, world, margin=0.02)
+    kw = dict(key=key, voxel_size=0.1, bounds=[[-1.3, -1.3, -0.9], [1.3, 1.3, 1.7]], chunk=n, dtype=jnp.float64)
+    clear_map = dk.workspace.reachability((robot, "hand"), n, avoid=avoid, **kw)
+    full_map = dk.workspace.reachability((robot, "hand"), n, **kw)
+    q = np.asarray(dk.workspace.sample_configs(robot.chain("hand"), n, jax.random.fold_in(key, 0), dtype=jnp.float64))
+    clear = np.asarray(dk.collision.clearance(robot, geom, q, world)) >= 0.02
+    p = np.asarray(dk.fk(robot, q, "hand"))[:, :3, 3]
+    cells = np.floor((p - clear_map.origin) * (1.0 / clear_map.voxel_size)).astype(int)
+    expected = np.zeros(clear_map.counts.shape, np.int64)
+    np.add.at(expected, tuple(cells[clear].T), 1)
+    np.testing.assert_array_equal(clear_map.counts, expected)
+    assert 0.05 < 1 - clear.mean() < 0.95  # the obstacles remove some samples, not all
+    assert full_map.counts.sum() == n and clear_map.n_outside == n - clear.sum()
+    assert np.all(clear_map.dexterity <= full_map.dexterity)
+    with pytest.raises(ValueError, match="avoid: needs a"):
+        dk.workspace.reachability(robot.chain("hand"), n, avoid=avoid, key=key)
+
+
 @pytest.mark.slow
 def test_panda_among_obstacles_against_coal_on_the_real_meshes():
     """The Panda of example-robot-data (fitted capsules, finger boxes, SRDF pairs) among a table, a

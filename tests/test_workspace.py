@@ -152,7 +152,7 @@ def test_compiled_once_per_chain_grid_and_chunk():
     assert (ws._compiled.cache_info().hits, ws._compiled.cache_info().misses) == (1, 1)
     mesh = jax.sharding.Mesh(np.array(jax.devices()), ("devices",))
     _, step, _ = ws._compiled(
-        partition(dk.robots.planar([1.0, 0.5]))[0], (13, 13, 13), 48, 512, jnp.dtype(jnp.float64), mesh
+        partition(dk.robots.planar([1.0, 0.5]))[0], (13, 13, 13), 48, 512, jnp.dtype(jnp.float64), mesh, None
     )
     assert step._cache_size() == 1  # 2 + 10 steps, one compilation
 

@@ -28,7 +28,17 @@ from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
 from diffkin.collision._distance import distance, motion
 from diffkin.collision._geometry import Geometry, moved
-from diffkin.collision._robot import World, batch_last, expanded, kind_size, pair_blocks, take, world_of_placed
+from diffkin.collision._robot import (
+    World,
+    batch_last,
+    expanded,
+    kind_size,
+    pair_blocks,
+    self_distances,
+    take,
+    world_distances,
+    world_of_placed,
+)
 from diffkin.collision._shapes import Box, Capsule, Sphere
 from diffkin.ik._terms import Rows
 
@@ -74,6 +84,15 @@ class Avoid:
     def cast(self, dtype) -> Avoid:
         """The arrays in ``dtype`` (the solver's)."""
         return jax.tree.map(lambda x: jnp.asarray(x, dtype), self)
+
+    def clearance(self, robot, q, base=None) -> jax.Array:
+        """``(...,)`` metres: the smallest distance this checks at ``q`` ``(..., dof)`` (the self pairs
+        when ``self_collision``, every shape to the world), ``inf`` if nothing is checked."""
+        parts = [self_distances(robot, self.geom, q, base)] if self.self_collision else []
+        if self.world is not None:
+            w = world_distances(robot, self.geom, q, self.world, base)
+            parts.append(w.reshape(*w.shape[:-2], -1))
+        return jnp.min(jnp.concatenate(parts, axis=-1), axis=-1, initial=jnp.inf)
 
 
 def _wrench(shape, grad) -> jax.Array:
