@@ -123,9 +123,7 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="batches 1 and 1,000 only")
     parser.add_argument("--dtype", choices=("float32", "float64", "both"), default="both")
     parser.add_argument("--compile", action="store_true", help="compile times of the value and the gradient only")
-    parser.add_argument(
-        "--no-coal", action="store_true", help="diffkin only (no coal loop: a GPU machine)"
-    )
+    parser.add_argument("--no-coal", action="store_true", help="diffkin only (no coal loop: a GPU machine)")
     args = parser.parse_args(argv)
     robot, urdf, srdf = panda()
     t = time.perf_counter()

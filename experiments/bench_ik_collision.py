@@ -12,6 +12,7 @@ it is installed (``pyroki`` and ``jaxls`` from their sources; commits in that fi
 
     python experiments/bench_ik_collision.py            # batches 1, 100, 1,000 (float32)
     python experiments/bench_ik_collision.py --quick    # batches 1 and 100
+    python experiments/bench_ik_collision.py --baxter 100  # Baxter, two hands, self-collision
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ def world_of(s: dict, dtype) -> C.World:
 class RealGeometry:
     """The URDF's collision geometry in coal (meshes as BVH models, boxes exact) and the scene's obstacles."""
 
-    def __init__(self, urdf: str, robot: dk.Robot, geom: C.Geometry, s: dict):
+    def __init__(self, urdf: str, robot: dk.Robot, geom: C.Geometry, s: dict | None):
         import coal
         import trimesh
 
@@ -84,7 +85,7 @@ class RealGeometry:
                     T[:3, :3] = rpy_matrix(np.array([float(x) for x in origin.get("rpy", "0 0 0").split()]))
                     T[:3, 3] = [float(x) for x in origin.get("xyz", "0 0 0").split()]
                 g = c.find("geometry")
-                mesh, box = g.find("mesh"), g.find("box")
+                mesh, box, cylinder, sphere = (g.find(k) for k in ("mesh", "box", "cylinder", "sphere"))
                 if mesh is not None:
                     m = trimesh.load(resolve_mesh(mesh.get("filename"), os.path.dirname(urdf)), force="mesh")
                     model = coal.BVHModelOBBRSS()
@@ -95,10 +96,17 @@ class RealGeometry:
                     shape: object = model
                 elif box is not None:
                     shape = coal.Box(*[float(x) for x in box.get("size").split()])
+                elif cylinder is not None:
+                    shape = coal.Cylinder(float(cylinder.get("radius")), float(cylinder.get("length")))
+                elif sphere is not None:
+                    shape = coal.Sphere(float(sphere.get("radius")))
                 else:
-                    raise ValueError(f"{link.get('name')}: only meshes and boxes are expected in the Panda URDF")
+                    raise ValueError(f"{link.get('name')}: unexpected collision geometry")
                 self.shapes[f"{link.get('name')}_{k}"] = (shape, T, robot.frame_index(link.get("name")))
         self.pairs = [(geom.shape_names[i], geom.shape_names[j]) for i, j in geom.pairs]
+        self.obstacles: list = []
+        if s is None:
+            return
         self.obstacles = [(coal.Sphere(float(r)), np.r_[x, y, z]) for x, y, z, r in s["spheres"]]
         self.obstacles += [(coal.Box(*(2 * h)), T) for T, h in s["boxes"]]
         n, d = s["plane"]
@@ -159,16 +167,54 @@ def targets_of(robot, geom, world64, n: int, rng) -> np.ndarray:
     return np.asarray(dk.fk(robot, jnp.asarray(q), EE))
 
 
+def baxter(n: int) -> None:
+    """Baxter's two grippers (self-collision only, SRDF pairs), float32: ``avoid`` against no avoid, the real
+    geometry (coal) judging self-collision; targets from configurations whose shapes clear each other by 3 cm."""
+    import pinocchio
+
+    share = os.path.join(os.path.dirname(os.path.dirname(pinocchio.__file__)), "..", "..", "..", "share")
+    root = os.path.abspath(os.path.join(share, "example-robot-data", "robots", "baxter_description"))
+    urdf, srdf = os.path.join(root, "urdf", "baxter.urdf"), os.path.join(root, "srdf", "baxter_manipulation.srdf")
+    robot = dk.load_robot(urdf)
+    geom = C.load(urdf, robot, srdf=srdf)
+    real = RealGeometry(urdf, robot, geom, None)
+    hands = ["left_gripper", "right_gripper"]
+    rng = np.random.default_rng(0)
+    lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
+    q = rng.uniform(lo, hi, (8 * n, robot.dof))
+    q = q[np.asarray(C.self_distances(robot, geom, jnp.asarray(q))).min(axis=-1) >= 0.03][:n]
+    T = np.asarray(dk.fk(robot, jnp.asarray(q), hands))
+    targets = {h: jnp.asarray(T[:, k], jnp.float32) for k, h in enumerate(hands)}
+    avoid = dk.ik.Avoid(geom, None, margin=MARGIN)
+    print(f"# Baxter: {len(geom.shape_names)} shapes, {len(geom.pairs)} self pairs; {n} two-hand targets")
+    print("| solver | first call (s) | warm (s) | success 1e-5 m/1e-4 rad | self-collision (real geometry) |")
+    print("| --- | --- | --- | --- | --- |")
+    for name, kw in (("diffkin avoid (self)", dict(avoid=avoid)), ("diffkin (no avoid)", {})):
+        fn = jax.jit(lambda t, kw=kw: dk.ik.solve(robot, t, **kw))
+        start = time.perf_counter()
+        res = jax.block_until_ready(fn(targets))
+        first = time.perf_counter() - start
+        warm = median_seconds(fn, targets, repeats=3, warmup=0, min_time=0.0)
+        qs = np.asarray(res.q, np.float64)
+        reached = np.asarray(dk.fk(robot, jnp.asarray(qs), hands))
+        pos = np.linalg.norm(reached[..., :3, 3] - T[..., :3, 3], axis=-1).max(axis=-1)
+        hits = real.colliding(qs)
+        ok = (pos <= 1e-5) & ~hits & np.asarray(res.success)
+        print(f"| {name} | {first:.1f} | {warm:.3g} | {ok.mean():.1%} | {hits.mean():.1%} |", flush=True)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="batches 1 and 100 only")
     parser.add_argument("--no-pyroki", action="store_true", help="skip PyRoki even if installed")
-    parser.add_argument(
-        "--no-coal", action="store_true", help="no check on the real meshes (coal)"
-    )
+    parser.add_argument("--no-coal", action="store_true", help="no check on the real meshes (coal)")
     parser.add_argument("--batches", type=int, nargs="+", help="batch sizes (default 1 100 1000; --quick: 1 100)")
+    parser.add_argument("--baxter", type=int, metavar="N", help="Baxter's two hands with self-collision instead")
     args = parser.parse_args(argv)
     jax.config.update("jax_enable_x64", True)  # float64 for judging; the solvers run in float32
+    if args.baxter:
+        baxter(args.baxter)
+        return 0
     robot, urdf, srdf = panda()
     geom = C.load(urdf, robot, srdf=srdf)
     s = scene()
