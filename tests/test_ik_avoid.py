@@ -178,6 +178,11 @@ def test_bad_avoid_arguments(arm):
         dk.ik.Avoid(world)
     with pytest.raises(ValueError, match="nothing to keep clear"):
         dk.ik.Avoid(geom, None, self_collision=False)
+    with pytest.raises(ValueError, match="nothing to keep clear"):
+        dk.ik.Avoid(geom, World(), self_collision=False)
+    empty = dk.ik.Avoid(geom, World())  # no obstacles: the self pairs only
+    q = np.array([0.0, 2.4, 2.4])
+    assert float(empty.clearance(robot, q)) == float(np.min(dk.collision.self_distances(robot, geom, q)))
     with pytest.raises(TypeError, match="avoid"):
         dk.ik.solve(robot, target, avoid=geom)
     chain = dk.load_urdf(ARM, "hand")

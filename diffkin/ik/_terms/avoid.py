@@ -78,7 +78,7 @@ class Avoid:
             raise ValueError(f"Avoid.margin: expected a scalar (metres), got shape {jnp.shape(self.margin)}")
         if concrete and not (np.isfinite(float(self.margin)) and float(self.margin) >= 0):
             raise ValueError(f"Avoid.margin: expected a finite distance >= 0 (metres), got {float(self.margin)}")
-        if not (self.world is not None and self.world.size) and not (self.self_collision and len(self.geom.pairs)):
+        if _obstacles(self) is None and not (self.self_collision and len(self.geom.pairs)):
             raise ValueError("Avoid: nothing to keep clear (no obstacles in world and no self-collision pairs)")
 
     def cast(self, dtype) -> Avoid:
@@ -89,10 +89,16 @@ class Avoid:
         """``(...,)`` metres: the smallest distance this checks at ``q`` ``(..., dof)`` (the self pairs
         when ``self_collision``, every shape to the world), ``inf`` if nothing is checked."""
         parts = [self_distances(robot, self.geom, q, base)] if self.self_collision else []
-        if self.world is not None:
-            w = world_distances(robot, self.geom, q, self.world, base)
+        world = _obstacles(self)
+        if world is not None:
+            w = world_distances(robot, self.geom, q, world, base)
             parts.append(w.reshape(*w.shape[:-2], -1))
         return jnp.min(jnp.concatenate(parts, axis=-1), axis=-1, initial=jnp.inf)
+
+
+def _obstacles(avoid: Avoid) -> World | None:
+    """The world of ``avoid`` if it has obstacles (at least one shape), else ``None``."""
+    return avoid.world if avoid.world is not None and avoid.world.size > 0 else None
 
 
 def _wrench(shape, grad) -> jax.Array:
@@ -183,7 +189,8 @@ class AvoidTerm:
             jnp.broadcast_to(distance(a, b), (len(block[3]),) + kin.shape)
             for (a, b), block in zip(sides, blocks, strict=True)
         ]
-        d_world = world_of_placed(shapes, avoid.world, kin.shape[0]) if avoid.world is not None else None
+        world = _obstacles(avoid)
+        d_world = world_of_placed(shapes, world, kin.shape[0]) if world is not None else None
         return shapes, blocks, sides, d_self, d_world
 
     def clearance(self, kin, avoid: Avoid) -> jax.Array:
