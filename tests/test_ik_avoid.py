@@ -251,3 +251,38 @@ def test_panda_among_obstacles_against_coal_on_the_real_meshes():
         assert judged["tight"] == 1.0 and judged["in collision"] == 0.0, (margin, judged)
         clearance = np.asarray(dk.collision.clearance(robot, geom, q[:-1], bench.world_of(scene, jnp.float64)))
         assert np.all(clearance >= margin - 1e-6)
+
+
+def test_self_motion_samples_in_collision_are_not_valid():
+    """``srs.sample_self_motion(..., avoid=(robot, Avoid))`` on the iiwa14 with a capsule per link
+    (``experiments/iiwa_self_motion.py``) beside a ball on its elbow circle: ``valid`` is the closed
+    form's validity and a clearance of at least the margin, recomputed by ``dk.collision.clearance``."""
+    sys.path.insert(0, EXPERIMENTS)
+    from iiwa_self_motion import iiwa14_with_capsules
+
+    urdf = iiwa14_with_capsules()
+    robot = dk.load_robot(urdf)
+    geom = dk.collision.load(urdf, robot)
+    home = np.asarray(dk.collision.self_distances(robot, geom, np.zeros(7)))
+    geom = geom.replace_pairs([p for p, d in zip(geom.pair_list, home, strict=True) if d > 0])
+    arm = dk.srs.iiwa14()
+    q_target = np.array([0.4, 0.7, -0.3, -1.1, 0.6, 0.9, -0.2])
+    target = np.asarray(dk.fk(robot, q_target, "iiwa14_link_ee"))
+    elbow = np.asarray(dk.fk(robot, q_target, "iiwa14_link_4"))[:3, 3]
+    world = World(Sphere(elbow[None] + np.array([[0.0, 0.0, 0.12]]), np.array([0.08])))
+    avoid = dk.ik.Avoid(geom, world, margin=0.02)
+    q, valid = dk.srs.sample_self_motion(arm, target, 300, avoid=(robot, avoid))
+    q_all, valid_all = dk.srs.sample_self_motion(arm, target, 300)
+    np.testing.assert_array_equal(np.asarray(q), np.asarray(q_all))
+    clear = np.asarray(dk.collision.clearance(robot, geom, np.asarray(q), world)) >= 0.02
+    np.testing.assert_array_equal(np.asarray(valid), np.asarray(valid_all) & clear)
+    assert 0.05 < np.mean(~clear[np.asarray(valid_all)]) < 0.95
+    with pytest.raises(ValueError, match="avoid\\[0\\]: expected a robot with the arm's 7 joints"):
+        dk.srs.sample_self_motion(arm, target, 3, avoid=(dk.load_robot(ARM), dk.ik.Avoid(*_arm_geometry())))
+    with pytest.raises(TypeError, match="avoid: expected a pair"):
+        dk.srs.sample_self_motion(arm, target, 3, avoid=avoid)
+
+
+def _arm_geometry():
+    robot = dk.load_robot(ARM)
+    return dk.collision.load(ARM, robot), World(Sphere(np.zeros((1, 3)), np.ones(1)))

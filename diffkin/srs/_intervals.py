@@ -136,7 +136,13 @@ def feasible_arm_angles(arm: SRSArm, target: ArrayLike, gc: ArrayLike) -> tuple[
 
 
 def sample_self_motion(
-    arm: SRSArm, target: ArrayLike, n: int, *, key: jax.Array | None = None, gc: jax.Array | None = None
+    arm: SRSArm,
+    target: ArrayLike,
+    n: int,
+    *,
+    key: jax.Array | None = None,
+    gc: jax.Array | None = None,
+    avoid: tuple | None = None,
 ) -> tuple[jax.Array, jax.Array]:
     """``n`` exact IK solutions of one pose spread over its whole self-motion within the joint limits.
 
@@ -151,16 +157,24 @@ def sample_self_motion(
         n: number of samples (a positive Python int; static under ``jit``).
         key: optional ``jax.random`` key for jittered samples; ``None`` gives evenly spaced ones.
         gc: optional ``(3,)`` global configuration to sample; default all eight.
+        avoid: optional pair ``(robot, dk.ik.Avoid(geom, world, margin))``: a
+            :class:`~diffkin.Robot` whose seven joints are the arm's (its URDF with collision
+            geometry) and what to keep clear; a sample whose clearance is below the margin is not
+            ``valid``.
 
     Returns:
-        ``q (n, 7)`` joint angles (radians) and ``valid (n,)``: false only when the pose has no
-        feasible arm angle (then ``q`` is finite but meaningless) or, in rounding, at an interval end.
+        ``q (n, 7)`` joint angles (radians) and ``valid (n,)``: false when the pose has no
+        feasible arm angle (then ``q`` is finite but meaningless), in rounding at an interval end,
+        or (with ``avoid``) where the arm collides.
 
     Raises:
-        TypeError: ``n`` not an int, ``arm`` not an :class:`SRSArm`.
-        ValueError: ``n <= 0``, ``target`` not ``(4, 4)``, ``gc`` not ``(3,)`` of ``+-1``.
+        TypeError: ``n`` not an int, ``arm`` not an :class:`SRSArm`, a bad ``avoid``.
+        ValueError: ``n <= 0``, ``target`` not ``(4, 4)``, ``gc`` not ``(3,)`` of ``+-1``, an
+            ``avoid`` robot without seven joints or with geometry of another robot.
     """
     instance(arm, SRSArm, "arm", AN_ARM)
+    if avoid is not None:
+        _check_avoid(avoid)
     n = positive_int(n, "n", "a positive int (number of samples)")
     target = pose_array(target)
     if target.shape != (4, 4):
@@ -181,4 +195,24 @@ def sample_self_motion(
     psi = lo[which] + jnp.clip(position - (ends[which] - length[which]), 0.0, length[which])
     gc_of = jnp.asarray(gcs, dtype)[which // MAX_INTERVALS]
     q, valid = ik(arm, target, psi, gc_of)
-    return q, valid & (total > 0)
+    valid = valid & (total > 0)
+    if avoid is not None:
+        robot, clear_of = avoid
+        valid = valid & (clear_of.clearance(robot, q) >= clear_of.margin)
+    return q, valid
+
+
+def _check_avoid(avoid) -> None:
+    """``avoid`` is ``(robot, Avoid)``: a seven-joint robot and an ``Avoid`` of its geometry."""
+    from diffkin.collision._robot import check_geometry
+    from diffkin.ik import Avoid
+    from diffkin.models.robot import Robot
+
+    if not (isinstance(avoid, tuple) and len(avoid) == 2):
+        raise TypeError(f"avoid: expected a pair (robot, dk.ik.Avoid(...)), got {type(avoid).__name__}")
+    robot, clear_of = avoid
+    instance(robot, Robot, "avoid[0]", "a diffkin.Robot whose joints are the arm's")
+    instance(clear_of, Avoid, "avoid[1]", "a dk.ik.Avoid(geom, world, margin)")
+    if robot.dof != 7:
+        raise ValueError(f"avoid[0]: expected a robot with the arm's 7 joints, got {robot.dof}")
+    check_geometry(robot, clear_of.geom)
