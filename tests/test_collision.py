@@ -472,3 +472,53 @@ def test_gradients_match_finite_differences(kinds):
     central = (up - down) / (2 * h)
     np.testing.assert_allclose(np.asarray(dd)[smooth], central[smooth], rtol=0, atol=2e-7)
     np.testing.assert_allclose(reverse[smooth], central[smooth], rtol=0, atol=2e-7)
+
+
+def _moved(s, twist: jax.Array, eps: jax.Array):
+    """The shapes moved to first order in ``eps`` by the space twists ``twist (n, 6)`` (a point ``p`` by
+    ``eps (v + w x p)``); half-spaces stay (obstacles)."""
+
+    def point(p):
+        return p + eps[:, None] * (twist[:, :3] + jnp.cross(twist[:, 3:], p))
+
+    if isinstance(s, Sphere):
+        return Sphere(point(s.center), s.radius)
+    if isinstance(s, Capsule):
+        return Capsule(point(s.a), point(s.b), s.radius)
+    if isinstance(s, Box):
+        w = twist[:, 3:]
+        zero = jnp.zeros_like(w[:, 0])
+        W = jnp.stack([jnp.stack([zero, -w[:, 2], w[:, 1]], -1), jnp.stack([w[:, 2], zero, -w[:, 0]], -1),
+                       jnp.stack([-w[:, 1], w[:, 0], zero], -1)], -2)  # fmt: skip
+        R = s.pose[:, :3, :3] + eps[:, None, None] * W @ s.pose[:, :3, :3]
+        T = s.pose.at[:, :3, :3].set(R).at[:, :3, 3].set(point(s.pose[:, :3, 3]))
+        return dk.collision._shapes.unchecked(Box, pose=T, half_extents=s.half_extents)
+    return s
+
+
+@pytest.mark.parametrize("kinds", PAIRS[:-1], ids=["-".join(p) for p in PAIRS[:-1]])
+def test_motion_is_the_derivative_under_rigid_motions(kinds):
+    """``motion``'s wrenches (from the contact normal and witness points) against forward-mode
+    derivatives of ``distance`` when either shape moves by a random twist, 1,000 random pairs of each
+    kind (about a third overlapping: every separating axis and closest feature), float64."""
+    from diffkin.collision._distance import motion
+
+    rng = np.random.default_rng(4)
+    n = 1000
+    a = shape(kinds[0], random_fields(kinds[0], rng, n, points=0.0))
+    b = shape(kinds[1], random_fields(kinds[1], rng, n, points=0.0))
+    d, Wa, Wb = jax.jit(motion)(a, b)
+    np.testing.assert_allclose(np.asarray(d), np.asarray(distance(a, b)), rtol=0, atol=1e-14)
+    for which, W in ((0, Wa), (1, Wb)):
+        twist = jnp.asarray(rng.normal(size=(n, 6)))
+
+        def moved_distance(eps, which=which, twist=twist):
+            pair = [a, b]
+            pair[which] = _moved(pair[which], twist, eps)
+            return distance(*pair)
+
+        _, derivative = jax.jvp(moved_distance, (jnp.zeros(n),), (jnp.ones(n),))
+        if kinds[1] == "plane" and which == 1:
+            assert np.all(np.asarray(W) == 0)  # a half-space is an obstacle: it does not move
+            continue
+        np.testing.assert_allclose(np.sum(np.asarray(W) * np.asarray(twist), -1), derivative, rtol=0, atol=1e-9)

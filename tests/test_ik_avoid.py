@@ -286,3 +286,48 @@ def test_self_motion_samples_in_collision_are_not_valid():
 def _arm_geometry():
     robot = dk.load_robot(ARM)
     return dk.collision.load(ARM, robot), World(Sphere(np.zeros((1, 3)), np.ones(1)))
+
+
+def _random_boxes(rng, n, spread):
+    T = np.tile(np.eye(4), (n, 1, 1))
+    for k in range(n):
+        w = rng.normal(size=3)
+        T[k, :3, :3] = _rotation(w)
+    T[:, :3, 3] = rng.uniform(-spread, spread, (n, 3))
+    return Box(T, rng.uniform(0.03, 0.2, (n, 3)))
+
+
+def _rotation(w):
+    """Rodrigues: the rotation by the rotation vector ``w``."""
+    angle = np.linalg.norm(w)
+    k = w / angle
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+@pytest.mark.parametrize("spread", [1.0, 0.25])  # few pairs near (gathered), most near (all computed)
+def test_near_motion_is_exact_where_the_reach_is(spread):
+    """The term's broad phase (``_near_motion``): where the exact distance is below the reach, the
+    distance is :func:`motion`'s, elsewhere at least the reach; the wrenches are :func:`motion`'s
+    where the cheap bound is below the reach and zero elsewhere; box-box and capsule-box, in both
+    branches (the near pairs gathered, or all computed)."""
+    from diffkin.collision import Capsule
+    from diffkin.collision._distance import lower_bound, motion
+    from diffkin.ik._terms.avoid import NEAR_SHARE, _near_motion
+
+    rng = np.random.default_rng(7)
+    n, reach = 400, 0.05
+    ends = rng.uniform(-spread, spread, (n, 3))
+    capsules = Capsule(ends, ends + rng.uniform(-0.2, 0.2, (n, 3)), rng.uniform(0.02, 0.1, n))
+    for a in (capsules, _random_boxes(rng, n, spread)):
+        b = _random_boxes(rng, n, spread)
+        d, Wa, Wb = jax.jit(_near_motion)(a, b, reach)
+        d_exact, Wa_exact, Wb_exact = motion(a, b)
+        near = np.asarray(d_exact) < reach
+        measured = np.asarray(lower_bound(a, b)) < reach  # exact there, zero wrenches elsewhere
+        assert near.sum() > 0 and (measured.sum() <= n // NEAR_SHARE) == (spread == 1.0)
+        np.testing.assert_allclose(np.asarray(d)[near], np.asarray(d_exact)[near], rtol=0, atol=1e-14)
+        assert np.all(np.asarray(d)[~near] >= reach)
+        for W, exact in ((Wa, Wa_exact), (Wb, Wb_exact)):
+            np.testing.assert_allclose(np.asarray(W)[measured], np.asarray(exact)[measured], rtol=1e-12, atol=1e-12)
+            assert np.all(np.asarray(W)[~measured] == 0)

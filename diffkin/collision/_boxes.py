@@ -30,6 +30,7 @@ from diffkin.collision._closest import (
     dot,
     lerp,
     norm,
+    point_box,
     rotation,
     safe_div,
     segment_params,
@@ -38,7 +39,7 @@ from diffkin.collision._closest import (
     to_frame,
     vec,
 )
-from diffkin.collision._shapes import Box, Capsule
+from diffkin.collision._shapes import Box, Capsule, Sphere
 
 
 def _sign(x: jax.Array) -> jax.Array:
@@ -307,6 +308,14 @@ def _segment_box_witness(a: Capsule, b: Box, code: jax.Array) -> tuple[jax.Array
 _segment_box_apart = _chosen(_segment_box_closest, _gap(_segment_box_witness, _capsule_point, _box_point))
 
 
+def capsule_box_bound(a: Capsule, b: Box) -> jax.Array:
+    """A lower bound of :func:`capsule_box`: the largest separation along the box's face axes (a few
+    operations: the projection on any axis separates no more than the distance or the depth)."""
+    p, q, u, h = _segment_in_box(a, b)
+    seps = [jnp.abs(0.5 * (p[i] + q[i])) - 0.5 * jnp.abs(u[i]) - h[i] for i in range(3)]
+    return jnp.maximum(jnp.maximum(seps[0], seps[1]), seps[2]) - a.radius
+
+
 def capsule_box(a: Capsule, b: Box) -> jax.Array:
     """Segment against box in the box frame (see the module docstring), minus the capsule's radius."""
     sat = _segment_box_separation(a, b)
@@ -412,7 +421,149 @@ def _box_box_witness(a: Box, b: Box, code: jax.Array) -> tuple[Vec, Vec]:
 _box_box_apart = _chosen(_box_box_closest, _gap(_box_box_witness, _box_point, _box_point))
 
 
+def box_box_bound(a: Box, b: Box) -> jax.Array:
+    """A lower bound of :func:`box_box`: the largest separation along the six face axes (as
+    :func:`capsule_box_bound`)."""
+    ha, hb, cols, c = _relative(a, b)
+    cb = to_frame(cols, c)
+    absR = [[jnp.abs(cols[m][i]) for m in range(3)] for i in range(3)]
+    seps = [jnp.abs(c[i]) - ha[i] - sum(absR[i][m] * hb[m] for m in range(3)) for i in range(3)]
+    seps += [jnp.abs(cb[m]) - sum(absR[i][m] * ha[i] for i in range(3)) - hb[m] for m in range(3)]
+    out = seps[0]
+    for sep in seps[1:]:
+        out = jnp.maximum(out, sep)
+    return out
+
+
 def box_box(a: Box, b: Box) -> jax.Array:
     """Box against box in the frame of ``a`` (see the module docstring)."""
     sat = _box_box_separation(a, b)
     return jnp.where(sat > 0, _box_box_apart(a, b), sat)
+
+
+# ---------------------------------------------------------------------------------- contact lines
+
+
+def _once(*value_codes: tuple[jax.Array, jax.Array]) -> list[tuple[jax.Array, jax.Array]]:
+    """Values and integer codes of candidate searches, each computed once (:func:`diffkin._xla.materialize`:
+    otherwise XLA copies the whole search into every consumer)."""
+    values = materialize([v for v, _ in value_codes])
+    codes = materialize([c for _, c in value_codes])
+    return [(values[k], codes[k]) for k in range(len(value_codes))]
+
+
+def _flat(tree) -> list:
+    return jax.tree.leaves(tree)
+
+
+def _halves(values: jax.Array) -> tuple[Vec, Vec]:
+    """Six stacked coordinates as two vectors."""
+    return tuple(values[:3]), tuple(values[3:])  # type: ignore[return-value]
+
+
+def _pick(code: jax.Array, columns: tuple[Vec, Vec, Vec]) -> Vec:
+    """The column ``code`` (0, 1 or 2, an array) of three vectors."""
+    return _where(code == 0, columns[0], _where(code == 1, columns[1], columns[2]))
+
+
+def _towards(n: Vec, direction: Vec) -> Vec:
+    """``n`` flipped where it points away from ``direction``."""
+    s = _sign(dot(n, direction))
+    return (s * n[0], s * n[1], s * n[2])
+
+
+def _support(centre: Vec, axes: tuple[Vec, Vec, Vec], h: Vec, n: Vec, sign: float, skip=None) -> Vec:
+    """``centre + sign * sum_k sgn(n . axis_k) h_k axis_k`` (over ``k != skip``): the support point (or the
+    support edge's midpoint) of a box in direction ``sign * n``; a tie (``n . axis_k = 0``) takes the
+    middle of that face."""
+    out = list(centre)
+    for k in range(3):
+        w = sign * jnp.sign(dot(n, axes[k])) * h[k]
+        if skip is not None:
+            w = jnp.where(skip == k, 0, w)
+        out = [out[i] + w * axes[k][i] for i in range(3)]
+    return tuple(out)
+
+
+def _line_point(p: Vec, u: Vec, q: Vec, v: Vec) -> Vec:
+    """The point of the line ``q + t v`` closest to the line ``p + s u`` (not parallel)."""
+    w = sub(p, q)
+    uu, uv, vv, uw, vw = dot(u, u), dot(u, v), dot(v, v), dot(u, w), dot(v, w)
+    t = safe_div(uu * vw - uv * uw, uu * vv - uv * uv)
+    return lerp(q, tuple(q[i] + v[i] for i in range(3)), t)
+
+
+def _contact(apart: jax.Array, pa: Vec, pb: Vec, n_sat: Vec, p_sat: Vec) -> tuple[Vec, Vec]:
+    """The unit normal (from ``a`` to ``b``) and a point of the contact line: apart, through the closest
+    points ``pa``, ``pb`` (zero where they coincide); overlapping, the winning axis ``n_sat`` through ``p_sat``."""
+    gap = sub(pb, pa)
+    length = norm(gap)
+    n_apart = tuple(safe_div(g, length) for g in gap)
+    return _where(apart, n_apart, n_sat), _where(apart, pb, p_sat)
+
+
+def sphere_box_contact(a: Sphere, b: Box) -> tuple[jax.Array, Vec, Vec]:
+    """The signed distance of a sphere and a box with its contact line ``(d, n, p)`` (as
+    :func:`capsule_box_contact`): apart, through the centre and its closest point of the box; inside,
+    the nearest face's normal through the centre."""
+    axes, c = rotation(b.pose), vec(b.pose[..., :3, 3])
+    h, centre = vec(b.half_extents), vec(a.center)
+    local = to_frame(axes, sub(centre, c))
+    over = [jnp.abs(local[i]) - h[i] for i in range(3)]
+    d = point_box(local, h) - a.radius
+    face = jnp.where(over[0] >= jnp.maximum(over[1], over[2]), 0, jnp.where(over[1] >= over[2], 1, 2))
+    axis = _pick(face, axes)
+    side = -_sign(jnp.where(face == 0, local[0], jnp.where(face == 1, local[1], local[2])))  # into the box
+    n_inside = (side * axis[0], side * axis[1], side * axis[2])
+    closest = _box_point(b, _in_units(_clamp(local, h)[1], h))
+    n, p = _contact(jnp.maximum(jnp.maximum(over[0], over[1]), over[2]) > 0, centre, closest, n_inside, centre)
+    return d, n, p
+
+
+def capsule_box_contact(a: Capsule, b: Box) -> tuple[jax.Array, Vec, Vec]:
+    """:func:`capsule_box` with its contact line: ``(d, n, p)``, ``n`` the unit normal from ``a`` to ``b``
+    and ``p`` a point of the line along ``n`` through the two witness points (world frame).
+
+    Moving the shapes rigidly changes ``d`` by ``n . (v_b(p) - v_a(p))`` (``v(p)``: the velocity of the
+    point ``p`` moving with that shape). Apart, the witness points are the closest points; overlapping,
+    along the winning axis: a box face (which turns with the box) through the segment's support point,
+    or ``e_i x u`` through the closest points of the box's support edge and the segment's line (the
+    derivative of the axis is orthogonal to the line between them).
+    """
+    (sat, axis), (gap, code) = _once(_segment_box_separations(a, b), _segment_box_closest(a, b))
+    apart = sat > 0
+    t, *rest = materialize(_flat(_segment_box_witness(a, b, code)))
+    units = tuple(rest)
+    P, Q = vec(a.a), vec(a.b)
+    u = sub(Q, P)
+    mid = tuple(0.5 * (P[i] + Q[i]) for i in range(3))
+    axes, c, h = rotation(b.pose), vec(b.pose[..., :3, 3]), vec(b.half_extents)
+    e = _pick(axis % 3, axes)
+    n = tuple(materialize(list(_towards(_where(axis < 3, e, _unit(_cross(e, u))[0]), sub(c, mid)))))
+    face = lerp(mid, Q, jnp.sign(dot(n, u)))  # the segment's support point towards n
+    edge = _line_point(P, u, _support(c, axes, h, n, -1.0, skip=axis % 3), e)
+    n, p = _contact(apart, _capsule_point(a, t), _box_point(b, units), n, _where(axis < 3, face, edge))
+    return jnp.where(apart, gap, sat) - a.radius, n, p
+
+
+def box_box_contact(a: Box, b: Box) -> tuple[jax.Array, Vec, Vec]:
+    """:func:`box_box` with its contact line ``(d, n, p)`` (as :func:`capsule_box_contact`): overlapping,
+    a face of ``a`` through ``b``'s support point, a face of ``b`` through ``a``'s, or ``a_i x b_m`` through
+    the closest points of the two support edges."""
+    (sat, axis), (gap, code) = _once(_box_box_separations(a, b), _box_box_closest(a, b))
+    apart = sat > 0
+    wa, wb = _halves(materialize(_flat(_box_box_witness(a, b, code))))
+    axes_a, c_a, h_a = rotation(a.pose), vec(a.pose[..., :3, 3]), vec(a.half_extents)
+    axes_b, c_b, h_b = rotation(b.pose), vec(b.pose[..., :3, 3]), vec(b.half_extents)
+    i = jnp.where(axis < 3, axis, (axis - 6) // 3)
+    m = jnp.where(axis < 6, axis - 3, (axis - 6) % 3)
+    e_a, e_b = _pick(i, axes_a), _pick(m, axes_b)
+    n = _where(axis < 3, e_a, _where(axis < 6, e_b, _unit(_cross(e_a, e_b))[0]))
+    n = tuple(materialize(list(_towards(n, sub(c_b, c_a)))))
+    on_b = _support(c_b, axes_b, h_b, n, -1.0)  # b's support point towards -n
+    on_a = _support(c_a, axes_a, h_a, n, 1.0)
+    edge_a = _support(c_a, axes_a, h_a, n, 1.0, skip=i)  # the support edges' midpoints
+    edge = _line_point(edge_a, e_a, _support(c_b, axes_b, h_b, n, -1.0, skip=m), e_b)
+    p_sat = _where(axis < 3, on_b, _where(axis < 6, on_a, edge))
+    n, p = _contact(apart, _box_point(a, wa), _box_point(b, wb), n, p_sat)
+    return jnp.where(apart, gap, sat), n, p

@@ -10,8 +10,8 @@ pair is computed exactly (to rounding):
 - Box-box and capsule-box: the separating-axis depth when overlapping, the closest features when
   apart (:mod:`diffkin.collision._boxes`).
 
-:func:`motion` also gives, for round shapes and half-spaces, how a rigid motion of each shape changes
-the distance (from the closest points: far cheaper than differentiating :func:`distance`).
+:func:`motion` also gives how a rigid motion of each shape changes the distance, from the witness
+points and the normal of the contact (far cheaper than differentiating :func:`distance`).
 """
 
 from __future__ import annotations
@@ -22,8 +22,17 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
+from diffkin._xla import materialize
 from diffkin.collision import _closest as cl
-from diffkin.collision._boxes import box_box, capsule_box
+from diffkin.collision._boxes import (
+    box_box,
+    box_box_bound,
+    box_box_contact,
+    capsule_box,
+    capsule_box_bound,
+    capsule_box_contact,
+    sphere_box_contact,
+)
 from diffkin.collision._shapes import SHAPES, Box, Capsule, Plane, Sphere
 
 
@@ -119,6 +128,19 @@ def distance(shape_a, shape_b) -> jax.Array:
     return _TABLE[kinds[::-1]](shape_b, shape_a)
 
 
+def lower_bound(a, b) -> jax.Array:
+    """A lower bound of :func:`distance` that is much cheaper for box-box and capsule-box (the face
+    axes' separation); the distance itself for the other pairs (already cheap)."""
+    kinds = (type(a), type(b))
+    if kinds == (Box, Box):
+        return box_box_bound(a, b)
+    if kinds == (Capsule, Box):
+        return capsule_box_bound(a, b)
+    if kinds == (Box, Capsule):
+        return capsule_box_bound(b, a)
+    return distance(a, b)
+
+
 def _cores(a: Sphere | Capsule, b: Sphere | Capsule) -> tuple[cl.Vec, cl.Vec]:
     """Closest points of the cores (centres, segments) of two round shapes."""
     if isinstance(a, Sphere) and isinstance(b, Sphere):
@@ -140,26 +162,51 @@ def _wrench(n: cl.Vec, p: cl.Vec) -> jax.Array:
     return jnp.stack(jnp.broadcast_arrays(*n, *m), axis=-1)
 
 
-def motion(a: Sphere | Capsule, b: Sphere | Capsule | Plane) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """The signed distance of a round shape (sphere, capsule) to a round shape or a half-space, and how
-    each shape's rigid motion changes it, from the closest points.
+def motion(a, b) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """The signed distance of two shapes (not both half-spaces) and how each shape's rigid motion changes it.
 
     Returns:
         ``(d, W_a, W_b)``: ``d (...,)`` as :func:`distance`; ``W_a``, ``W_b`` ``(..., 6)`` wrenches
         ``[f; tau]`` such that moving shape ``a`` by the space twist ``[v; w]`` (a point ``p`` by ``v + w
-        x p``) changes ``d`` by ``W_a . [v; w]`` (and ``b`` likewise; a half-space's ``W_b`` is zero: it
-        is an obstacle here). Where the closest points coincide (concentric spheres, crossing core
-        segments) the direction is undefined and the wrenches are zero (finite).
+        x p``) changes ``d`` by ``W_a . [v; w]`` (and ``b`` likewise; a half-space's wrench is zero: it
+        is an obstacle here). Both come from the contact: the unit normal ``n`` from ``a`` to ``b`` and a
+        point ``p`` on the line through the witness points, ``W_b = [n; p x n] = -W_a`` (for boxes,
+        :func:`diffkin.collision._boxes.capsule_box_contact`). They equal the derivative of
+        :func:`distance` wherever it is unique. Where the closest points coincide (concentric spheres,
+        crossing core segments, shapes just touching) the direction is undefined and the wrenches are
+        zero (finite).
     """
+    if isinstance(a, Plane):
+        d, W_b, W_a = motion(b, a)
+        return d, W_a, W_b
     if isinstance(b, Plane):
         n = cl.vec(b.normal)
         if isinstance(a, Sphere):
             p = cl.vec(a.center)
-        else:
+        elif isinstance(a, Capsule):
             lower = cl.dot(n, cl.vec(a.a)) <= cl.dot(n, cl.vec(a.b))
             p = tuple(jnp.where(lower, u, v) for u, v in zip(cl.vec(a.a), cl.vec(a.b), strict=True))
-        d = cl.dot(n, p) - b.offset - a.radius
+        else:  # the box's lowest point along n (the middle of a face or an edge on ties)
+            p = cl.vec(a.pose[..., :3, 3])
+            for k, axis in enumerate(cl.rotation(a.pose)):
+                w = -jnp.sign(cl.dot(n, axis)) * a.half_extents[..., k]
+                p = tuple(p[i] + w * axis[i] for i in range(3))
+        radius = 0.0 if isinstance(a, Box) else a.radius
+        d = cl.dot(n, p) - b.offset - radius
         return d, _wrench(n, p), jnp.zeros(jnp.shape(d) + (6,), d.dtype)
+    if isinstance(a, Box) and not isinstance(b, Box):
+        d, W_b, W_a = motion(b, a)
+        return d, W_a, W_b
+    if isinstance(b, Box):
+        if isinstance(a, Box):
+            d, n, p = box_box_contact(a, b)
+        elif isinstance(a, Sphere):
+            d, n, p = sphere_box_contact(a, b)
+        else:
+            d, n, p = capsule_box_contact(a, b)
+        line = materialize([*n, *p])  # read by twelve wrench entries: computed once
+        n, p = tuple(line[:3]), tuple(line[3:])
+        return d, _wrench(tuple(-c for c in n), p), _wrench(n, p)
     p, q = _cores(a, b)
     gap = cl.norm(cl.sub(q, p))
     u = tuple(cl.safe_div(c, gap) for c in cl.sub(q, p))  # from a to b

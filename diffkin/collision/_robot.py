@@ -26,8 +26,19 @@ def _fields(shape) -> dict[str, jax.Array]:
     return {name: getattr(shape, name) for name in _TRAILING if hasattr(shape, name)}
 
 
-def _batch_shape(shape) -> tuple[int, ...]:
+def batch_shape(shape) -> tuple[int, ...]:
     return jnp.broadcast_shapes(*(jnp.shape(v)[: jnp.ndim(v) - _TRAILING[k]] for k, v in _fields(shape).items()))
+
+
+def flattened(shape, batch: tuple[int, ...]):
+    """The shapes broadcast to the batch shape ``batch`` and flattened: every field ``(prod(batch), ...)``."""
+    size = int(np.prod(batch))
+
+    def flat(v, r):
+        tail = v.shape[v.ndim - r :]
+        return jnp.broadcast_to(v, batch + tail).reshape((size,) + tail)
+
+    return _map(shape, flat)
 
 
 def _map(shape, fn):
@@ -55,7 +66,7 @@ class World:
                 raise TypeError(
                     f"World: argument {i}: expected a Sphere, Capsule, Box or Plane, got {type(shape).__name__}"
                 )
-            batch = _batch_shape(shape)
+            batch = batch_shape(shape)
             n = int(np.prod(batch, dtype=np.int64))
             groups[type(shape)].append(
                 _map(
@@ -91,7 +102,7 @@ class World:
     @property
     def size(self) -> int:
         """The number of obstacles ``W``."""
-        return sum(int(_batch_shape(s)[0]) for s in self.kinds())
+        return sum(int(batch_shape(s)[0]) for s in self.kinds())
 
     def kinds(self) -> tuple[Sphere, Capsule, Box, Plane]:
         return (self.spheres, self.capsules, self.boxes, self.planes)
@@ -181,7 +192,7 @@ def expanded(shape):
 
 def kind_size(shape) -> int:
     """The number of shapes of a stacked kind (its first batch axis)."""
-    return int(_batch_shape(shape)[0])
+    return int(batch_shape(shape)[0])
 
 
 def take(shape, idx):

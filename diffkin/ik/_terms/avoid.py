@@ -5,11 +5,10 @@ One-sided residuals, zero where every distance is at least ``margin + BAND``:
 - one row per self-collision pair: ``a = max(0, margin + BAND - d)``;
 - one row per robot shape against the world: ``sqrt(sum_o a_o^2)`` over the obstacles ``o``.
 
-A row's Jacobian is the motion of its distance: the gradient of each distance with respect to the
-placed shapes (reverse mode through :func:`diffkin.collision.distance`), turned into a wrench
-``[f; tau]`` on the shape's frame and contracted with that frame's space twist per column of the
-state (a point ``p`` of the frame moves by ``v + w x p``). It is exact where the closest features
-are unique (:mod:`diffkin.collision`).
+A row's Jacobian is the motion of its distance: a wrench ``[f; tau]`` per shape from the contact's
+normal and witness points (:func:`diffkin.collision._distance.motion`), contracted with the space
+twist of the shape's frame per column of the state (a point ``p`` of the frame moves by
+``v + w x p``). It is exact where the closest features are unique (:mod:`diffkin.collision`).
 
 The band starts the push before the margin is reached, so that an iterate approaching an obstacle
 is turned aside rather than stopped at it; success needs the exact clearance ``>= margin`` only:
@@ -26,26 +25,28 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
-from diffkin.collision._distance import distance, motion
+from diffkin._xla import blocks_in_place
+from diffkin.collision._distance import distance, lower_bound, motion
 from diffkin.collision._geometry import Geometry, moved
 from diffkin.collision._robot import (
     World,
     batch_last,
+    batch_shape,
     expanded,
-    kind_size,
+    flattened,
     pair_blocks,
     self_distances,
     take,
     world_distances,
     world_of_placed,
 )
-from diffkin.collision._shapes import Box, Capsule, Sphere
+from diffkin.collision._shapes import Box
 from diffkin.ik._terms import Rows
-
-ROUND = (Sphere, Capsule)
 
 #: metres above the margin where the residual starts (a centimetre: the size of a gripper finger).
 BAND = 0.01
+#: the exact motion of box pairs is computed for the near ones only, gathered when they are at most 1 / NEAR_SHARE.
+NEAR_SHARE = 8
 
 
 @pytree_dataclass
@@ -101,58 +102,53 @@ def _obstacles(avoid: Avoid) -> World | None:
     return avoid.world if avoid.world is not None and avoid.world.size > 0 else None
 
 
-def _wrench(shape, grad) -> jax.Array:
-    """``(n, P, 6)`` ``[f; tau]``: the distance gradient ``grad`` (a shape of the same kind) of placed
-    shapes ``(n, P, ...)`` as a wrench at the world origin: ``dd = f . v + tau . w`` when the shapes
-    move by the space twist ``[v; w]`` (a point ``p`` by ``v + w x p``, a box axis ``R_j`` by ``w x R_j``)."""
-    if isinstance(shape, Sphere):
-        f = grad.center
-        tau = jnp.cross(shape.center, grad.center)
-    elif isinstance(shape, Capsule):
-        f = grad.a + grad.b
-        tau = jnp.cross(shape.a, grad.a) + jnp.cross(shape.b, grad.b)
-    else:
-        f = grad.pose[..., :3, 3]
-        tau = jnp.cross(shape.pose[..., :3, 3], f)
-        tau = tau + sum(jnp.cross(shape.pose[..., :3, j], grad.pose[..., :3, j]) for j in range(3))
-    return jnp.concatenate([f, tau], axis=-1)
+def _near_motion(a, b, reach: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """:func:`motion` of shapes ``a``, ``b`` (batch axes broadcast to ``B``) where it matters: ``(d, W_a, W_b)``,
+    ``d`` ``B``, the wrenches ``B + (6,)``.
+
+    Box pairs first get a cheap lower bound of their distance (:func:`lower_bound`); where it is at
+    least ``reach`` the residual and its row are zero, so ``d`` is that bound and the wrenches are
+    zero. The exact motion is computed for the others only, gathered (at most ``1 / NEAR_SHARE`` of
+    the pairs; all pairs when more are near).
+    """
+    batch = tuple(jnp.broadcast_shapes(batch_shape(a), batch_shape(b)))
+    if not isinstance(a, Box) and not isinstance(b, Box):
+        d, Wa, Wb = motion(a, b)
+        return jnp.broadcast_to(d, batch), jnp.broadcast_to(Wa, batch + (6,)), jnp.broadcast_to(Wb, batch + (6,))
+    total = int(np.prod(batch))
+    a, b = (flattened(s, batch) for s in (a, b))
+    bound = lower_bound(a, b)
+    near = bound < reach
+    budget = -(-total // NEAR_SHARE)
+
+    def few(_):
+        idx = jnp.nonzero(near, size=budget, fill_value=total)[0]
+        safe = jnp.minimum(idx, total - 1)
+        d, Wa, Wb = motion(take(a, safe), take(b, safe))
+        zero = jnp.zeros((total, 6), d.dtype)
+        return bound.at[idx].set(d, mode="drop"), zero.at[idx].set(Wa, mode="drop"), zero.at[idx].set(Wb, mode="drop")
+
+    def every(_):
+        d, Wa, Wb = motion(a, b)
+        return jnp.where(near, d, bound), jnp.where(near[:, None], Wa, 0.0), jnp.where(near[:, None], Wb, 0.0)
+
+    d, Wa, Wb = jax.lax.cond(jnp.sum(near) <= budget, few, every, None)
+    return d.reshape(batch), Wa.reshape(batch + (6,)), Wb.reshape(batch + (6,))
 
 
-def _pair_wrenches(a, b, weight: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """``(n, P, 6)`` each: ``weight`` ``(n, P)`` times the wrenches of the distances of the shapes ``a``
-    and ``b`` (``(n, P, ...)``): from the closest points for round shapes (:func:`motion`), else by
-    reverse mode through :func:`distance` (boxes)."""
-    if isinstance(a, ROUND) and isinstance(b, ROUND):
-        _, Wa, Wb = motion(a, b)
-        return weight[..., None] * Wa, weight[..., None] * Wb
-    _, pull = jax.vjp(lambda a, b: jnp.broadcast_to(distance(a, b), weight.shape), a, b)
-    ga, gb = pull(weight)
-    return _wrench(a, ga), _wrench(b, gb)
-
-
-def _world_wrenches(shapes, world: World, coef: jax.Array) -> jax.Array:
-    """``(S, P, 6)``: per robot shape, ``sum_o coef[s, o] W_so`` over the obstacles ``o``, ``W_so`` the
-    wrench of the shape's distance to obstacle ``o`` (``coef`` ``(S, W, P)`` in the order of
-    :func:`world_of_placed`)."""
-    rows = np.cumsum((0, *(kind_size(s) for s in shapes)))
-    kinds = world.kinds()
-    cols = np.cumsum((0, *(kind_size(o) for o in kinds)))
-    out = []
-    for kr, shape in enumerate(shapes):
-        total = jnp.zeros((rows[kr + 1] - rows[kr],) + coef.shape[2:] + (6,), coef.dtype)
-        moving = expanded(shape)  # (n_kind, 1, P, ...)
-        for ko, obstacle in enumerate(kinds):
-            if rows[kr + 1] == rows[kr] or cols[ko + 1] == cols[ko]:
-                continue
-            c = coef[rows[kr] : rows[kr + 1], cols[ko] : cols[ko + 1]]  # (n_kind, n_obstacles, P)
-            o = expanded(obstacle)  # (n_obstacles, 1, ...)
-            if isinstance(shape, ROUND) and not isinstance(obstacle, Box):
-                total = total + jnp.sum(c[..., None] * motion(moving, o)[1], axis=1)
-            else:
-                _, pull = jax.vjp(lambda s, o=o, c=c: jnp.broadcast_to(distance(s, o), c.shape), moving)
-                (grad,) = pull(c)
-                total = total + _wrench(moving, grad)[:, 0]
-        out.append(total)
+def _world_wrench(w_world: list, coef: jax.Array) -> jax.Array:
+    """``(S, P, 6)``: per robot shape, ``sum_o coef[s, o] W_so`` over the obstacles, ``W_so`` its wrench
+    against obstacle ``o`` (``w_world[kind][obstacle kind]`` ``(n_kind, n_obstacles, P, 6)``; ``coef``
+    ``(S, W, P)`` in the order of :func:`world_of_placed`)."""
+    out, row = [], 0
+    for per_kind in w_world:
+        col, total = 0, jnp.zeros((), coef.dtype)
+        for W in per_kind:
+            c = coef[row : row + W.shape[0], col : col + W.shape[1]]
+            total = total + jnp.sum(c[..., None] * W, axis=1)
+            col += W.shape[1]
+        out.append(jnp.broadcast_to(total, (per_kind[0].shape[0],) + coef.shape[2:] + (6,)))
+        row += per_kind[0].shape[0]
     return jnp.concatenate(out)
 
 
@@ -178,30 +174,49 @@ class AvoidTerm:
     def bind(self, avoid: Avoid) -> Avoid:
         return avoid
 
-    def _measure(self, kin, avoid: Avoid):
-        """The shapes placed at the state (batch-last), the self pairs' two sides per group
-        (:func:`pair_blocks`) and their distances ``(n_pairs, P)``, the world distances ``(S, W, P)``."""
+    def _measure(self, kin, avoid: Avoid, jacobian: bool = False):
+        """The self pairs' blocks (:func:`pair_blocks`) with their distances ``(n_pairs, P)`` each and the
+        world distances ``(S, W, P)`` at the state; with ``jacobian``, also the wrenches of the self
+        pairs' two sides ``(n_pairs, P, 6)`` and of the robot shapes against each obstacle kind
+        (``[[(n_kind, n_obstacles, P, 6)]]``), and distances that are exact only below the reach
+        (:func:`_near_motion`)."""
         T = rg.to_matrices([kin.pose(f) for f in self.frames], kin.shape, kin.dtype)  # (P, F, 4, 4)
         shapes = batch_last(moved(avoid.geom, T, self.slots))  # each kind (n_kind, P, ...)
         blocks = pair_blocks(avoid.geom) if self.self_collision else []
-        sides = [(take(shapes[ka], ia), take(shapes[kb], ib)) for _, ka, kb, ia, ib in blocks]
-        d_self = [
-            jnp.broadcast_to(distance(a, b), (len(block[3]),) + kin.shape)
-            for (a, b), block in zip(sides, blocks, strict=True)
-        ]
         world = _obstacles(avoid)
-        d_world = world_of_placed(shapes, world, kin.shape[0]) if world is not None else None
-        return shapes, blocks, sides, d_self, d_world
+        reach = avoid.margin + BAND
+        n = kin.shape[0]
+        d_self, w_self, w_world, d_world = [], [], [], None
+        for _, ka, kb, ia, ib in blocks:
+            a, b = take(shapes[ka], ia), take(shapes[kb], ib)
+            if jacobian:
+                d, Wa, Wb = _near_motion(a, b, reach)
+                w_self.append((Wa, Wb))
+            d_self.append(jnp.broadcast_to(d if jacobian else distance(a, b), (len(ia), n)))
+        if world is not None and jacobian:
+            d_blocks = []
+            for shape in shapes:
+                row_d, row_w = [], []
+                for obstacle in world.kinds():
+                    d, W, _ = _near_motion(expanded(shape), expanded(obstacle), reach)  # (n_kind, n_obstacles, P)
+                    row_d.append(d)
+                    row_w.append(W)
+                d_blocks.append(row_d)
+                w_world.append(row_w)
+            d_world = blocks_in_place(d_blocks, n)
+        elif world is not None:
+            d_world = world_of_placed(shapes, world, n)
+        return blocks, d_self, d_world, w_self, w_world
 
     def clearance(self, kin, avoid: Avoid) -> jax.Array:
         """``(P,)`` the smallest checked distance (exact)."""
-        _, _, _, d_self, d_world = self._measure(kin, avoid)
+        _, d_self, d_world, _, _ = self._measure(kin, avoid)
         d = d_self + ([] if d_world is None else [d_world.reshape(-1, kin.shape[0])])
         return jnp.min(jnp.concatenate(d), axis=0)
 
     def rows(self, kin, avoid: Avoid, jacobian: bool) -> Rows:
         dtype, reach = kin.dtype, avoid.margin + BAND
-        shapes, blocks, sides, d_self, d_world = self._measure(kin, avoid)
+        blocks, d_self, d_world, w_self, w_world = self._measure(kin, avoid, jacobian)
         a_self = [jnp.maximum(reach - d, 0.0) for d in d_self]  # (n_pairs, P) each
         r = list(a_self)
         if d_world is not None:
@@ -214,14 +229,14 @@ class AvoidTerm:
             twists = self._twists(kin)  # (F, C, 6, P)
             slot = np.asarray(self.slots, dtype=np.int64)
             starts = np.cumsum((0, *avoid.geom.counts))
-            for (_, ka, kb, ia, ib), (a, b), active in zip(blocks, sides, a_self, strict=True):
-                Wa, Wb = _pair_wrenches(a, b, (active > 0).astype(dtype))
-                Ja = jnp.einsum("npk,nckp->ncp", Wa, twists[slot[starts[ka] + ia]])
-                Jb = jnp.einsum("npk,nckp->ncp", Wb, twists[slot[starts[kb] + ib]])
+            for (_, ka, kb, ia, ib), (Wa, Wb), active in zip(blocks, w_self, a_self, strict=True):
+                on = (active > 0).astype(dtype)[..., None]
+                Ja = jnp.einsum("npk,nckp->ncp", on * Wa, twists[slot[starts[ka] + ia]])
+                Jb = jnp.einsum("npk,nckp->ncp", on * Wb, twists[slot[starts[kb] + ib]])
                 J.append(Ja + Jb)
-            if avoid.world is not None and d_world is not None:
+            if d_world is not None:
                 coef = a_world / jnp.where(r_world > 0, r_world, 1.0)[:, None]  # d r_world / d(-d_world)
-                wrench = _world_wrenches(shapes, avoid.world, coef)  # (S, P, 6)
+                wrench = _world_wrench(w_world, coef)  # (S, P, 6)
                 J.append(jnp.einsum("spk,sckp->scp", wrench, twists[slot]))
         d = d_self + ([] if d_world is None else [d_world.reshape(-1, kin.shape[0])])
         clear = jnp.min(jnp.concatenate(d), axis=0) >= avoid.margin
@@ -238,7 +253,7 @@ class AvoidTerm:
         return rg.stack(entries, kin.shape, kin.dtype, axis=0).reshape(shape)
 
     def screen(self, kin, avoid: Avoid) -> rg.Entry:
-        _, _, _, d_self, d_world = self._measure(kin, avoid)
+        _, d_self, d_world, _, _ = self._measure(kin, avoid)
         reach = avoid.margin + BAND
         cost = sum(jnp.sum(jnp.maximum(reach - d, 0.0) ** 2, axis=0) for d in d_self)
         if d_world is not None:
