@@ -4,6 +4,7 @@
     diffkin info ROBOT_OR_FILE [--end-link L] [--base-link B]
     diffkin fk ROBOT_OR_FILE q1 ... qn | --q-file configs.npy [--format text|json|npy] [--output FILE]
     diffkin ik ROBOT_OR_FILE --pose x y z qw qx qy qz | --position x y z [--seeds N] [--q0 ...] [--all ...]
+        [--avoid scene.json [--margin M]]
     diffkin workspace ROBOT_OR_FILE --samples N --voxel V --out map.npz [--plot slice.png]
     diffkin view ROBOT_OR_FILE [--map map.npz] [--ik-results res.npz] [--end FRAME ...]
 

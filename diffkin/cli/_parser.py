@@ -243,6 +243,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="success tolerance on the rotation error, rad (default 1e-4)",
     )
     p.add_argument("--seed", type=_seed, default=1, help="PRNG seed of the random seeds (default 1)")
+    p.add_argument(
+        "--avoid",
+        metavar="SCENE.json",
+        help="obstacles to keep clear of (spheres, capsules, boxes, planes; docs/collision.md): solves the "
+        "file's whole robot with its collision geometry (dk.ik.solve(..., avoid=)); success needs the clearance",
+    )
+    p.add_argument(
+        "--margin",
+        type=_tolerance,
+        metavar="M",
+        help="with --avoid: the clearance asked for, m (default: the scene's margin, else 0)",
+    )
     p.add_argument("--all", action="store_true", help="iiwa7/iiwa14: exact solutions along the self-motion (dk.srs)")
     p.add_argument("--psi", type=_finite, metavar="PSI", help="with --all: one arm angle (rad), via dk.srs.ik")
     p.add_argument(
