@@ -9,8 +9,9 @@ import numpy as np
 
 from diffkin.cli._compiled import solve_ik, solve_ik_avoiding, srs_fns
 from diffkin.cli._errors import CLIError
-from diffkin.cli._robots import SRS_ROBOTS, frame_of, jax_x64, load_robot, robot_key, robot_with_geometry, single_end
-from diffkin.cli._text import fmt
+from diffkin.cli._robots import SRS_ROBOTS, frame_of, load_robot, robot_key, robot_with_geometry, single_end
+from diffkin.cli._scene import read_scene
+from diffkin.cli._text import collision_word, fmt
 
 
 def target_pose(pose) -> np.ndarray:
@@ -74,31 +75,6 @@ def _note_quaternion(pose) -> None:
             file=sys.stderr,
             flush=True,
         )
-
-
-def read_scene(path: str, margin: float | None):
-    """The ``dk.collision.Scene`` of ``--avoid PATH`` in float64, its margin replaced by ``--margin``.
-
-    Raises:
-        CLIError: a file that cannot be read or is not a valid scene (the message names the field).
-    """
-    jax_x64()  # the obstacles' arrays in float64
-    import dataclasses
-
-    from diffkin.collision import load_scene
-
-    try:
-        scene = load_scene(path)
-    except (OSError, ValueError) as e:
-        raise CLIError(f"--avoid: {e}") from None
-    return scene if margin is None else dataclasses.replace(scene, margin=margin)
-
-
-def collision_word(clearance: float, margin: float) -> str:
-    """``collision-free`` (clearance at least the margin), ``within the margin`` or ``in collision`` (< 0)."""
-    if clearance >= margin:
-        return "collision-free"
-    return "within the margin" if clearance >= 0 else "in collision"
 
 
 def _ik_avoid(args, target: np.ndarray) -> int:

@@ -139,6 +139,21 @@ def _add_robot(p: argparse.ArgumentParser) -> None:
     p.add_argument("--base-link", metavar="B", help="base frame of the chain (default: the root)")
 
 
+def _add_avoid(p: argparse.ArgumentParser, what: str) -> None:
+    """``--avoid SCENE.json`` and ``--margin M`` (``ik``, ``view``); ``what`` says what the command does with them."""
+    p.add_argument(
+        "--avoid",
+        metavar="SCENE.json",
+        help=f"obstacles to keep clear of (spheres, capsules, boxes, planes; docs/collision.md): {what}",
+    )
+    p.add_argument(
+        "--margin",
+        type=_tolerance,
+        metavar="M",
+        help="with --avoid: the clearance asked for, m (default: the scene's margin, else 0)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``diffkin`` argument parser with its subcommands."""
     parser = _Parser(
@@ -243,18 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="success tolerance on the rotation error, rad (default 1e-4)",
     )
     p.add_argument("--seed", type=_seed, default=1, help="PRNG seed of the random seeds (default 1)")
-    p.add_argument(
-        "--avoid",
-        metavar="SCENE.json",
-        help="obstacles to keep clear of (spheres, capsules, boxes, planes; docs/collision.md): solves the "
-        "file's whole robot with its collision geometry (dk.ik.solve(..., avoid=)); success needs the clearance",
-    )
-    p.add_argument(
-        "--margin",
-        type=_tolerance,
-        metavar="M",
-        help="with --avoid: the clearance asked for, m (default: the scene's margin, else 0)",
-    )
+    _add_avoid(p, "solves the file's whole robot with its collision geometry; success needs the clearance")
     p.add_argument("--all", action="store_true", help="iiwa7/iiwa14: exact solutions along the self-motion (dk.srs)")
     p.add_argument("--psi", type=_finite, metavar="PSI", help="with --all: one arm angle (rad), via dk.srs.ik")
     p.add_argument(
@@ -315,5 +319,6 @@ def build_parser() -> argparse.ArgumentParser:
         "to browse and play",
     )
     p.add_argument("--end", nargs="+", metavar="FRAME", help="frames with an IK target (default: the leaf frames)")
+    _add_avoid(p, "a URDF/MJCF file's robot with its collision geometry; obstacles drawn, drags solved clear of them")
     p.set_defaults(func=cmd_view)
     return parser
