@@ -638,17 +638,16 @@ def test_obstacles_are_drawn_with_the_clearance(viewer_of, arm_avoid):
 
 @pytest.mark.skipif(bool(IK_BROKEN), reason=IK_BROKEN or "ik runs")
 def test_drag_with_avoid_is_solved_clear_of_the_obstacles(viewer_of, arm_avoid):
-    """A hand pose beside the box, dragged to: the whole arm solved onto it, clear of the obstacles by the
-    margin (checked by dk.collision.clearance at the configuration shown), the clearance on the page."""
-    robot, geom, avoid = arm_avoid
-    viewer = viewer_of(robot, avoid=avoid)
-    rng = np.random.default_rng(2)
-    q = rng.uniform(np.asarray(robot.lower), np.asarray(robot.upper), (400, robot.dof))
-    q = q[np.asarray(dk.collision.clearance(robot, geom, q, avoid.world)) > 0.05][0]
-    T = np.asarray(dk.fk(robot, q, "hand"))
+    """A hand pose above the box, dragged to: the whole arm solved onto it, clear of the box and the floor
+    by the margin (checked by dk.collision.clearance at the configuration shown), the clearance on the page.
+    (The scene of tests/test_cli.py: two kinds of obstacles compile faster than four.)"""
+    robot, geom, _ = arm_avoid
+    scene = dk.collision.load_scene(SCENE)
+    viewer = viewer_of(robot, avoid=dk.ik.Avoid(geom, scene.world, scene.margin))
+    T = np.asarray(dk.fk(robot, np.array([-0.2, 1.0, 1.2]), "hand"))  # the hand 0.14 m above the box
     res = viewer.move_target("hand", T)
     assert bool(res.success), res
-    clearance = float(dk.collision.clearance(robot, geom, viewer.q, avoid.world))
+    clearance = float(dk.collision.clearance(robot, geom, viewer.q, scene.world))
     assert clearance >= 0.02 and float(res.clearance) == pytest.approx(clearance, abs=1e-9)
     np.testing.assert_allclose(viewer.frame_pose("hand"), T, atol=1e-4)
     assert f"clearance {clearance:.4f} m" in viewer.ik_status["hand"].content
