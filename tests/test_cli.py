@@ -613,3 +613,5 @@ def test_ik_avoid_user_errors(capsys, arm_scene, tmp_path):
     assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--q0", 0, 0, match="--q0: arm has 3 joints")
     assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--end-link", "hnd", match="--end-link")
     assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--base-link", "l1", match="--base-link does not")
+    assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--all", match="--avoid does not apply to --all")
+    assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--psi", 0.1, match="go with --all")

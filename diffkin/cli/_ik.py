@@ -81,6 +81,8 @@ def _ik_avoid(args, target: np.ndarray) -> int:
     """IK of the whole robot of a file among the obstacles of ``--avoid`` (``dk.ik.solve(..., avoid=)``)."""
     if args.all:
         raise CLIError("--avoid does not apply to --all (the iiwa closed form ignores obstacles)")
+    if args.psi is not None or args.gc is not None or args.samples is not None:
+        raise CLIError("--psi, --gc and --samples go with --all")
     if args.base_link is not None:
         raise CLIError("--base-link does not apply to --avoid (the whole robot is solved, targets in its root frame)")
     robot, geom = robot_with_geometry(args.robot)

@@ -220,8 +220,9 @@ def build_parser() -> argparse.ArgumentParser:
         "ik",
         help="inverse kinematics of one pose or position",
         description="Inverse kinematics of one target: batched Levenberg-Marquardt from random seeds "
-        "(dk.ik.solve), or with --all every exact iiwa solution along the arm angle (dk.srs). "
-        "Exit status 1 if no solution was found.",
+        "(dk.ik.solve), among the obstacles of a scene file with --avoid, or with --all every exact iiwa "
+        "solution along the arm angle (dk.srs). Exit status 1 if no solution was found (with --avoid: none "
+        "clear of the obstacles by the margin).",
     )
     _add_robot(p)
     target = p.add_mutually_exclusive_group(required=True)
@@ -305,7 +306,8 @@ def build_parser() -> argparse.ArgumentParser:
         "view",
         help="interactive 3D viewer in the browser (viser; pip install 'diffkin[viewer]')",
         description="Serve an interactive 3D view of a robot (viser): meshes or link cylinders, joint "
-        "sliders, draggable IK targets, the iiwa arm angle, a reachability map, batched results. "
+        "sliders, draggable IK targets, the iiwa arm angle, a reachability map, batched results, "
+        "obstacles (--avoid: drags solved clear of them). "
         "Prints the URL; runs until Ctrl-C.",
     )
     p.add_argument("robot", metavar="ROBOT_OR_FILE", help=f"built-in robot ({', '.join(ROBOTS)}) or a URDF/MJCF file")
