@@ -18,6 +18,9 @@ import diffkin as dk
 from diffkin import cli
 
 DATA = os.path.join(os.path.dirname(__file__), "data")
+DOCS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "docs")
+FINGER = os.path.join(DATA, "example-robot-data", "robots", "finger_edu_description", "robots", "finger_edu.urdf")
+SCENE_FILE = os.path.join(DOCS, "scene.json")  # the documented example
 TARGET = pose(np.diag([1.0, -1.0, -1.0]), [0.5, 0.1, 0.6])  # --pose 0.5 0.1 0.6 0 1 0 0: a half-turn about x
 
 
@@ -324,6 +327,11 @@ def test_info_says_home_is_outside_the_limits(capsys):
     [
         (["demo", "--quick"], "matplotlib", "demo"),
         (["workspace", "iiwa14", "--samples", "100", "--out", "m.npz", "--plot", "s.png"], "matplotlib", "plot"),
+        (
+            ["ik", FINGER, "--position", "0", "0", "0.3", "--avoid", os.path.join(DOCS, "scene.json")],
+            "trimesh",
+            "collision",
+        ),
     ],
 )
 def test_missing_optional_dependency_is_one_line(capsys, monkeypatch, tmp_path, argv, module, extra):
@@ -438,3 +446,172 @@ def test_info_and_fk_of_whole_robots(capsys):
     assert code == 2 and "unknown frame 'hand'" in err
     code, _, err = run(capsys, "fk", "iiwa14", "--frame", "x", *q[:7])
     assert code == 2 and "applies to URDF and MJCF files" in err
+
+
+# ------------------------------------------------------------------------------------ scenes and ik --avoid
+
+# an arm of capsules and a ball hand (tests/test_ik_avoid.py's), and a scene of a turned box and a floor
+ARM = """<robot name="arm">
+  <link name="base"/>
+  <link name="l1"><collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.04" length="0.4"/></geometry>
+    </collision></link>
+  <link name="l2"><collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.04" length="0.4"/></geometry>
+    </collision></link>
+  <link name="l3"><collision><origin xyz="0 0 0.15"/><geometry><capsule radius="0.03" length="0.3"/></geometry>
+    </collision></link>
+  <link name="hand"><collision><geometry><sphere radius="0.05"/></geometry></collision></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.05"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.4"/>
+    <axis xyz="0 1 0"/><limit lower="-2.5" upper="2.5"/></joint>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0 0 0.4"/>
+    <axis xyz="0 1 0"/><limit lower="-2.8" upper="2.8"/></joint>
+  <joint name="tip" type="fixed"><parent link="l3"/><child link="hand"/><origin xyz="0 0 0.3"/></joint>
+</robot>"""
+BOX_CENTER = [0.45, -0.1, 0.25]
+SCENE = {
+    "margin": 0.02,
+    "boxes": [{"position": BOX_CENTER, "quaternion": [0.9800666, 0, 0, 0.1986693], "half_extents": [0.12, 0.08, 0.1]}],
+    "planes": [{"normal": [0, 0, 2], "offset": -0.2}],  # z <= -0.1, the normal's length divided out
+}
+
+
+@pytest.fixture(scope="module")
+def arm_scene(tmp_path_factory):
+    """The arm's URDF and the scene's JSON, written once per module (the IK compiles once for both)."""
+    folder = tmp_path_factory.mktemp("avoid")
+    (folder / "arm.urdf").write_text(ARM)
+    (folder / "scene.json").write_text(json.dumps(SCENE))
+    return str(folder / "arm.urdf"), str(folder / "scene.json")
+
+
+def test_scene_file_of_every_kind():
+    """docs/scene.json: every kind, in the world as written (the box turned by its quaternion)."""
+    scene = dk.collision.load_scene(SCENE_FILE)
+    world = scene.world
+    assert scene.margin == 0.01 and scene.self_collision is True
+    assert [int(k.radius.shape[0]) if hasattr(k, "radius") else None for k in world.kinds()[:2]] == [2, 1]
+    assert world.boxes.pose.shape == (4, 4, 4) and world.planes.normal.shape == (1, 3) and world.size == 8
+    np.testing.assert_allclose(world.spheres.center[0], [0.3, -0.45, 0.45])
+    np.testing.assert_allclose(world.capsules.b[0], [-0.4, -0.4, 1.2])
+    turned = np.asarray(world.boxes.pose[3])
+    np.testing.assert_allclose(turned[:3, 3], [-0.5, 0.4, 0.0])
+    np.testing.assert_allclose(turned[:3, 0], [np.cos(np.pi / 6), np.sin(np.pi / 6), 0.0], atol=1e-6)  # yaw 30 deg
+    np.testing.assert_allclose(world.boxes.pose[0, :3, :3], np.eye(3))  # no quaternion: not turned
+    np.testing.assert_allclose(world.boxes.half_extents[2], [0.2, 0.02, 0.37])
+    np.testing.assert_allclose(world.planes.normal[0], [0, 0, 1]) and float(world.planes.offset[0]) == -0.15
+    # the same scene from JSON text and from a mapping; a plane normal's length is divided out with its offset
+    again = dk.collision.load_scene(json.dumps(SCENE))
+    np.testing.assert_allclose(again.world.planes.normal[0], [0, 0, 1])
+    assert float(again.world.planes.offset[0]) == pytest.approx(-0.1)
+    assert dk.collision.load_scene({"self_collision": False}).world.size == 0
+
+
+_BAD_SCENES = [
+    ({"obstacles": []}, "unknown key 'obstacles'"),
+    ({"margin": -0.1}, "margin: expected a distance >= 0"),
+    ({"margin": float("nan")}, "margin: expected a finite number, got nan"),
+    ({"self_collision": 1}, "self_collision: expected true or false, got 1"),
+    ({"spheres": {"center": [0, 0, 0]}}, "spheres: expected a list of objects"),
+    ({"spheres": [[0, 0, 0, 0.1]]}, "spheres[0]: expected an object with center, radius"),
+    ({"spheres": [{"center": [0, 0, 0]}]}, "spheres[0]: missing key 'radius'"),
+    ({"spheres": [{"center": [0, 0], "radius": 0.1}]}, "spheres[0].center: expected a list of 3 numbers, got 2 values"),
+    ({"spheres": [{"center": [0, 0, 0], "radius": -0.1}]}, "spheres[0].radius: expected values >= 0, got -0.1"),
+    ({"spheres": [{"center": [0, 0, "1"], "radius": 0.1}]}, 'spheres[0].center[2]: expected a number, got "1"'),
+    ({"spheres": [{"center": [0, 0, True], "radius": 0.1}]}, "spheres[0].center[2]: expected a number, got true"),
+    ({"spheres": [{"center": [0, float("inf"), 0], "radius": 0.1}]}, "spheres[0].center[1]: expected a finite"),
+    (
+        {"capsules": [{"a": [0, 0, 0], "b": [0, 0, 1], "radius": 0.1, "name": "pole"}]},
+        "capsules[0]: unknown key 'name'",
+    ),
+    ({"capsules": [{"a": [0, 0, 0], "b": [0, 0, 1, 2], "radius": 0.1}]}, "capsules[0].b: expected a list of 3"),
+    ({"boxes": [{"position": [0, 0, 0], "half_extents": [0.1, -0.1, 0.1]}]}, "boxes[0].half_extents: expected values"),
+    ({"boxes": [{"position": [0, 0, 0], "rpy": [0, 0, 1], "half_extents": [0.1] * 3}]}, "boxes[0]: unknown key 'rpy'"),
+    ({"boxes": [{"position": [0, 0, 0], "quaternion": [0, 0, 0, 0], "half_extents": [0.1] * 3}]}, "norm 0"),
+    ({"boxes": [{"position": [0, 0, 0], "quaternion": [1, 0, 0], "half_extents": [0.1] * 3}]}, "list of 4 numbers"),
+    ({"boxes": [{"quaternion": [1, 0, 0, 0], "half_extents": [0.1] * 3}]}, "boxes[0]: missing key 'position'"),
+    ({"planes": [{"normal": [0, 0, 0], "offset": 0}]}, "planes[0].normal: expected a non-zero vector"),
+    ({"planes": [{"normal": [0, 0, 1]}]}, "planes[0]: missing key 'offset'"),
+]
+
+
+@pytest.mark.parametrize("data, match", _BAD_SCENES, ids=[m for _, m in _BAD_SCENES])
+def test_bad_scenes_name_the_field(data, match):
+    with pytest.raises(ValueError) as info:
+        dk.collision.load_scene(data)
+    assert match in str(info.value)
+
+
+def test_bad_scene_files(tmp_path):
+    """A file's errors start with its path; NaN, Infinity and broken JSON are named too."""
+    path = tmp_path / "scene.json"
+    path.write_text('{"spheres": [{"center": [0, NaN, 0], "radius": 0.1}]}')
+    with pytest.raises(ValueError, match=rf"^{re.escape(str(path))}: spheres\[0\]\.center\[1\]: expected a finite"):
+        dk.collision.load_scene(path)
+    path.write_text("[1, 2]")
+    with pytest.raises(
+        ValueError, match="scene.json: expected a JSON object with keys margin, self_collision, spheres"
+    ):
+        dk.collision.load_scene(path)
+    path.write_text('{"spheres": [')
+    with pytest.raises(ValueError, match="scene.json: not valid JSON"):
+        dk.collision.load_scene(str(path))
+    with pytest.raises(OSError):
+        dk.collision.load_scene(tmp_path / "missing.json")
+
+
+def _printed_q(out: str) -> np.ndarray:
+    return np.array(out.split("q          [")[1].split("]")[0].split(), dtype=np.float64)
+
+
+def test_ik_avoid_solves_clear_of_a_box(capsys, arm_scene):
+    """A hand target beside the box: solved, and the printed q clears the scene by the margin (checked
+    here by dk.collision.clearance and fk)."""
+    urdf, scene = arm_scene
+    code, out, err = run(capsys, "ik", urdf, "--position", 0.3, 0.2, 0.4, "--avoid", scene, "--seeds", 8)
+    assert code == 0, err
+    assert "arm: IK of a position (orientation free) of hand, LM, 8 seeds" in out
+    assert f"avoiding 2 obstacles of {scene}, margin 0.02 m, self-collision on (4 shapes on the robot)" in out
+    assert "success    True" in out and "m: collision-free" in out
+    robot = dk.load_robot(ARM)
+    geom = dk.collision.load(ARM, robot)
+    world = dk.collision.load_scene(SCENE).world
+    q = _printed_q(out)
+    clearance = float(dk.collision.clearance(robot, geom, q, world))
+    assert clearance >= 0.02 - 1e-8
+    assert float(out.split("clearance  ")[1].split()[0]) == pytest.approx(clearance, abs=1e-6)
+    np.testing.assert_allclose(np.asarray(dk.fk(robot, q, "hand"))[:3, 3], [0.3, 0.2, 0.4], atol=2e-5)
+
+
+def test_ik_avoid_target_inside_the_box_is_no_success(capsys, arm_scene):
+    """The box's centre (reachable without obstacles): not a success, exit status 1; the --margin flag
+    replaces the scene's."""
+    urdf, scene = arm_scene
+    code, out, err = run(capsys, "ik", urdf, "--position", *BOX_CENTER, "--avoid", scene, "--seeds", 8, "--margin", 0)
+    assert code == 1, err
+    assert "margin 0 m" in out and "success    False" in out
+    missed = float(out.split("pos_err")[1].split()[0]) > 1e-5
+    assert missed or "m: in collision" in out  # the best found either misses the centre or is in the box
+
+
+def test_ik_avoid_user_errors(capsys, arm_scene, tmp_path):
+    urdf, scene = arm_scene
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"boxes": [{"position": [0, 0, 0], "half_extents": [0.1, 0.1]}]}))
+    target = ("--position", 0.3, 0.2, 0.4)
+    line = assert_user_error(
+        capsys, "ik", urdf, *target, "--avoid", bad, match="boxes[0].half_extents: expected a list"
+    )
+    assert line.startswith(f"diffkin: error: --avoid: {bad}: ")
+    assert_user_error(capsys, "ik", urdf, *target, "--avoid", tmp_path / "no.json", match="--avoid: [Errno 2]")
+    assert_user_error(capsys, "ik", "panda", *target, "--avoid", scene, match="built-in robot 'panda' has no collision")
+    bare = tmp_path / "bare.urdf"
+    bare.write_text(re.sub(r"<collision>.*?</collision>", "", ARM, flags=re.DOTALL))
+    assert_user_error(capsys, "ik", bare, *target, "--avoid", scene, match="has no collision geometry")
+    assert_user_error(capsys, "ik", urdf, *target, "--margin", 0.1, match="--margin goes with --avoid")
+    assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--margin", -1, match="non-negative")
+    assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--q0", 0, 0, match="--q0: arm has 3 joints")
+    assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--end-link", "hnd", match="--end-link")
+    assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--base-link", "l1", match="--base-link does not")
+    assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--all", match="--avoid does not apply to --all")
+    assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--psi", 0.1, match="go with --all")

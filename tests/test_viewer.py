@@ -1,5 +1,6 @@
 """The browser viewer (diffkin.viewer, viser): scene graph, sliders, IK gizmos, arm angle, overlays, a real browser."""
 
+import json
 import os
 import re
 import shutil
@@ -15,7 +16,7 @@ import pytest
 pytest.importorskip("viser")
 pytest.importorskip("trimesh")
 
-from test_cli import INTERRUPTIBLE
+from test_cli import ARM, INTERRUPTIBLE, SCENE, SCENE_FILE
 
 import diffkin as dk  # noqa: E402
 from diffkin.viewer import _visuals, show  # noqa: E402
@@ -592,6 +593,67 @@ def test_names_from_the_file_reach_the_page_as_plain_text(viewer_of, tmp_path):
     assert labels == [joint]  # a label is text in viser's page
 
 
+@pytest.fixture(scope="module")
+def arm_avoid():
+    """tests/test_cli.py's arm of capsules, its geometry and scene (a turned box, a floor: margin 0.02 m)."""
+    robot = dk.load_robot(ARM)
+    geom = dk.collision.load(ARM, robot)
+    scene = dk.collision.load_scene({**SCENE, "spheres": [{"center": [-0.4, 0, 0.5], "radius": 0.1}],
+                                     "capsules": [{"a": [0, -0.5, 0], "b": [0, -0.5, 1], "radius": 0.05}]})  # fmt: skip
+    return robot, geom, dk.ik.Avoid(geom, scene.world, scene.margin, scene.self_collision)
+
+
+def test_obstacles_are_drawn_with_the_clearance(viewer_of, arm_avoid):
+    """Each obstacle of ``avoid`` is a primitive where the scene puts it; the "Obstacles" folder shows the
+    clearance of the configuration shown (dk.collision.clearance), updated as a slider moves it."""
+    robot, geom, avoid = arm_avoid
+    viewer = viewer_of(robot, avoid=avoid)
+    assert sorted(viewer.obstacles) == [
+        "/obstacles/box0", "/obstacles/capsule0/a", "/obstacles/capsule0/axis", "/obstacles/capsule0/b",
+        "/obstacles/plane0", "/obstacles/sphere0",
+    ]  # fmt: skip
+    box, plane = viewer.obstacles["/obstacles/box0"], viewer.obstacles["/obstacles/plane0"]
+    np.testing.assert_allclose(box.position, SCENE["boxes"][0]["position"])
+    np.testing.assert_allclose(box.wxyz, SCENE["boxes"][0]["quaternion"], atol=1e-6)
+    np.testing.assert_allclose(box.dimensions, [0.24, 0.16, 0.2])
+    assert plane.position[2] + plane.dimensions[2] / 2 == pytest.approx(-0.1)  # its top face: the plane z = -0.1
+    axis = viewer.obstacles["/obstacles/capsule0/axis"]
+    np.testing.assert_allclose(axis.position, [0, -0.5, 0.5]) and axis.height == pytest.approx(1.0)
+    assert viewer.obstacles["/obstacles/sphere0"].radius == pytest.approx(0.1)
+    for q in (viewer.q, np.array([-0.2, 1.3, 1.0])):  # the start, then the hand pushed into the box by the sliders
+        for i, value in enumerate(q):
+            viewer.sliders[i].value = float(value)
+        expected = float(dk.collision.clearance(robot, geom, viewer.q, avoid.world))
+        assert viewer.clearance == pytest.approx(expected, abs=1e-9)
+        word = "collision-free" if expected >= 0.02 else "in collision" if expected < 0 else "within the margin"
+        assert viewer.clearance_status.content == f"clearance {expected:.4f} m (margin 0.02 m): {word}"
+    assert word == "in collision"
+    viewer.show_obstacles.value = False
+    assert not any(h.visible for h in viewer.obstacles.values())
+    with pytest.raises(TypeError, match="avoid: collision-aware IK needs a dk.Robot"):
+        show(dk.robots.iiwa14(), avoid=avoid, warmup=False, verbose=False)
+    with pytest.raises(TypeError, match="avoid: expected a dk.ik.Avoid"):
+        show(robot, avoid=avoid.world, warmup=False, verbose=False)
+
+
+@pytest.mark.skipif(bool(IK_BROKEN), reason=IK_BROKEN or "ik runs")
+def test_drag_with_avoid_is_solved_clear_of_the_obstacles(viewer_of, arm_avoid):
+    """A hand pose above the box, dragged to: the whole arm solved onto it, clear of the box and the floor
+    by the margin (checked by dk.collision.clearance at the configuration shown), the clearance on the page.
+    (The scene of tests/test_cli.py: two kinds of obstacles compile faster than four.)"""
+    robot, geom, _ = arm_avoid
+    scene = dk.collision.load_scene(SCENE)
+    viewer = viewer_of(robot, avoid=dk.ik.Avoid(geom, scene.world, scene.margin))
+    T = np.asarray(dk.fk(robot, np.array([-0.2, 1.0, 1.2]), "hand"))  # the hand 0.14 m above the box
+    res = viewer.move_target("hand", T)
+    assert bool(res.success), res
+    clearance = float(dk.collision.clearance(robot, geom, viewer.q, scene.world))
+    assert clearance >= 0.02 and float(res.clearance) == pytest.approx(clearance, abs=1e-9)
+    np.testing.assert_allclose(viewer.frame_pose("hand"), T, atol=1e-4)
+    assert f"clearance {clearance:.4f} m" in viewer.ik_status["hand"].content
+    assert viewer.clearance_status.content.endswith(": collision-free")
+
+
 def test_cli_view_errors(capsys):
     from diffkin.cli import main
 
@@ -599,6 +661,33 @@ def test_cli_view_errors(capsys):
     assert "unknown robot 'no-such-robot'" in capsys.readouterr().err
     assert main(["view", "iiwa14", "--map", "missing.npz"]) == 2
     assert "--map: no such file 'missing.npz'" in capsys.readouterr().err
+
+
+def test_cli_view_avoid(capsys, tmp_path, monkeypatch):
+    """``diffkin view FILE --avoid scene.json [--margin M]`` serves the file's robot with ``avoid`` of its
+    geometry and the scene (``dk.viewer.show`` stubbed: it would serve until Ctrl-C); its errors are one line."""
+    from diffkin import viewer
+    from diffkin.cli import main
+
+    urdf, scene, bad = tmp_path / "arm.urdf", tmp_path / "scene.json", tmp_path / "bad.json"
+    urdf.write_text(ARM)
+    scene.write_text(json.dumps(SCENE))
+    bad.write_text(json.dumps({"planes": [{"normal": [0, 0, 0], "offset": 0}]}))
+    shown = {}
+    monkeypatch.setattr(viewer, "show", lambda model, **kwargs: shown.update(model=model, **kwargs))
+    assert main(["view", str(urdf), "--avoid", str(scene), "--margin", "0.03"]) == 0
+    avoid = shown["avoid"]
+    assert isinstance(shown["model"], dk.Robot) and shown["source"] == str(urdf) and shown["block"]
+    assert float(avoid.margin) == 0.03 and avoid.world.size == 2 and avoid.self_collision
+    assert avoid.geom.shape_names == dk.collision.load(ARM, shown["model"]).shape_names
+    for argv, match in (
+        ([str(urdf), "--avoid", str(bad)], f"--avoid: {bad}: planes[0].normal: expected a non-zero vector"),
+        (["iiwa14", "--avoid", SCENE_FILE], "the built-in robot 'iiwa14' has no collision geometry"),
+        ([str(urdf), "--margin", "0.1"], "--margin goes with --avoid"),
+    ):
+        assert main(["view", *argv]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("diffkin: error: ") and match in err and err.count("\n") == 1, err
 
 
 def _bad_archives(folder) -> dict[str, str]:

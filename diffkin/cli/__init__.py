@@ -4,8 +4,9 @@
     diffkin info ROBOT_OR_FILE [--end-link L] [--base-link B]
     diffkin fk ROBOT_OR_FILE q1 ... qn | --q-file configs.npy [--format text|json|npy] [--output FILE]
     diffkin ik ROBOT_OR_FILE --pose x y z qw qx qy qz | --position x y z [--seeds N] [--q0 ...] [--all ...]
+        [--avoid scene.json [--margin M]]
     diffkin workspace ROBOT_OR_FILE --samples N --voxel V --out map.npz [--plot slice.png]
-    diffkin view ROBOT_OR_FILE [--map map.npz] [--ik-results res.npz] [--end FRAME ...]
+    diffkin view ROBOT_OR_FILE [--map map.npz] [--ik-results res.npz] [--end FRAME ...] [--avoid scene.json]
 
 ``ROBOT_OR_FILE`` is a built-in robot (``iiwa7``, ``iiwa14``, ``panda``, ``ur5``, ``puma560``) or a
 URDF or MJCF file (``info`` prints its tree; ``fk --frame NAME`` any frame of it; the other commands use
@@ -17,9 +18,9 @@ compilation cache (``--cache-dir``, ``--no-cache``, ``DIFFKIN_CACHE_DIR``; see
 :func:`diffkin.cli._cache.cache_dir`).
 
 One module per job: ``_parser`` (options), ``_errors`` (one-line errors), ``_cache`` (compilation
-cache), ``_robots`` (robots by name or file), ``_compiled`` (jitted functions shared by commands),
-``_text`` (printing), ``_plots`` (figures) and one module per command. Nothing here imports JAX
-until a command runs, so ``--help`` and usage errors answer at once.
+cache), ``_robots`` (robots by name or file), ``_scene`` (obstacles of ``--avoid``), ``_compiled``
+(jitted functions shared by commands), ``_text`` (printing), ``_plots`` (figures) and one module per
+command. Nothing here imports JAX until a command runs, so ``--help`` and usage errors answer at once.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""The jitted functions the commands share, compiled once per robot and shape: batched IK, the iiwa closed form."""
+"""The jitted functions the commands share, compiled once per robot and shape: batched IK, IK among
+obstacles, the iiwa closed form."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import sys
 
 import numpy as np
 
-from diffkin.cli._robots import chain_for, jax_x64
+from diffkin.cli._robots import chain_for, jax_x64, robot_key, robot_with_geometry
 
 IK_CHUNK = 64  # targets per jitted IK call: one compilation serves every batch size
 
@@ -85,6 +86,83 @@ def solve_ik(
     if bar is not None:
         bar.close()
     return {f: np.concatenate([p[f] for p in parts]) for f in parts[0]}
+
+
+@functools.lru_cache(maxsize=8)
+def _avoid_ik_fn(spec: str, key: tuple, end: str, num_seeds: int, self_collision: bool):
+    """A jitted one-target ``dk.ik.solve`` of a file's whole robot with ``avoid``, compiled once per
+    robot file (``key``: its :func:`~diffkin.cli._robots.robot_key`), end frame, seed count and
+    ``self_collision``; the robot and its collision geometry are closed over.
+
+    Its arguments are ``(target, key, q0 or None, pos_tol, rot_tol, world, margin)``: the obstacles
+    (a ``dk.collision.World``; one compilation per count of each kind), the tolerances and the margin
+    are traced.
+    """
+    jax = jax_x64()
+    import diffkin as dk
+    from diffkin._xla import SOLVER_COMPILE
+
+    robot, geom = robot_with_geometry(spec)
+    return jax.jit(
+        lambda T, k, q0, pos_tol, rot_tol, world, margin: dk.ik.solve(
+            robot,
+            {end: T},
+            key=k,
+            q0=q0,
+            num_seeds=num_seeds,
+            pos_tol=pos_tol,
+            rot_tol=rot_tol,
+            avoid=dk.ik.Avoid(geom, world, margin, self_collision),
+        ),
+        compiler_options=SOLVER_COMPILE,
+    )
+
+
+def solve_ik_avoiding(
+    spec: str,
+    end: str,
+    target: np.ndarray,
+    scene,
+    *,
+    num_seeds: int = 32,
+    q0=None,
+    seed: int = 1,
+    pos_tol: float = 1e-5,
+    rot_tol: float = 1e-4,
+):
+    """IK of one target of a URDF/MJCF file's whole robot, keeping clear of a scene's obstacles.
+
+    Args:
+        spec: the robot file (its collision geometry: :func:`diffkin.cli._robots.robot_with_geometry`).
+        end: the frame that goes to ``target``.
+        target: ``(4, 4)`` pose ``T_world_end`` or ``(3,)`` position (m) in the robot's root frame.
+        scene: a ``dk.collision.Scene`` (obstacles in the root frame, ``margin``, ``self_collision``),
+            its arrays in float64.
+        q0: ``(dof,)`` warm start (every actuated joint of the robot), or ``None``.
+
+    Returns:
+        ``dict`` of numpy values: ``q (dof,)``, ``success``, ``pos_err``, ``rot_err``, ``iters`` and
+        ``clearance`` (m) scalars.
+    """
+    jax = jax_x64()
+    import diffkin as dk
+
+    robot, geom = robot_with_geometry(spec)
+    dk.ik.Avoid(geom, scene.world, scene.margin, scene.self_collision)  # its checks on the host, before compiling
+    fn = _avoid_ik_fn(spec, robot_key(spec, None, None), end, num_seeds, scene.self_collision)
+    res = fn(
+        np.asarray(target, dtype=np.float64),
+        jax.random.key(seed),
+        None if q0 is None else np.asarray(q0, dtype=np.float64),
+        np.float64(pos_tol),
+        np.float64(rot_tol),
+        scene.world,
+        np.float64(scene.margin),
+    )
+    return {
+        "q": np.asarray(res.q),
+        **{f: np.asarray(getattr(res, f)).reshape(()) for f in ("success", "pos_err", "rot_err", "iters", "clearance")},
+    }
 
 
 @functools.lru_cache(maxsize=4)

@@ -1,4 +1,5 @@
-"""``diffkin ik``: inverse kinematics of one pose or position (LM), or every exact iiwa solution (``--all``)."""
+"""``diffkin ik``: inverse kinematics of one pose or position (LM), among obstacles (``--avoid``), or every
+exact iiwa solution (``--all``)."""
 
 from __future__ import annotations
 
@@ -6,10 +7,11 @@ import sys
 
 import numpy as np
 
-from diffkin.cli._compiled import solve_ik, srs_fns
+from diffkin.cli._compiled import solve_ik, solve_ik_avoiding, srs_fns
 from diffkin.cli._errors import CLIError
-from diffkin.cli._robots import SRS_ROBOTS, load_robot, robot_key
-from diffkin.cli._text import fmt
+from diffkin.cli._robots import SRS_ROBOTS, frame_of, load_robot, robot_key, robot_with_geometry, single_end
+from diffkin.cli._scene import read_scene
+from diffkin.cli._text import collision_word, fmt
 
 
 def target_pose(pose) -> np.ndarray:
@@ -65,17 +67,73 @@ def _ik_all(args, T_base_target: np.ndarray) -> int:
     return 0 if valid.any() else 1
 
 
-def cmd_ik(args) -> int:
-    """IK of one pose or position: LM from random seeds, or every exact iiwa solution with ``--all``."""
-    key = robot_key(args.robot, args.end_link, args.base_link)
-    chain = load_robot(args.robot, args.end_link, args.base_link)
-    target = target_pose(args.pose) if args.pose else np.asarray(args.position)
-    if args.pose and abs(np.linalg.norm(args.pose[3:]) - 1) > 1e-6:
+def _note_quaternion(pose) -> None:
+    """Say on stderr that a ``--pose`` quaternion not of unit norm was normalised."""
+    if pose and abs(np.linalg.norm(pose[3:]) - 1) > 1e-6:
         print(
-            f"diffkin: note: the quaternion's norm is {np.linalg.norm(args.pose[3:]):.7g}, not 1: normalised",
+            f"diffkin: note: the quaternion's norm is {np.linalg.norm(pose[3:]):.7g}, not 1: normalised",
             file=sys.stderr,
             flush=True,
         )
+
+
+def _ik_avoid(args, target: np.ndarray) -> int:
+    """IK of the whole robot of a file among the obstacles of ``--avoid`` (``dk.ik.solve(..., avoid=)``)."""
+    if args.all:
+        raise CLIError("--avoid does not apply to --all (the iiwa closed form ignores obstacles)")
+    if args.psi is not None or args.gc is not None or args.samples is not None:
+        raise CLIError("--psi, --gc and --samples go with --all")
+    if args.base_link is not None:
+        raise CLIError("--base-link does not apply to --avoid (the whole robot is solved, targets in its root frame)")
+    robot, geom = robot_with_geometry(args.robot)
+    end = frame_of(robot, args.end_link, "--end-link") if args.end_link else single_end(robot)
+    scene = read_scene(args.avoid, args.margin)
+    if args.q0 is not None and len(args.q0) != robot.dof:
+        raise CLIError(f"--q0: {robot.name or args.robot} has {robot.dof} joints, got {len(args.q0)} values")
+    res = solve_ik_avoiding(
+        args.robot,
+        end,
+        target,
+        scene,
+        num_seeds=args.seeds,
+        q0=args.q0,
+        seed=args.seed,
+        pos_tol=args.pos_tol,
+        rot_tol=args.rot_tol,
+    )
+    ok = bool(res["success"])
+    what = "pose" if target.shape == (4, 4) else "position (orientation free)"
+    clearance = float(res["clearance"])
+    print(
+        f"{robot.name or args.robot}: IK of a {what} of {end}, LM, {args.seeds} seeds{' + q0' if args.q0 else ''}, "
+        f"tolerances {args.pos_tol:g} m / {args.rot_tol:g} rad"
+    )
+    print(
+        f"avoiding {scene.world.size} obstacles of {args.avoid}, margin {scene.margin:g} m, "
+        f"self-collision {'on' if scene.self_collision else 'off'} ({len(geom.shape_names)} shapes on the robot)"
+    )
+    print(f"q          {fmt(res['q'], 10)} rad")
+    print(f"success    {ok}")
+    print(f"pos_err    {float(res['pos_err']):.3e} m")
+    print(f"rot_err    {float(res['rot_err']):.3e} rad{' (not constrained)' if target.shape == (3,) else ''}")
+    print(f"iters      {int(res['iters'])}")
+    print(f"clearance  {clearance:.3e} m: {collision_word(clearance, scene.margin)}")
+    return 0 if ok else 1
+
+
+def cmd_ik(args) -> int:
+    """IK of one pose or position: LM from random seeds, among obstacles with ``--avoid``, or every
+    exact iiwa solution with ``--all``."""
+    if args.margin is not None and args.avoid is None:
+        raise CLIError("--margin goes with --avoid")
+    if args.avoid is not None:
+        target = target_pose(args.pose) if args.pose else np.asarray(args.position)
+        _note_quaternion(args.pose)
+        return _ik_avoid(args, target)
+    key = robot_key(args.robot, args.end_link, args.base_link)
+    chain = load_robot(args.robot, args.end_link, args.base_link)
+    target = target_pose(args.pose) if args.pose else np.asarray(args.position)
+    _note_quaternion(args.pose)
     if not args.all and (args.psi is not None or args.gc is not None or args.samples is not None):
         raise CLIError("--psi, --gc and --samples go with --all")
     if args.all:

@@ -139,6 +139,21 @@ def _add_robot(p: argparse.ArgumentParser) -> None:
     p.add_argument("--base-link", metavar="B", help="base frame of the chain (default: the root)")
 
 
+def _add_avoid(p: argparse.ArgumentParser, what: str) -> None:
+    """``--avoid SCENE.json`` and ``--margin M`` (``ik``, ``view``); ``what`` says what the command does with them."""
+    p.add_argument(
+        "--avoid",
+        metavar="SCENE.json",
+        help=f"obstacles to keep clear of (spheres, capsules, boxes, planes; docs/collision.md): {what}",
+    )
+    p.add_argument(
+        "--margin",
+        type=_tolerance,
+        metavar="M",
+        help="with --avoid: the clearance asked for, m (default: the scene's margin, else 0)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``diffkin`` argument parser with its subcommands."""
     parser = _Parser(
@@ -205,8 +220,9 @@ def build_parser() -> argparse.ArgumentParser:
         "ik",
         help="inverse kinematics of one pose or position",
         description="Inverse kinematics of one target: batched Levenberg-Marquardt from random seeds "
-        "(dk.ik.solve), or with --all every exact iiwa solution along the arm angle (dk.srs). "
-        "Exit status 1 if no solution was found.",
+        "(dk.ik.solve), among the obstacles of a scene file with --avoid, or with --all every exact iiwa "
+        "solution along the arm angle (dk.srs). Exit status 1 if no solution was found (with --avoid: none "
+        "clear of the obstacles by the margin).",
     )
     _add_robot(p)
     target = p.add_mutually_exclusive_group(required=True)
@@ -243,6 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="success tolerance on the rotation error, rad (default 1e-4)",
     )
     p.add_argument("--seed", type=_seed, default=1, help="PRNG seed of the random seeds (default 1)")
+    _add_avoid(p, "solves the file's whole robot with its collision geometry; success needs the clearance")
     p.add_argument("--all", action="store_true", help="iiwa7/iiwa14: exact solutions along the self-motion (dk.srs)")
     p.add_argument("--psi", type=_finite, metavar="PSI", help="with --all: one arm angle (rad), via dk.srs.ik")
     p.add_argument(
@@ -289,7 +306,8 @@ def build_parser() -> argparse.ArgumentParser:
         "view",
         help="interactive 3D viewer in the browser (viser; pip install 'diffkin[viewer]')",
         description="Serve an interactive 3D view of a robot (viser): meshes or link cylinders, joint "
-        "sliders, draggable IK targets, the iiwa arm angle, a reachability map, batched results. "
+        "sliders, draggable IK targets, the iiwa arm angle, a reachability map, batched results, "
+        "obstacles (--avoid: drags solved clear of them). "
         "Prints the URL; runs until Ctrl-C.",
     )
     p.add_argument("robot", metavar="ROBOT_OR_FILE", help=f"built-in robot ({', '.join(ROBOTS)}) or a URDF/MJCF file")
@@ -303,5 +321,6 @@ def build_parser() -> argparse.ArgumentParser:
         "to browse and play",
     )
     p.add_argument("--end", nargs="+", metavar="FRAME", help="frames with an IK target (default: the leaf frames)")
+    _add_avoid(p, "a URDF/MJCF file's robot with its collision geometry; obstacles drawn, drags solved clear of them")
     p.set_defaults(func=cmd_view)
     return parser

@@ -91,6 +91,41 @@ def single_end(robot) -> str:
     return robot.frame_names[max(f for f, b in enumerate(robot.frame_bodies) if b == leaves[0])]
 
 
+@functools.lru_cache(maxsize=4)
+def _geometry_for(path: str, mtime: int):
+    """The collision geometry (``dk.collision.Geometry``) of a URDF or MJCF file's whole robot."""
+    import diffkin as dk
+
+    return dk.collision.load(path, _tree_for(path, mtime))
+
+
+def robot_with_geometry(spec: str):
+    """The whole robot (``dk.Robot``) of a URDF or MJCF file and its collision geometry.
+
+    Raises:
+        CLIError: a built-in robot (no collision geometry), a file without collision shapes, or
+            collision meshes without trimesh (the ``diffkin[collision]`` extra).
+        ValueError: a malformed file or collision element (from :func:`diffkin.collision.load`).
+    """
+    if spec in ROBOTS:
+        raise CLIError(
+            f"--avoid: the built-in robot {spec!r} has no collision geometry: "
+            "give a URDF or MJCF file with <collision> elements or geoms"
+        )
+    jax_x64()
+    path, mtime = robot_key(spec, None, None)[:2]
+    try:
+        geom = _geometry_for(path, mtime)
+    except ImportError:
+        raise CLIError(
+            f"--avoid: the collision meshes of {spec!r} need trimesh, which is not installed: "
+            "pip install 'diffkin[collision]' (or pip install trimesh)"
+        ) from None
+    if not geom.shape_names:
+        raise CLIError(f"--avoid: {spec!r} has no collision geometry (no <collision> elements or geoms)")
+    return _tree_for(path, mtime), geom
+
+
 def tree(spec: str):
     """The ``dk.Robot`` of a URDF or MJCF path (``None`` for a built-in robot name)."""
     key = robot_key(spec, None, None)

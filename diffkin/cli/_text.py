@@ -25,3 +25,10 @@ def quaternions(T) -> np.ndarray:
     from diffkin import se3
 
     return np.asarray(se3.quaternion_from_rotation(np.asarray(T, dtype=np.float64)[..., :3, :3]))
+
+
+def collision_word(clearance: float, margin: float) -> str:
+    """``collision-free`` (clearance at least the margin), ``within the margin`` or ``in collision`` (< 0)."""
+    if clearance >= margin:
+        return "collision-free"
+    return "within the margin" if clearance >= 0 else "in collision"

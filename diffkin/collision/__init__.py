@@ -4,13 +4,14 @@ Primitives (:class:`Sphere`, :class:`Capsule`, :class:`Box`, :class:`Plane`) and
 :func:`distance` for every pair of kinds: positive between separated shapes, minus the penetration
 depth when they overlap; batched, float32/float64, differentiable where the closest features are
 unique. A robot's shapes from its URDF or MJCF file (:func:`load`, a :class:`Geometry`), obstacles
-(:class:`World`), and the robot's distances (:func:`self_distances`, :func:`world_distances`,
-:func:`clearance`).
+(:class:`World`, or a JSON scene file: :func:`load_scene`), and the robot's distances
+(:func:`self_distances`, :func:`world_distances`, :func:`clearance`).
 """
 
 from diffkin.collision._distance import distance
 from diffkin.collision._geometry import Geometry, load
 from diffkin.collision._robot import World, clearance, self_distances, world_distances
+from diffkin.collision._scene import Scene, load_scene
 from diffkin.collision._shapes import Box, Capsule, Plane, Sphere
 
 __all__ = [
@@ -18,11 +19,13 @@ __all__ = [
     "Capsule",
     "Geometry",
     "Plane",
+    "Scene",
     "Sphere",
     "World",
     "clearance",
     "distance",
     "load",
+    "load_scene",
     "self_distances",
     "world_distances",
 ]

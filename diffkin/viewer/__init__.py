@@ -6,8 +6,9 @@
 
 The page draws the robot (its URDF visual meshes, or cylinders between its frames), one slider per
 joint, a draggable IK target per end frame, the iiwa arm-angle self-motion, a reachability map as
-points and a slider and playback through batched results (with a floating robot's root poses). viser
-and trimesh are imported only here.
+points, a slider and playback through batched results (with a floating robot's root poses), and
+obstacles with every drag solved clear of them (``avoid=dk.ik.Avoid(...)``). viser and trimesh are
+imported only here.
 """
 
 from __future__ import annotations

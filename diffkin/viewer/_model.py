@@ -122,3 +122,25 @@ def make_ik(kin: Kinematics, end: str, num_seeds: int) -> tuple[Callable, np.nda
         lambda T, q0, key: dk.ik.solve(chain, T, q0=q0, key=key, num_seeds=num_seeds), compiler_options=SOLVER_COMPILE
     )
     return solve, index
+
+
+def make_ik_avoiding(kin: Kinematics, end: str, num_seeds: int, avoid) -> tuple[Callable, np.ndarray]:
+    """A jitted one-target IK of a whole :class:`diffkin.Robot` that keeps clear of ``avoid``, and
+    the indices of its joints in ``q`` (all of them).
+
+    The function maps ``(T_world_target (4, 4), q0 (dof,), key, T_world_root (4, 4))`` to
+    :class:`diffkin.ik.IKResult` with ``pos_err``, ``rot_err`` of the one target as scalars:
+    ``dk.ik.solve(robot, {end: T}, q0=q0, key=key, num_seeds=num_seeds, base=T_world_root,
+    avoid=avoid)``, every joint free (the obstacles are in the world, the root fixed where it is
+    drawn). A fixed robot's root is always at the identity (only a floating robot's results move
+    it): its ``T_world_root`` is not passed on, which saves a third of the compilation. The robot
+    and ``avoid`` (a ``dk.ik.Avoid`` of its geometry) are closed over.
+    """
+    robot = kin.model
+
+    def solve(T, q0, key, T_world_root):
+        base = T_world_root if robot.floating else None
+        res = dk.ik.solve(robot, {end: T}, q0=q0, key=key, num_seeds=num_seeds, base=base, avoid=avoid)
+        return res._replace(pos_err=res.pos_err[..., 0], rot_err=res.rot_err[..., 0])
+
+    return jax.jit(solve, compiler_options=SOLVER_COMPILE), np.arange(kin.dof)

@@ -1,8 +1,15 @@
-"""Data drawn over the robot: reachability maps as coloured points, and a colour map."""
+"""Data drawn over the robot: reachability maps as coloured points, a colour map, and obstacles as primitives."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
+
+from diffkin.viewer._visuals import z_to
+
+#: thickness of the slab that draws a half-space (its top face is the boundary plane), metres
+PLANE_SLAB = 0.01
 
 # viridis at five stops (matplotlib's values), interpolated linearly
 _VIRIDIS = np.array(
@@ -41,3 +48,59 @@ def map_points(wmap, quantity: str = "counts") -> tuple[np.ndarray, np.ndarray]:
     points = np.asarray(wmap.origin, dtype=np.float64) + (index + 0.5) * float(wmap.voxel_size)
     values = np.asarray(getattr(wmap, quantity), dtype=np.float64)[tuple(index.T)]
     return points, colormap(values)
+
+
+@dataclasses.dataclass(frozen=True)
+class Primitive:
+    """One shape drawn for an obstacle.
+
+    Attributes:
+        name: its scene-tree path (``/obstacles/sphere0``, ``/obstacles/capsule1/a``, ...).
+        kind: ``"sphere"`` (``size``: radius), ``"cylinder"`` (radius, height along its z axis) or
+            ``"box"`` (edge lengths along its x, y, z axes).
+        position: ``(3,)`` centre in the world, metres.
+        rotation: ``(3, 3)`` orientation ``R_world_shape``.
+        size: as ``kind`` says, metres.
+    """
+
+    name: str
+    kind: str
+    position: np.ndarray
+    rotation: np.ndarray
+    size: tuple[float, ...]
+
+
+def obstacle_primitives(world, center, extent: float) -> list[Primitive]:
+    """The primitives that draw the obstacles of a ``dk.collision.World``.
+
+    A sphere is a sphere; a capsule a cylinder between its end points and a sphere at each end; a
+    box a box; a half-space ``n . x <= offset`` a square slab ``extent`` wide and
+    :data:`PLANE_SLAB` thick whose top face is the boundary plane, centred below ``center``.
+
+    Args:
+        world: the obstacles (world frame).
+        center: ``(3,)`` the point of the scene the slabs are centred on (projected on each plane).
+        extent: edge length of the slabs, metres.
+    """
+    out: list[Primitive] = []
+    eye = np.eye(3)
+
+    def host(x) -> np.ndarray:
+        return np.asarray(x, dtype=np.float64)
+
+    s, c, b = world.spheres, world.capsules, world.boxes
+    for i, (x, r) in enumerate(zip(host(s.center), host(s.radius), strict=True)):
+        out.append(Primitive(f"/obstacles/sphere{i}", "sphere", x, eye, (float(r),)))
+    for i, (a, e, r) in enumerate(zip(host(c.a), host(c.b), host(c.radius), strict=True)):
+        name, length = f"/obstacles/capsule{i}", float(np.linalg.norm(e - a))
+        out.append(Primitive(f"{name}/axis", "cylinder", (a + e) / 2, z_to(e - a), (float(r), length)))
+        out.append(Primitive(f"{name}/a", "sphere", a, eye, (float(r),)))
+        out.append(Primitive(f"{name}/b", "sphere", e, eye, (float(r),)))
+    for i, (T, h) in enumerate(zip(host(b.pose), host(b.half_extents), strict=True)):
+        out.append(Primitive(f"/obstacles/box{i}", "box", T[:3, 3], T[:3, :3], tuple(float(v) for v in 2 * h)))
+    center = np.asarray(center, dtype=np.float64)
+    for i, (n, d) in enumerate(zip(host(world.planes.normal), host(world.planes.offset), strict=True)):
+        on_plane = center - (float(n @ center) - float(d)) * n
+        position = on_plane - n * PLANE_SLAB / 2
+        out.append(Primitive(f"/obstacles/plane{i}", "box", position, z_to(n), (extent, extent, PLANE_SLAB)))
+    return out

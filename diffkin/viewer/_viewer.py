@@ -16,8 +16,9 @@ import viser.transforms as vtf
 
 import diffkin as dk
 from diffkin._npz import read_npz
+from diffkin.collision._robot import check_geometry
 from diffkin.viewer import _overlays, _visuals
-from diffkin.viewer._model import kinematics, make_ik
+from diffkin.viewer._model import kinematics, make_ik, make_ik_avoiding
 from diffkin.viewer._results import check_results, describe
 
 GC_OPTIONS = tuple(" ".join(f"{s:+d}" for s in signs) for signs in itertools.product((1, -1), repeat=3))
@@ -73,6 +74,12 @@ def _pose(position, wxyz) -> np.ndarray:
     return T
 
 
+def _clearance_text(clearance: float, margin: float) -> str:
+    """``clearance 0.034 m (margin 0.01 m): collision-free`` (or ``within the margin``, ``in collision``)."""
+    word = "collision-free" if clearance >= margin else "within the margin" if clearance >= 0 else "in collision"
+    return f"clearance {clearance:.4f} m (margin {margin:g} m): {word}"
+
+
 def _intervals_text(intervals: np.ndarray, mask: np.ndarray) -> str:
     used = [f"[{lo:+.3f}, {hi:+.3f}]" for (lo, hi), m in zip(np.asarray(intervals), np.asarray(mask), strict=True) if m]
     return " ∪ ".join(used) if used else "none (no arm angle keeps every joint within its limits)"
@@ -85,7 +92,8 @@ class Viewer:
     component): ``/robot/<frame>`` is a frame node per model frame at its world pose (axes
     toggled by "Show frames"), its visual meshes below it at their fixed pose in the frame;
     ``/skeleton/<frame>`` cylinders join each frame to its parent frame; ``/targets/<frame>``
-    are the IK gizmos; ``/map`` the reachability point cloud. The model is drawn with its root at
+    are the IK gizmos; ``/map`` the reachability point cloud; ``/obstacles/<kind><i>`` the obstacles
+    of ``avoid`` (a capsule as ``axis``, ``a`` and ``b`` below its node). The model is drawn with its root at
     :attr:`T_world_root` (the identity, or the ``base`` of the batch result shown); IK targets are
     world poses, solved for the chain from the root at that pose.
 
@@ -109,6 +117,10 @@ class Viewer:
         result_index: the batch result shown last (``None`` before the first).
         play_fps, play_loop, play_button: the "Batch results" playback controls (with results).
         arm: the ``dk.srs.SRSArm`` driving the arm-angle controls, or ``None``.
+        avoid: the ``dk.ik.Avoid`` every drag is solved with (the whole robot, clear of its obstacles
+            by its margin), or ``None`` (the chain of the dragged frame, no collision check).
+        obstacles: ``{scene path: handle}`` of the obstacles drawn (empty without ``avoid``).
+        clearance: the clearance (m) of the configuration shown (``inf`` without ``avoid``).
         url: ``http://host:port``.
     """
 
@@ -122,6 +134,7 @@ class Viewer:
         q0=None,
         workspace_map=None,
         results=None,
+        avoid=None,
         host: str = "127.0.0.1",
         port: int = 8080,
         num_seeds: int = 8,
@@ -130,6 +143,8 @@ class Viewer:
         self.kin = kinematics(model, ends)
         self.model = model
         self.arm = arm
+        self.avoid = _checked_avoid(avoid, model)
+        self.clearance = float("inf")
         self._lock = threading.RLock()
         self._quiet = False
         self._key = jax.random.key(0)
@@ -165,6 +180,9 @@ class Viewer:
         )
 
         self._build_robot(source, size)
+        self.obstacles: dict[str, Any] = {}
+        if self.avoid is not None and self.avoid.world is not None:
+            self._build_obstacles(center, 2 * size)
         self._build_gui(workspace_map)
         self._apply(self.q, source=None)
         if warmup:
@@ -216,6 +234,28 @@ class Viewer:
         self._lengths = {name: 1.0 for name in self.skeleton}
         for frame in self.frames.values():
             frame.show_axes = not has_meshes
+
+    def _build_obstacles(self, center: np.ndarray, extent: float) -> None:
+        """The obstacles of :attr:`avoid` as translucent red primitives (half-spaces as slabs ``extent`` wide)."""
+        scene = self.server.scene
+        color, opacity = (220, 70, 60), 0.6
+        for shape in _overlays.obstacle_primitives(self.avoid.world, center, extent):
+            position, wxyz = shape.position, _wxyz(shape.rotation)
+            handle: Any
+            if shape.kind == "sphere":
+                handle = scene.add_icosphere(
+                    shape.name, radius=shape.size[0], color=color, opacity=opacity, position=position, wxyz=wxyz
+                )
+            elif shape.kind == "cylinder":
+                radius, height = shape.size
+                handle = scene.add_cylinder(
+                    shape.name, radius, height, color, opacity=opacity, position=position, wxyz=wxyz
+                )
+            else:
+                handle = scene.add_box(
+                    shape.name, color, np.asarray(shape.size), opacity=opacity, position=position, wxyz=wxyz
+                )
+            self.obstacles[shape.name] = handle
 
     def _update_scene(self, poses: np.ndarray) -> None:
         names = self.kin.frame_names
@@ -291,6 +331,34 @@ class Viewer:
                 self.targets[end] = gizmo
         self._pending = dict.fromkeys(self.kin.ends, False)
         self._solving = threading.Lock()
+
+        if self.avoid is not None:
+            avoid, model = self.avoid, self.model
+            self._clearance = jax.jit(lambda q, base: avoid.clearance(model, q, base))
+            world = avoid.world
+            sizes = (
+                {}
+                if world is None
+                else {
+                    "spheres": world.spheres.radius,
+                    "capsules": world.capsules.radius,
+                    "boxes": world.boxes.half_extents,
+                    "planes": world.planes.offset,
+                }
+            )
+            counts = ", ".join(f"{len(v)} {name}" for name, v in sizes.items() if len(v))
+            with gui.add_folder("Obstacles"):
+                gui.add_markdown(
+                    f"{counts or 'no obstacles'}; self-collision {'on' if avoid.self_collision else 'off'}; "
+                    "every drag is solved clear of them by the margin (the whole robot moves)."
+                )
+                self.clearance_status = gui.add_markdown("")
+                self.show_obstacles = gui.add_checkbox("Show obstacles", initial_value=True)
+
+            @self.show_obstacles.on_update
+            def _(_event) -> None:
+                for handle in self.obstacles.values():
+                    handle.visible = self.show_obstacles.value
 
         if self.arm is not None:
             arm = self.arm
@@ -400,6 +468,9 @@ class Viewer:
                         gizmo.position, gizmo.wxyz = poses[f, :3, 3], _wxyz(poses[f, :3, :3])
                 if self.arm is not None and source != "srs":
                     self._sync_arm_angle()
+                if self.avoid is not None:
+                    self.clearance = float(self._clearance(jnp.asarray(self.q), jnp.asarray(self.T_world_root)))
+                    self.clearance_status.content = _clearance_text(self.clearance, float(self.avoid.margin))
             finally:
                 self._quiet = False
 
@@ -427,29 +498,43 @@ class Viewer:
 
     def _ik_fn(self, end: str):
         if end not in self._ik:
-            self._ik[end] = make_ik(self.kin, end, self._num_seeds)
+            self._ik[end] = (
+                make_ik(self.kin, end, self._num_seeds)
+                if self.avoid is None
+                else make_ik_avoiding(self.kin, end, self._num_seeds, self.avoid)
+            )
         return self._ik[end]
+
+    def _run_ik(self, end: str, T_world_target: np.ndarray, q: np.ndarray):
+        """The IK function of ``end`` on the world pose ``T_world_target`` from ``q`` (the root at
+        :attr:`T_world_root`), and the indices in ``q`` of the joints it solves."""
+        fn, index = self._ik_fn(end)
+        if self.avoid is None:
+            T_root_target = np.linalg.solve(self.T_world_root, T_world_target)
+            return fn(jnp.asarray(T_root_target), jnp.asarray(q[index]), self._key), index
+        return fn(jnp.asarray(T_world_target), jnp.asarray(q), self._key, jnp.asarray(self.T_world_root)), index
 
     def solve_ik(self, end: str, T) -> object:
         """IK for frame ``end`` to the world pose ``T (4, 4)`` from the current ``q``; shows the result.
 
         The root stays at :attr:`T_world_root` (the chain is solved for ``T_world_root^-1 T``). The
         chain's joints take the solver's ``q`` (the best found, even if it failed); the other
-        joints keep theirs. Returns the ``IKResult`` (numpy fields; poses in the root frame).
+        joints keep theirs. With :attr:`avoid`, every joint of the robot is solved, clear of the
+        obstacles by the margin (``success`` needs it; ``res.clearance``). Returns the
+        ``IKResult`` (numpy fields; poses in the root frame).
         """
-        fn, index = self._ik_fn(end)
         with self._lock:
-            T_root_target = np.linalg.solve(self.T_world_root, np.asarray(T, dtype=np.float64))
-            res = fn(jnp.asarray(T_root_target), jnp.asarray(self.q[index]), self._key)
+            res, index = self._run_ik(end, np.asarray(T, dtype=np.float64), self.q)
             res = jax.tree.map(np.asarray, res)
             q = self.q.copy()
             q[index] = res.q
             self._apply(q, source=("gizmo", end))
             self.ik_results[end] = res
             mark = "✓ solved" if bool(res.success) else "✗ not reached (best shown)"
+            clear = "" if self.avoid is None else f", clearance {float(res.clearance):.4f} m"
             self.ik_status[end].content = (
                 f"{_plain(end)}: {mark}, pos err {float(res.pos_err):.2e} m, "
-                f"rot err {float(res.rot_err):.2e} rad, {int(res.iters)} iters"
+                f"rot err {float(res.rot_err):.2e} rad{clear}, {int(res.iters)} iters"
             )
         return res
 
@@ -620,10 +705,9 @@ class Viewer:
         """Compile the IK and arm-angle functions in the background so the first drag is quick."""
         try:
             for end in self.kin.ends:
-                fn, index = self._ik_fn(end)
                 f = self.kin.frame_names.index(end)
-                T = np.asarray(self.kin.poses(jnp.asarray(self.q)))[f]
-                jax.block_until_ready(fn(jnp.asarray(T), jnp.asarray(self.q[index]), self._key))
+                T = self.T_world_root @ np.asarray(self.kin.poses(jnp.asarray(self.q)))[f]
+                jax.block_until_ready(self._run_ik(end, T, self.q)[0])
         except Exception:  # warm-up only: a real solve reports its own errors
             pass
 
@@ -631,6 +715,20 @@ class Viewer:
         """Stop the playback (see :meth:`pause`) and the server."""
         self.pause()
         self.server.stop()
+
+
+def _checked_avoid(avoid, model):
+    """``avoid`` if it is ``None`` or a ``dk.ik.Avoid`` of ``model``'s geometry (a :class:`~diffkin.Robot`)."""
+    if avoid is None:
+        return None
+    if not isinstance(avoid, dk.ik.Avoid):
+        raise TypeError(f"avoid: expected a dk.ik.Avoid (geometry, obstacles, margin), got {type(avoid).__name__}")
+    if not isinstance(model, dk.Robot):
+        raise TypeError(
+            f"avoid: collision-aware IK needs a dk.Robot (a URDF or MJCF file's robot), got {type(model).__name__}"
+        )
+    check_geometry(model, avoid.geom)
+    return avoid
 
 
 def show(
@@ -642,6 +740,7 @@ def show(
     q0=None,
     workspace_map=None,
     results=None,
+    avoid=None,
     host: str = "127.0.0.1",
     port: int = 8080,
     num_seeds: int = 8,
@@ -673,6 +772,11 @@ def show(
             ``dk.ik.solve`` over a batch of ``N`` targets) is
             ``{"q": res.q, "base": res.base, "success": res.success}``; reshape a larger batch to
             ``(N, ...)`` first.
+        avoid: a ``dk.ik.Avoid`` of a :class:`~diffkin.Robot`'s collision geometry, obstacles and
+            margin (``dk.ik.Avoid(dk.collision.load(path, robot), world, margin)``; a scene file's
+            with :func:`diffkin.collision.load_scene`): the obstacles are drawn (an "Obstacles"
+            folder shows them, the clearance of the configuration shown and whether it is
+            collision-free), and every drag solves the whole robot clear of them by the margin.
         host, port: where to serve (the next free port is taken if ``port`` is in use).
         num_seeds: seeds of each interactive IK solve (the warm start is one of them).
         warmup: compile the IK functions in a background thread right away.
@@ -705,6 +809,7 @@ def show(
         q0=q0,
         workspace_map=workspace_map,
         results=results,
+        avoid=avoid,
         host=host,
         port=port,
         num_seeds=num_seeds,
