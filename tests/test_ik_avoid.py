@@ -165,6 +165,39 @@ def test_floating_locked_secondary_with_avoid(arm):
     np.testing.assert_allclose(np.asarray(res.q)[:, 0], q[:, 0], atol=1e-6)
 
 
+def test_path_with_avoid(arm):
+    """``solve_path(..., avoid=)``: 6 paths of 8 hand positions along joint-space lines between clear
+    configurations (every state on the line clear by 5 cm): every successful waypoint is clear by the
+    margin (recomputed), on target and within the step; ``clearance`` is the exact one."""
+    robot, geom, world = arm
+    margin, T = 0.01, 8
+    rng = np.random.default_rng(5)
+    lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
+    s = np.linspace(0, 1, T)[:, None]
+    paths = []
+    while len(paths) < 6:
+        qa, qb = rng.uniform(lo, hi, (2, robot.dof))
+        line = qa + s * (qb - qa)
+        if np.linalg.norm(qb - qa) < 1.5 and np.all(
+            np.asarray(dk.collision.clearance(robot, geom, line, world)) > 0.05
+        ):
+            paths.append(line)
+    q_path = np.stack(paths)  # (6, T, dof)
+    targets = np.asarray(dk.fk(robot, q_path, "hand"))[..., :3, 3]
+    res = dk.ik.solve_path(
+        robot, {"hand": targets}, q0=q_path[:, 0], max_step=0.5, avoid=dk.ik.Avoid(geom, world, margin=margin)
+    )
+    ok = np.asarray(res.success)
+    assert ok.mean() >= 0.9 and res.clearance.shape == (6, T)
+    q = np.asarray(res.q)
+    clearance = np.asarray(dk.collision.clearance(robot, geom, q, world))
+    np.testing.assert_allclose(np.asarray(res.clearance), clearance, rtol=0, atol=1e-12)
+    assert np.all(clearance[ok] >= margin)
+    reached = np.asarray(dk.fk(robot, q, "hand"))[..., :3, 3]
+    assert np.all(np.linalg.norm(reached - targets, axis=-1)[ok] <= 1e-5)
+    assert np.all(np.abs(np.diff(q, axis=1)) <= 0.5 + 1e-12)
+
+
 def test_bad_avoid_arguments(arm):
     robot, geom, world = arm
     target = {"hand": np.array([0.3, 0.0, 0.5])}

@@ -25,8 +25,9 @@ from diffkin.ik import _args, _search
 from diffkin.ik._implicit import implicit
 from diffkin.ik._methods import METHODS
 from diffkin.ik._prepare import cast, detach, inward, valid_targets
-from diffkin.ik._problem import Problem
+from diffkin.ik._problem import Kinematics, Problem
 from diffkin.ik._solve import Spec, plan, result, solve, terms_of
+from diffkin.ik._terms.avoid import AvoidTerm
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain
 from diffkin.models.robot import Robot
@@ -48,6 +49,7 @@ _PASSED = (
     "base",
     "relative",
     "com",
+    "avoid",
 )
 
 
@@ -64,6 +66,8 @@ class PathResult(NamedTuple):
             :class:`IKResult`.
         base: ``(..., T, 4, 4)`` the solved root poses with ``solve_base=True``, else ``None``.
         com_err: ``(..., T)`` with a ``com`` target, else ``None``.
+        clearance: ``(..., T)`` metres with ``avoid`` (as :attr:`IKResult.clearance`: every
+            waypoint's success also needs it ``>= avoid.margin``), else ``None``.
     """
 
     q: jax.Array
@@ -74,6 +78,7 @@ class PathResult(NamedTuple):
     rot_err: jax.Array
     base: jax.Array | None = None
     com_err: jax.Array | None = None
+    clearance: jax.Array | None = None
 
 
 def _pose_axis(a) -> int:
@@ -110,7 +115,9 @@ def solve_path(model, targets, *, q0=None, max_step=None, **solve_kwargs) -> Pat
             (prismatic): a scalar or ``(dof,)``; default unbounded.
         **solve_kwargs: the other arguments of :func:`solve` (``key``, ``num_seeds``, ``method``,
             ``max_iters``, tolerances, ``respect_limits``, ``optimizer``, ``weights``, ``locked``,
-            ``solve_base``, ``base``, ``relative``, ``com``); ``max_iters`` applies to every waypoint.
+            ``solve_base``, ``base``, ``relative``, ``com``, ``avoid``); ``max_iters`` applies to
+            every waypoint, and with ``avoid`` every waypoint keeps clear (a waypoint that cannot
+            is not a success).
 
     Returns:
         :class:`PathResult`.
@@ -149,6 +156,7 @@ def solve_path(model, targets, *, q0=None, max_step=None, **solve_kwargs) -> Pat
         None if kw["base"] is None else jnp.asarray(kw["base"], dtype),
         None if checked.locked_q is None else jnp.asarray(checked.locked_q, dtype),
         jnp.asarray(bound, dtype),
+        kw["avoid"],
         _args.tolerance(kw["pos_tol"], dtype),
         _args.tolerance(kw["rot_tol"], dtype),
         static=static,
@@ -185,6 +193,7 @@ def _follow(
     base,
     locked_q,
     bound,
+    avoid,
     pos_tol,
     rot_tol,
     *,
@@ -232,20 +241,30 @@ def _follow(
     no_wrap = jnp.zeros(dof, bool)
     steps = METHODS[method].steps(optimizer)
     settings = _search.Settings(1, max_iters, 0, pos_tol, rot_tol)
+    k = len(spec.terms)
+    avoid_term = None if avoid is None else AvoidTerm.of(avoid)
+    avoid_arrays = None if avoid is None else detach(avoid.cast(dtype))
+    terms = spec.terms + (() if avoid_term is None else (avoid_term,))  # the targets' terms, then clearance
 
     def step(x_prev, waypoint):
         q_prev = x_prev[:dof]
         lo = jnp.maximum(lower[:, None], q_prev - bound[:, None])
         hi = jnp.minimum(upper[:, None], q_prev + bound[:, None])
         bound_terms = tuple(term.bind(t) for term, t in zip(spec.terms, waypoint, strict=True))
+        if avoid_arrays is not None:
+            bound_terms = bound_terms + (avoid_arrays,)
         problem = Problem(
-            model, spec.terms, bound_terms, lo, hi, no_wrap, True, spec.locked, locked_values, root, spec.solve_base
+            model, terms, bound_terms, lo, hi, no_wrap, True, spec.locked, locked_values, root, spec.solve_base
         )
         best = _search.follow(problem, x_prev, steps, settings)
-        return best.x, (best.x, best.success, best.ev.pos_err, best.ev.rot_err, best.iters)
+        success, clearance = best.success, jnp.zeros_like(best.ev.cost)
+        if avoid_term is not None and avoid_arrays is not None:  # exactly, at the returned states
+            clearance = avoid_term.clearance(Kinematics(problem, best.x), avoid_arrays)
+            success = success & (clearance >= avoid_arrays.margin)
+        return best.x, (best.x, success, best.ev.pos_err[:k], best.ev.rot_err[:k], best.iters, clearance)
 
     later = [w[1:] for w in fixed]
-    _, (xs, success, pos_err, rot_err, iters) = jax.lax.scan(step, x0, later)
+    _, (xs, success, pos_err, rot_err, iters, clearance) = jax.lax.scan(step, x0, later)
     # every waypoint's state (T, n_state, n), its derivative by the implicit function theorem
     xs = jnp.concatenate([x0[None], xs])
     flat = lambda a: jnp.moveaxis(a, 0, -1).reshape(a.shape[1:-1] + (n * T,))  # noqa: E731  (..., n, T) order
@@ -257,7 +276,6 @@ def _follow(
         flat(xs),
     )
     first_rows = lambda e: e.reshape(n, -1).T[None]  # noqa: E731  (n[, k]) -> (1, k, n)
-    k = len(spec.terms)
     ok0, first_errors = first.success.reshape(1, n), first_rows(_all_errors(first, k, n))
     errors = jnp.concatenate([first_errors, jnp.concatenate([pos_err, rot_err], axis=1)])  # (T, 2k, n)
     success = jnp.concatenate([ok0, success & valid[1:]])
@@ -286,6 +304,9 @@ def _follow(
         rot_err=out.rot_err,
         base=out.base,
         com_err=out.com_err,
+        clearance=None
+        if first.clearance is None
+        else jnp.concatenate([first.clearance.reshape(1, n), clearance]).T.reshape(paths + (T,)),
     )
 
 
