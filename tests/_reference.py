@@ -1,11 +1,142 @@
-"""Independent float64 NumPy references shared by the tests: forward kinematics written from the
-textbook formulas (not from diffkin's kernels), pose errors, and the iiwa's global configurations."""
+"""The tests' one module of shared helpers, importable from every tier (``tests/conftest.py`` puts
+``tests/`` on ``sys.path``): data paths and test robots, random configurations, a time limit, the
+model kinds every kinematics test runs over, independent float64 NumPy references (forward kinematics
+written from the textbook formulas, not from diffkin's kernels; pose errors; the iiwa's global
+configurations) and, for the validation tier, Pinocchio's view of a robot (imported on use: the unit
+tier needs only diffkin, numpy, jax, optax and hypothesis)."""
 
 from __future__ import annotations
 
+import contextlib
+import os
+import signal
+from importlib import metadata
+
+import jax
 import numpy as np
+import pytest
 
 import diffkin as dk
+from diffkin import se3
+
+# ----------------------------------------------------------------------------------------------- paths
+
+TESTS = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(TESTS)
+"""The source checkout (``pyproject.toml``, ``docs/``, ``experiments/``)."""
+DATA = os.path.join(TESTS, "data")
+EXPERIMENTS = os.path.join(ROOT, "experiments")
+
+# ---------------------------------------------------------------------------------------------- robots
+
+# URDF robots of the validation: (name, path, end link); built once per session (``urdf_chains``).
+URDF_ROBOTS = {
+    "iiwa7": (dk.robots.urdf_path("iiwa7"), "iiwa7_link_ee"),
+    "iiwa14": (dk.robots.urdf_path("iiwa14"), "iiwa14_link_ee"),
+    "panda": (os.path.join(DATA, "panda.urdf"), "panda_link8"),
+    "ur5": (os.path.join(DATA, "ur5.urdf"), "tool0"),
+}
+BUILTIN = dk.robots.BUILTIN
+PANDA = os.path.join(DATA, "panda.urdf")
+"""The Panda with its gripper: a tree (two fingers), one mimic joint."""
+FINGER = os.path.join(DATA, "example-robot-data", "robots", "finger_edu_description", "robots", "finger_edu.urdf")
+
+
+def _example_robot_data() -> str | None:
+    try:
+        dist = metadata.distribution("example-robot-data")
+    except metadata.PackageNotFoundError:
+        return None
+    path = str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))
+    return path if os.path.isdir(path) else None
+
+
+ERD = _example_robot_data()
+"""The robots folder of example-robot-data (validation install), or ``None``."""
+BAXTER = os.path.join(ERD, "baxter_description/urdf/baxter.urdf") if ERD else ""
+SOLO = os.path.join(ERD, "solo_description/robots/solo12.urdf") if ERD else ""
+HANDS = ["left_gripper", "right_gripper"]
+FEET = ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
+
+# Whole-robot IK, every success re-checked by Pinocchio: tolerances and, float32 solutions re-checked in
+# float64 against the float64 targets, no slack (the solver decides success with a margin for float32
+# rounding: diffkin.ik._solve.ROUNDING_POS/ROT).
+POS_TOL, ROT_TOL = 1e-5, 1e-4
+SLACK_POS, SLACK_ROT = 0.0, 0.0
+
+# --------------------------------------------------------------------------------------- model kinds
+
+_TREE = """<robot name="tree"><link name="root"/><link name="upper"/><link name="left"/><link name="right"/>
+  <joint name="shoulder" type="revolute"><parent link="root"/><child link="upper"/>
+    <origin xyz="0 0 0.3"/><axis xyz="0 0 1"/><limit lower="-2" upper="2"/></joint>
+  <joint name="left" type="revolute"><parent link="upper"/><child link="left"/>
+    <origin xyz="0.2 0.1 0" rpy="0.3 0 0"/><axis xyz="0 1 0"/><limit lower="-2" upper="2"/></joint>
+  <joint name="right" type="prismatic"><parent link="upper"/><child link="right"/>
+    <origin xyz="0.2 -0.1 0" rpy="0 0 -0.4"/><axis xyz="1 0 0"/><limit lower="0" upper="0.5"/></joint>
+</robot>"""
+
+MODEL_KINDS = {
+    "standard DH": lambda: dk.robots.iiwa14(),
+    "modified DH": lambda: dk.robots.panda(),
+    "PoE": lambda: dk.load_urdf(*URDF_ROBOTS["ur5"]),
+    "tree": lambda: dk.load_robot(_TREE),
+}
+"""Builders of one model of every kind: a standard-DH and a modified-DH chain, a product-of-exponentials
+chain (a URDF), and a small tree (a ``Robot``: two branches, one prismatic joint; its functions name
+frames)."""
+CHAIN_KINDS = ("standard DH", "modified DH", "PoE")
+
+
+def every_model_kind(*kinds: str):
+    """Decorator: run a test once per model kind (all of :data:`MODEL_KINDS`, or ``kinds``), the model
+    passed as its ``model`` argument and named in the test's id, as in::
+
+        @every_model_kind(*CHAIN_KINDS)
+        def test_batch_shapes(model): ...
+    """
+    unknown = set(kinds) - set(MODEL_KINDS)
+    if unknown:
+        raise ValueError(f"kinds: expected some of {list(MODEL_KINDS)}, got {sorted(unknown)}")
+    chosen = kinds or tuple(MODEL_KINDS)
+    return pytest.mark.parametrize("model", [MODEL_KINDS[k]() for k in chosen], ids=list(chosen))
+
+
+# ---------------------------------------------------------------------------------------------- utilities
+
+
+@contextlib.contextmanager
+def time_limit(seconds: float, what: str):
+    """Fail (``TimeoutError``) if the block runs longer than ``seconds``: a hang fails a test instead of stalling CI.
+
+    SIGALRM interrupts Python code only (not a running XLA computation); main thread, POSIX.
+    """
+
+    def expire(signum, frame):
+        raise TimeoutError(f"{what}: still running after {seconds:g} s")
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def random_q(chain, n, seed=0):
+    """``(n, dof)`` float64 configurations uniform within limits (unlimited joints over one turn)."""
+    lo = np.where(np.isfinite(chain.lower), chain.lower, -np.pi)
+    hi = np.where(np.isfinite(chain.upper), chain.upper, np.pi)
+    return np.random.default_rng(seed).uniform(lo, hi, (n, chain.dof))
+
+
+def success_rate(success) -> float:
+    """Fraction of successes, counted exactly (a float32 mean of 99 of 100 reads 0.98999995)."""
+    success = np.asarray(success)
+    return np.count_nonzero(success) / success.size
+
+
+# ------------------------------------------------------------------------------------ NumPy references
 
 ALL_GC = np.array([[g2, g4, g6] for g2 in (1, -1) for g4 in (1, -1) for g6 in (1, -1)], dtype=np.float64)
 """``(8, 3)``: the eight global configurations ``(gc2, gc4, gc6)`` of an SRS arm."""
@@ -112,3 +243,48 @@ def pose(R, p) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, p
     return T
+
+
+def frame_errors(T, targets):
+    """Position (m) and rotation (rad) errors ``(n, k)`` between poses ``T`` and ``targets`` (float64)."""
+    targets = np.asarray(targets, np.float64)
+    pos = np.linalg.norm(T[..., :3, 3] - targets[..., :3, 3], axis=-1)
+    with jax.enable_x64(True):
+        rot = np.asarray(se3.rotation_angle(targets[..., :3, :3] @ np.swapaxes(T[..., :3, :3], -1, -2)))
+    return pos, rot
+
+
+# ------------------------------------------------------------------ Pinocchio (the validation install)
+
+
+def pin_q(model, robot, q):
+    """Pinocchio's configuration for our ``q``: mimic joints set from their sources (Pinocchio's
+    default URDF reader keeps them as independent joints)."""
+    import pinocchio as pin
+
+    values = dict(zip(robot.joint_names, q, strict=True))
+    for name, (source, m, o) in robot.mimic.items():
+        values[name] = m * values[source] + o
+    qp = pin.neutral(model)
+    for name, value in values.items():
+        joint = model.joints[model.getJointId(name)]
+        if joint.nq == 2:  # continuous joints: (cos, sin)
+            qp[joint.idx_q : joint.idx_q + 2] = np.cos(value), np.sin(value)
+        else:
+            qp[joint.idx_q] = value
+    return qp
+
+
+def pin_poses(path, robot, q, names, base=None):
+    """``(n, k, 4, 4)`` world poses of frames ``names`` by Pinocchio (float64), the root at ``base``."""
+    import pinocchio as pin
+
+    model = pin.buildModelFromUrdf(path)
+    data = model.createData()
+    out = np.zeros((len(q), len(names), 4, 4))
+    for i in range(len(q)):
+        pin.framesForwardKinematics(model, data, pin_q(model, robot, np.asarray(q[i], np.float64)))
+        for k, name in enumerate(names):
+            M = data.oMf[model.getFrameId(name, pin.BODY)].homogeneous
+            out[i, k] = M if base is None else np.asarray(base[i], np.float64) @ M
+    return out

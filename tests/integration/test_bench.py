@@ -1,12 +1,10 @@
 """The benchmark suite ``experiments/bench.py`` (a source-checkout script): its table, options and ratios."""
 
-import os
 import re
 import sys
 
 import pytest
-
-EXPERIMENTS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "experiments")
+from _reference import EXPERIMENTS
 
 
 @pytest.fixture

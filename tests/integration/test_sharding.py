@@ -7,7 +7,7 @@ import sys
 import textwrap
 
 import pytest
-from conftest import DATA
+from _reference import DATA
 
 FINGER = os.path.join(DATA, "example-robot-data", "robots", "finger_edu_description", "robots", "finger_edu.urdf")
 

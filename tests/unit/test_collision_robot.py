@@ -283,7 +283,7 @@ def test_humanoids_against_mujoco(model):
 
 
 def _erd(*parts: str) -> str:
-    from test_robot import ERD
+    from _reference import ERD
 
     path = os.path.join(ERD, *parts) if ERD else ""
     if not os.path.isfile(path):

@@ -7,8 +7,7 @@ import pinocchio as pin
 import pytest
 import pytorch_kinematics as pk
 import torch
-from _reference import dh_fk, poe_fk
-from conftest import BUILTIN, URDF_ROBOTS, random_q
+from _reference import BUILTIN, URDF_ROBOTS, dh_fk, poe_fk, random_q
 
 import diffkin as dk
 from diffkin import se3

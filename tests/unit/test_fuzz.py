@@ -26,9 +26,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _reference import FINGER, rotation_angle, time_limit
 from _reference import fk as fk_reference
-from _reference import rotation_angle
-from conftest import time_limit
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
@@ -622,15 +621,6 @@ def test_garbage_examples_fixed_in_issue_18(value):
 
 # ----- whole-robot IK: random targets, weights and locked joints -----------------------------------------
 
-FINGER = os.path.join(
-    os.path.dirname(__file__),
-    "data",
-    "example-robot-data",
-    "robots",
-    "finger_edu_description",
-    "robots",
-    "finger_edu.urdf",
-)
 _FINGER_ROBOT = dk.load_robot(FINGER)
 # Weights and locks are static (one compilation each): a few of them, the numbers random.
 _ROBOT_WEIGHTS = [None, (1.0, 1.0, 0.0, 1.0, 1.0, 1.0), (1e-5, 1e-5)]

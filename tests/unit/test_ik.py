@@ -11,8 +11,7 @@ import optax
 import pytest
 import pytorch_kinematics as pk
 import torch
-from _reference import dh_fk, pose_errors
-from conftest import URDF_ROBOTS, random_q
+from _reference import URDF_ROBOTS, dh_fk, pose_errors, random_q
 
 import diffkin as dk
 import diffkin.ik as ik

@@ -7,7 +7,7 @@ import pinocchio as pin
 import pytest
 import pytorch_kinematics as pk
 import torch
-from conftest import BUILTIN, URDF_ROBOTS, random_q
+from _reference import BUILTIN, URDF_ROBOTS, random_q
 
 import diffkin as dk
 from diffkin import se3

@@ -3,9 +3,9 @@
 import os
 import tomllib
 
-import diffkin as dk
+from _reference import ROOT
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+import diffkin as dk
 
 
 def test_license_and_typing_marker():

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import DATA
+from _reference import DATA
 
 import diffkin as dk
 from diffkin import se3

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import DATA
+from _reference import DATA
 
 import diffkin as dk
 from diffkin import workspace as ws

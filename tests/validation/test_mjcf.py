@@ -6,7 +6,7 @@ import os
 import mujoco
 import numpy as np
 import pytest
-from conftest import DATA, random_q, time_limit
+from _reference import DATA, random_q, time_limit
 
 import diffkin as dk
 import diffkin.cli
