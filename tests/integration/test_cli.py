@@ -12,12 +12,11 @@ import sys
 
 import numpy as np
 import pytest
-from _reference import dh_fk, pose, pose_errors
+from _reference import DATA, dh_fk, pose, pose_errors
 
 import diffkin as dk
 from diffkin import cli
 
-DATA = os.path.join(os.path.dirname(__file__), "data")
 TARGET = pose(np.diag([1.0, -1.0, -1.0]), [0.5, 0.1, 0.6])  # --pose 0.5 0.1 0.6 0 1 0 0: a half-turn about x
 
 
