@@ -136,6 +136,48 @@ def success_rate(success) -> float:
     return np.count_nonzero(success) / success.size
 
 
+# -------------------------------------------------------------------------- random collision shapes
+
+
+def rotations(rng: np.random.Generator, n: int) -> np.ndarray:
+    """``(n, 3, 3)`` uniformly random rotations (from unit quaternions)."""
+    w, x, y, z = (rng.normal(size=(n, 4)) / 1).T
+    s = np.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / s, x / s, y / s, z / s
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def random_fields(kind: str, rng: np.random.Generator, n: int, points: float = 0.1) -> dict[str, np.ndarray]:
+    """Fields of ``n`` random shapes of one kind in the cube ``[-0.5, 0.5]^3`` (sizes 0.02 to 0.4 m),
+    so that about a third of the pairs overlap. A fraction ``points`` of the capsules have zero length."""
+    if kind == "sphere":
+        return {"center": rng.uniform(-0.5, 0.5, (n, 3)), "radius": rng.uniform(0.02, 0.4, n)}
+    if kind == "capsule":
+        a = rng.uniform(-0.5, 0.5, (n, 3))
+        b = a + rng.normal(0, 0.3, (n, 3)) * (rng.uniform(size=(n, 1)) >= points)
+        return {"a": a, "b": b, "radius": rng.uniform(0.01, 0.2, n)}
+    if kind == "box":
+        T = np.tile(np.eye(4), (n, 1, 1))
+        T[:, :3, :3], T[:, :3, 3] = rotations(rng, n), rng.uniform(-0.5, 0.5, (n, 3))
+        return {"pose": T, "half_extents": rng.uniform(0.02, 0.4, (n, 3))}
+    normal = rng.normal(size=(n, 3))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    return {"normal": normal, "offset": rng.uniform(-0.3, 0.3, n)}
+
+
+def shape(kind: str, fields: dict, dtype=None):
+    """A ``dk.collision`` shape of one kind (sphere, capsule, box, plane) from :func:`random_fields`."""
+    classes = {"sphere": dk.collision.Sphere, "capsule": dk.collision.Capsule, "box": dk.collision.Box}
+    return classes.get(kind, dk.collision.Plane)(**{k: jax.numpy.asarray(v, dtype) for k, v in fields.items()})
+
+
 # ------------------------------------------------------------------------------------ NumPy references
 
 ALL_GC = np.array([[g2, g4, g6] for g2 in (1, -1) for g4 in (1, -1) for g6 in (1, -1)], dtype=np.float64)
