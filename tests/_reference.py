@@ -130,6 +130,15 @@ def random_q(chain, n, seed=0):
     return np.random.default_rng(seed).uniform(lo, hi, (n, chain.dof))
 
 
+def random_robot_q(robot, n, seed):
+    """In-limit configurations; unlimited (or huge-limit) joints within one turn either way, and so are
+    joints limited to one value (``<limit>`` without ``lower``/``upper``: wheels), for the kinematics."""
+    lo = np.maximum(np.where(np.isfinite(robot.lower), robot.lower, -np.pi), -np.pi)
+    hi = np.minimum(np.where(np.isfinite(robot.upper), robot.upper, np.pi), np.pi)
+    lo, hi = np.where(lo < hi, lo, -np.pi), np.where(lo < hi, hi, np.pi)
+    return np.random.default_rng(seed).uniform(lo, hi, (n, robot.dof))
+
+
 def success_rate(success) -> float:
     """Fraction of successes, counted exactly (a float32 mean of 99 of 100 reads 0.98999995)."""
     success = np.asarray(success)
