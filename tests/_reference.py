@@ -12,6 +12,8 @@ import os
 import signal
 from importlib import metadata
 
+import hypothesis
+import hypothesis.strategies
 import jax
 import numpy as np
 import pytest
@@ -185,6 +187,31 @@ def shape(kind: str, fields: dict, dtype=None):
     """A ``dk.collision`` shape of one kind (sphere, capsule, box, plane) from :func:`random_fields`."""
     classes = {"sphere": dk.collision.Sphere, "capsule": dk.collision.Capsule, "box": dk.collision.Box}
     return classes.get(kind, dk.collision.Plane)(**{k: jax.numpy.asarray(v, dtype) for k, v in fields.items()})
+
+
+# -------------------------------------------------------------------------------------- fuzzing budgets
+
+EXAMPLES = int(os.environ.get("DIFFKIN_FUZZ_EXAMPLES", "25"))
+FUZZ = hypothesis.settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    derandomize="DIFFKIN_FUZZ_EXAMPLES" not in os.environ,
+    suppress_health_check=[hypothesis.HealthCheck.too_slow, hypothesis.HealthCheck.data_too_large],
+)
+"""Property tests: ``DIFFKIN_FUZZ_EXAMPLES`` examples each (25, derandomized, unless set)."""
+# MJCF examples run under a SIGALRM limit (a hang, such as an include bomb, fails the test instead of
+# stalling CI) and a hypothesis deadline (an example slower than that is reported).
+MJCF_FUZZ = hypothesis.settings(FUZZ, deadline=5000)
+MJCF_TIME_LIMIT = 20.0
+
+
+def finite_floats(lo, hi):
+    return hypothesis.strategies.floats(lo, hi, allow_nan=False, allow_infinity=False)
+
+
+def number_text(values) -> str:
+    """Numbers as an XML attribute's text: ``"0.1 2.0 -3.5"``."""
+    return " ".join(repr(float(v)) for v in values)
 
 
 # ------------------------------------------------------------------------------------ NumPy references
