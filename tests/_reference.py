@@ -103,6 +103,12 @@ def every_model_kind(*kinds: str):
     return pytest.mark.parametrize("model", [MODEL_KINDS[k]() for k in chosen], ids=list(chosen))
 
 
+def frames_of(model) -> tuple[str, ...]:
+    """The frame arguments of a model's functions: none for a chain, a tree's last frame for a ``Robot``
+    (``dk.fk(model, q, *frames_of(model))``)."""
+    return (model.frame_names[-1],) if isinstance(model, dk.Robot) else ()
+
+
 # ---------------------------------------------------------------------------------------------- utilities
 
 

@@ -5,7 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import BUILTIN, URDF_ROBOTS, dh_fk, poe_fk, random_q
+from _reference import BUILTIN, CHAIN_KINDS, URDF_ROBOTS, dh_fk, every_model_kind, frames_of, poe_fk, random_q
 
 import diffkin as dk
 from diffkin import se3
@@ -141,15 +141,13 @@ def test_base_and_tool_transforms_apply():
     np.testing.assert_allclose(dk.fk(moved, q), base @ np.asarray(dk.fk(chain, q)) @ tool, atol=1e-14)
 
 
-# --- batching, transformations, dtypes -------------------------------------------------------
-
-_CHAINS = {"dh": dk.robots.panda(), "poe": dk.load_urdf(*URDF_ROBOTS["ur5"])}
+# --- batching, transformations, dtypes: every kind of chain (standard and modified DH, PoE) ----------
 
 
-@pytest.mark.parametrize("kind", list(_CHAINS))
+@every_model_kind(*CHAIN_KINDS)
 @pytest.mark.parametrize("shape", [(), (5,), (2, 3)])
-def test_batch_shapes(kind, shape):
-    chain = _CHAINS[kind]
+def test_batch_shapes(model, shape):
+    chain = model
     q = random_q(chain, int(np.prod(shape)), seed=13).reshape(shape + (chain.dof,))
     T = dk.fk(chain, q)
     assert T.shape == shape + (4, 4)
@@ -158,9 +156,9 @@ def test_batch_shapes(kind, shape):
     np.testing.assert_allclose(np.asarray(T).reshape(-1, 4, 4), flat, atol=1e-15)
 
 
-@pytest.mark.parametrize("kind", list(_CHAINS))
-def test_jit_vmap_grad_match_eager(kind):
-    chain = _CHAINS[kind]
+@every_model_kind(*CHAIN_KINDS)
+def test_jit_vmap_grad_match_eager(model):
+    chain = model
     q = jnp.asarray(random_q(chain, 8, seed=14))
     eager = dk.fk(chain, q)
     np.testing.assert_allclose(jax.jit(lambda x: dk.fk(chain, x))(q), eager, atol=1e-15)
@@ -183,13 +181,30 @@ def test_jit_vmap_grad_match_eager(kind):
     assert jf.shape == (4, 4, chain.dof) and np.all(np.isfinite(jf))
 
 
-@pytest.mark.parametrize("kind", list(_CHAINS))
-def test_float32_close_to_float64(kind):
-    chain = _CHAINS[kind]
+@every_model_kind(*CHAIN_KINDS)
+def test_float32_close_to_float64(model):
+    chain = model
     q = random_q(chain, 100, seed=15)
     T32 = jax.jit(lambda x: dk.fk(chain, x))(jnp.asarray(q, jnp.float32))
     assert T32.dtype == jnp.float32
     np.testing.assert_allclose(np.asarray(T32, np.float64), dk.fk(chain, q), atol=1e-5)
+
+
+@every_model_kind()
+def test_every_kind_compiled_equals_eager(model):
+    """fk, link_poses and the Jacobian by both methods, of every model kind (a tree at its last frame):
+    compiled equals eager, and the two Jacobians agree."""
+    frames = frames_of(model)
+    q = random_q(model, 4, seed=16)
+
+    def kinematics(q):
+        jacobians = tuple(dk.jacobian(model, q, *frames, method=m) for m in ("analytic", "autodiff"))
+        return dk.fk(model, q, *frames), dk.link_poses(model, q), *jacobians
+
+    eager, compiled = kinematics(q), jax.jit(kinematics)(q)
+    for a, b in zip(eager, compiled, strict=True):
+        np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(eager[2], eager[3], rtol=0, atol=1e-13)
 
 
 def test_fk_at_zero_angle_is_exact_and_gradient_finite():

@@ -5,7 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import BUILTIN, URDF_ROBOTS, random_q
+from _reference import BUILTIN, CHAIN_KINDS, URDF_ROBOTS, every_model_kind, random_q
 
 import diffkin as dk
 from diffkin import se3
@@ -142,9 +142,10 @@ def test_jacobian_batch_shapes(shape):
     assert dk.manipulability(chain, q).shape == shape
 
 
+@every_model_kind(*CHAIN_KINDS)
 @pytest.mark.parametrize("method", ["autodiff", "analytic"])
-def test_jacobian_jit_vmap_and_float32(method):
-    chain = MODELS["panda"]
+def test_jacobian_jit_vmap_and_float32(model, method):
+    chain = model
     q = random_q(chain, 6, seed=26)
     ref = dk.jacobian(chain, q, "body", method=method)
     fn = jax.jit(lambda x: dk.jacobian(chain, x, "body", method=method))
