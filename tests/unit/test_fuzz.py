@@ -383,6 +383,18 @@ def test_bad_inputs_raise_value_or_type_errors(data):
     _value_or_type_error_only(_args.check_settings, 4, "lm", 10, junk, 1e-4, None)
 
 
+@pytest.mark.parametrize("junk", [",", "abc", b","])
+def test_strings_are_type_errors(junk):
+    """A string is not numbers: TypeError (``","`` raised SyntaxError from NumPy's dtype parser, found by
+    test_bad_inputs_raise_value_or_type_errors)."""
+    chain = dk.robots.iiwa14()
+    for fn in (dk.fk, dk.jacobian):
+        with pytest.raises(TypeError, match=r"^q: expected an array of joint values"):
+            fn(chain, junk)
+    with pytest.raises(TypeError, match=r"^a: expected an array"):
+        dk.DHChain.from_table(np.zeros((7, 4))).replace(a=junk)
+
+
 @pytest.mark.parametrize("value", [np.nan, np.inf])
 def test_garbage_examples_fixed_in_issue_18(value):
     """A few of the inputs the fuzzing found, kept as plain regression tests."""
