@@ -1,5 +1,5 @@
-"""Workspace maps in subprocesses: identical across device counts (4 host devices), and memory that does
-not grow with the number of samples."""
+"""Workspace maps saved, loaded and plotted (matplotlib: the plot extra); in subprocesses, identical
+across device counts (4 host devices), and memory that does not grow with the number of samples."""
 
 import json
 import os
@@ -16,6 +16,41 @@ import diffkin as dk
 from diffkin import workspace as ws
 
 KEY = jax.random.key(7)
+
+
+def test_save_load_and_plot_slice(tmp_path):
+    m = ws.reachability(dk.robots.planar([1.0, 0.5]), 4000, key=KEY, voxel_size=0.25, chunk=1000)
+    m.save(tmp_path / "map.npz")
+    back = ws.ReachabilityMap.load(tmp_path / "map.npz")
+    for name in ("counts", "manipulability", "dexterity", "origin"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(m, name))
+    assert (back.voxel_size, back.n_samples, back.n_outside, back.orientation_bins, back.chain_name) == (
+        m.voxel_size,
+        m.n_samples,
+        m.n_outside,
+        m.orientation_bins,
+        "planar2R",
+    )
+    labels = {"count": "samples per voxel", "manipulability": "Yoshikawa", "dexterity": "(of 48)"}
+    for quantity in ("count", "manipulability", "dexterity"):
+        path = tmp_path / f"{quantity}.png"
+        ax = ws.plot_slice(m, axis="z", value=0.0, quantity=quantity, path=path)
+        assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 5000
+        # the plot says what it shows: the slab, the samples, the Jacobian, the dexterity scale
+        title, image = ax.get_title(), ax.images[0]
+        assert "slab z in [-0.125, 0.125) m" in title and "4,000 samples uniform in joint space" in title, title
+        assert labels[quantity] in image.colorbar.ax.get_ylabel()
+        if quantity == "manipulability":
+            assert "world Jacobian of the end effector" in title
+        if quantity == "dexterity":
+            assert image.get_clim() == (0, 48)
+    ws.plot_slice(reach_map=m, axis="z")  # the parameter no longer shadows the builtin map
+    with pytest.raises(ValueError, match="quantity"):
+        ws.plot_slice(m, quantity="volume")
+    with pytest.raises(ValueError, match="axis"):
+        ws.plot_slice(m, axis="w")
+    with pytest.raises(ValueError, match="value"):
+        ws.plot_slice(m, axis="z", value=5.0)
 
 
 def _run(script: str, env: dict) -> dict:
