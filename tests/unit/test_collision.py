@@ -116,7 +116,7 @@ _VALUE_AND_GRAD = jax.jit(jax.value_and_grad(distance, argnums=(0, 1)))
 
 
 @pytest.mark.parametrize("a, b, expected", [c[1:] for c in DEGENERATE], ids=[c[0] for c in DEGENERATE])
-@pytest.mark.parametrize("dtype", [pytest.param(jnp.float32, marks=pytest.mark.slow), jnp.float64])
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
 def test_degenerate_inputs_are_finite(a, b, expected, dtype):
     """Finite distances (both orders) and finite gradients with respect to every field, f32 and f64."""
     a, b = (jax.tree.map(lambda x: x.astype(dtype), s) for s in (a, b))
