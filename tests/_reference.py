@@ -1,9 +1,10 @@
 """The tests' one module of shared helpers, importable from every tier (``tests/conftest.py`` puts
-``tests/`` on ``sys.path``): data paths and test robots, random configurations, a time limit, the
-model kinds every kinematics test runs over, independent float64 NumPy references (forward kinematics
-written from the textbook formulas, not from diffkin's kernels; pose errors; the iiwa's global
-configurations) and, for the validation tier, Pinocchio's view of a robot (imported on use: the unit
-tier needs only diffkin, numpy, jax, optax and hypothesis)."""
+``tests/`` on ``sys.path``; test modules do not import each other): data paths and test robots, the
+model kinds of :func:`every_model_kind`, random configurations, a time limit, random collision shapes,
+MJCF snippets, fuzzing budgets, independent float64 NumPy references (forward kinematics written from
+the textbook formulas, not from diffkin's kernels; pose errors; the iiwa's global configurations) and,
+for the validation tier, Pinocchio's view of a robot (imported on use: the unit tier needs only
+diffkin, numpy, jax, optax and hypothesis)."""
 
 from __future__ import annotations
 
