@@ -196,6 +196,31 @@ def shape(kind: str, fields: dict, dtype=None):
     return classes.get(kind, dk.collision.Plane)(**{k: jax.numpy.asarray(v, dtype) for k, v in fields.items()})
 
 
+# ------------------------------------------------------------------------------ a toy arm's collision geometry
+
+TOY_COLLISION_URDF = """<robot name="toy">
+  <link name="base"><collision><geometry><box size="0.4 0.4 0.1"/></geometry></collision></link>
+  <link name="upper">
+    <collision><origin xyz="0 0 0.25"/><geometry><cylinder radius="0.05" length="0.5"/></geometry></collision>
+    <collision><origin xyz="0 0 0.5"/><geometry><sphere radius="0.07"/></geometry></collision>
+  </link>
+  <link name="lower"><collision><origin xyz="0 0 0.2" rpy="0 1.5707963267948966 0"/>
+    <geometry><capsule radius="0.04" length="0.4"/></geometry></collision></link>
+  <link name="hand"><collision><geometry><sphere radius="0.06"/></geometry></collision></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="upper"/><origin xyz="0 0 0.05"/>
+    <axis xyz="0 1 0"/><limit lower="-3" upper="3"/></joint>
+  <joint name="j2" type="revolute"><parent link="upper"/><child link="lower"/><origin xyz="0 0 0.5"/>
+    <axis xyz="0 1 0"/><limit lower="-3" upper="3"/></joint>
+  <joint name="fixed" type="fixed"><parent link="lower"/><child link="hand"/><origin xyz="0 0 0.4"/></joint>
+</robot>"""
+
+
+def toy_robot():
+    """The toy arm of :data:`TOY_COLLISION_URDF` and its collision geometry."""
+    robot = dk.load_robot(TOY_COLLISION_URDF)
+    return robot, dk.collision.load(TOY_COLLISION_URDF, robot)
+
+
 # ------------------------------------------------------------------------------------------- MJCF snippets
 
 HEAD = '<compiler boundmass="1" boundinertia="0.1"/>'  # masses MuJoCo needs; no kinematic effect

@@ -1,7 +1,8 @@
 """A robot's collision geometry (``dk.collision.load``), its pairs and distances.
 
 Small files here; dm_control's humanoids against MuJoCo, example-robot-data against Pinocchio
-and coal, and the mesh fits of the Panda and UR5: ``tests/validation/test_collision_robot_validation.py``.
+and coal, the mesh fits of the Panda and UR5, and the toy's batches, jit, gradients and large batches
+in steps (long compilations): ``tests/validation/test_collision_robot_validation.py``.
 """
 
 from __future__ import annotations
@@ -10,33 +11,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _reference import TOY_COLLISION_URDF as URDF
+from _reference import toy_robot
 
 import diffkin as dk
-from diffkin.collision import Box, Plane, Sphere, World
-
-URDF = """<robot name="toy">
-  <link name="base"><collision><geometry><box size="0.4 0.4 0.1"/></geometry></collision></link>
-  <link name="upper">
-    <collision><origin xyz="0 0 0.25"/><geometry><cylinder radius="0.05" length="0.5"/></geometry></collision>
-    <collision><origin xyz="0 0 0.5"/><geometry><sphere radius="0.07"/></geometry></collision>
-  </link>
-  <link name="lower"><collision><origin xyz="0 0 0.2" rpy="0 1.5707963267948966 0"/>
-    <geometry><capsule radius="0.04" length="0.4"/></geometry></collision></link>
-  <link name="hand"><collision><geometry><sphere radius="0.06"/></geometry></collision></link>
-  <joint name="j1" type="revolute"><parent link="base"/><child link="upper"/><origin xyz="0 0 0.05"/>
-    <axis xyz="0 1 0"/><limit lower="-3" upper="3"/></joint>
-  <joint name="j2" type="revolute"><parent link="upper"/><child link="lower"/><origin xyz="0 0 0.5"/>
-    <axis xyz="0 1 0"/><limit lower="-3" upper="3"/></joint>
-  <joint name="fixed" type="fixed"><parent link="lower"/><child link="hand"/><origin xyz="0 0 0.4"/></joint>
-</robot>"""
+from diffkin.collision import Plane, Sphere, World
 
 SRDF = """<robot name="toy"><disable_collisions link1="base" link2="hand" reason="Never"/></robot>"""
 
 
 @pytest.fixture(scope="module")
 def toy():
-    robot = dk.load_robot(URDF)
-    return robot, dk.collision.load(URDF, robot)
+    return toy_robot()
 
 
 def test_urdf_shapes_and_pairs(toy):
@@ -74,51 +60,6 @@ def test_distances_closed_form(toy):
     np.testing.assert_allclose(w[0, 0], 2 - 0.55 - 0.07 - 0.1, atol=1e-12)  # upper's sphere below the ball
     c = jax.jit(dk.collision.clearance)(robot, geom, q, world)
     np.testing.assert_allclose(c, min(d.min(), w.min()))
-
-
-def test_batches_base_jit_and_gradients(toy):
-    """Batched q and a floating base (a shift moves every shape), under jit, with finite gradients."""
-    robot, geom = toy
-    q = jnp.asarray(np.random.default_rng(0).uniform(-3, 3, (6, 2)))
-    world = World(Box(jnp.eye(4).at[2, 3].set(-1.0), jnp.ones(3)))
-    w = jax.jit(lambda q: dk.collision.world_distances(robot, geom, q, world))(q)
-    assert w.shape == (6, 5, 1)
-    up = jnp.eye(4).at[2, 3].set(0.3)
-    np.testing.assert_allclose(dk.collision.world_distances(robot, geom, q, world, base=up), w + 0.3, atol=1e-12)
-    assert dk.collision.self_distances(robot, geom, q[0], base=jnp.stack([up, up])).shape == (2, 2)
-    g = jax.jit(jax.grad(lambda q: dk.collision.clearance(robot, geom, q, world)))(q[0])
-    assert np.all(np.isfinite(g))
-    g32 = jax.jit(jax.grad(lambda q: dk.collision.clearance(robot, geom, q, world).sum()))(q.astype(jnp.float32))
-    assert np.all(np.isfinite(g32))
-
-
-def test_large_batches_go_in_steps(toy, monkeypatch):
-    """Above twice the step, the batch goes through in fixed-size steps (the last overlapping): same values,
-    a floating base included, and gradients through the steps."""
-    from diffkin.collision import _robot
-
-    robot, geom = toy
-    rng = np.random.default_rng(3)
-    q = jnp.asarray(rng.uniform(-3, 3, (5, 7, 2)))
-    base = jnp.tile(jnp.eye(4), (7, 1, 1)).at[:, :3, 3].set(jnp.asarray(rng.uniform(-0.2, 0.2, (7, 3))))
-    world = World(Box(jnp.eye(4).at[2, 3].set(-1.0), jnp.ones(3)), Sphere(jnp.array([0.3, 0, 0.5]), 0.1))
-    whole = (
-        dk.collision.self_distances(robot, geom, q, base),
-        dk.collision.world_distances(robot, geom, q, world, base),
-    )
-    monkeypatch.setattr(_robot, "STEP", 4)
-    stepped = (
-        dk.collision.self_distances(robot, geom, q, base),
-        dk.collision.world_distances(robot, geom, q, world, base),
-    )
-    for a, b in zip(whole, stepped, strict=True):
-        assert a.shape == b.shape
-        np.testing.assert_allclose(b, a, rtol=0, atol=1e-14)
-    # jitted: op by op, the derivative of the steps' loop is compiled piece by piece, several times slower;
-    # the ball only (the box's derivative, tested in test_collision.py, triples the compile time)
-    ball = World(Sphere(jnp.array([0.3, 0, 0.5]), 0.1))
-    g = jax.jit(jax.grad(lambda q: dk.collision.clearance(robot, geom, q, ball).sum()))(q)
-    assert g.shape == q.shape and np.all(np.isfinite(g))
 
 
 def test_bad_input():
