@@ -1,5 +1,6 @@
 """The tests' one module of shared helpers, importable from every tier (``tests/conftest.py`` puts
-``tests/`` on ``sys.path``; test modules do not import each other): data paths and test robots, the
+``tests/`` on ``sys.path``; test modules do not import each other, but for ``test_viewer.py``'s
+``INTERRUPTIBLE`` from ``test_cli.py``): data paths and test robots, the
 model kinds of :func:`every_model_kind`, random configurations, a time limit, random collision shapes,
 MJCF snippets, fuzzing budgets, independent float64 NumPy references (forward kinematics written from
 the textbook formulas, not from diffkin's kernels; pose errors; the iiwa's global configurations) and,
