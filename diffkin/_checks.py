@@ -76,6 +76,8 @@ def real_array(value, name: str, what: str = "numbers") -> jax.Array:
         ValueError: numbers beyond the float range.
         TypeError: not numbers, or bool or complex values.
     """
+    if isinstance(value, (str, bytes)):  # jnp.asarray reads a string as a dtype: "," raises SyntaxError
+        raise TypeError(f"{name}: expected an array of {what}, got {type(value).__name__}")
     try:
         x = jnp.asarray(value)
     except OverflowError as err:

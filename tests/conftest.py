@@ -1,56 +1,47 @@
 """Test settings: float64 enabled (float32 tests pass float32 arrays explicitly), strict promotion off,
-warnings are errors (pyproject), and shared robot fixtures."""
+warnings are errors (pyproject), shared robot fixtures, and the tiers.
 
-import contextlib
+The tests live in three directories, by what they need (CONTRIBUTING.md): ``unit/`` (diffkin, numpy,
+jax, optax, hypothesis: ``pip install -e ".[dev]"``), ``validation/`` (other libraries: Pinocchio,
+MuJoCo, pytorch-kinematics, coal, example-robot-data, dm_control, real meshes) and ``integration/``
+(subprocesses, the CLI, the viewer's server, benchmarks and experiments, the docs' examples). Each test
+is marked with its directory's name (``-m unit``); tests outside the unit tier are also ``slow``, so
+``-m "not slow"`` selects the unit tier. Shared helpers: ``tests/_reference.py`` (``tests/`` is put on
+``sys.path`` here, so every tier imports it as ``_reference``)."""
+
 import os
-import signal
+import sys
+from pathlib import Path
 
 import jax
-import numpy as np
 import pytest
 
 jax.config.update("jax_enable_x64", True)
 # The CLI's persistent compilation cache stays off in tests (and their subprocesses) unless a test asks.
 os.environ["DIFFKIN_CACHE_DIR"] = "off"
 
+TESTS = Path(__file__).resolve().parent
+if str(TESTS) not in sys.path:
+    sys.path.insert(0, str(TESTS))
+
+from _reference import URDF_ROBOTS  # noqa: E402
+
 import diffkin as dk  # noqa: E402
 
-DATA = os.path.join(os.path.dirname(__file__), "data")
-
-# URDF robots of the validation: (name, path, end link); built once per session.
-URDF_ROBOTS = {
-    "iiwa7": (dk.robots.urdf_path("iiwa7"), "iiwa7_link_ee"),
-    "iiwa14": (dk.robots.urdf_path("iiwa14"), "iiwa14_link_ee"),
-    "panda": (os.path.join(DATA, "panda.urdf"), "panda_link8"),
-    "ur5": (os.path.join(DATA, "ur5.urdf"), "tool0"),
-}
-BUILTIN = dk.robots.BUILTIN
+TIERS = ("unit", "validation", "integration")
 
 
-@contextlib.contextmanager
-def time_limit(seconds: float, what: str):
-    """Fail (``TimeoutError``) if the block runs longer than ``seconds``: a hang fails a test instead of stalling CI.
-
-    SIGALRM interrupts Python code only (not a running XLA computation); main thread, POSIX.
-    """
-
-    def expire(signum, frame):
-        raise TimeoutError(f"{what}: still running after {seconds:g} s")
-
-    previous = signal.signal(signal.SIGALRM, expire)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
-
-
-def random_q(chain, n, seed=0):
-    """``(n, dof)`` float64 configurations uniform within limits (unlimited joints over one turn)."""
-    lo = np.where(np.isfinite(chain.lower), chain.lower, -np.pi)
-    hi = np.where(np.isfinite(chain.upper), chain.upper, np.pi)
-    return np.random.default_rng(seed).uniform(lo, hi, (n, chain.dof))
+@pytest.hookimpl(tryfirst=True)  # before -m deselects by the markers
+def pytest_collection_modifyitems(config, items):
+    """Mark each test with its tier, the directory it lives in (``slow`` too outside ``unit/``)."""
+    for item in items:
+        parts = Path(item.path).resolve().relative_to(TESTS).parts
+        tier = parts[0] if len(parts) > 1 else None
+        if tier not in TIERS:
+            raise pytest.UsageError(f"{item.nodeid}: a test lives in tests/unit, tests/validation or tests/integration")
+        item.add_marker(tier)
+        if tier != "unit":
+            item.add_marker("slow")
 
 
 @pytest.fixture(scope="session")

@@ -1,55 +1,16 @@
-"""Jacobians in three frames, manipulability, and gradients with respect to model parameters."""
+"""Jacobians in three frames, manipulability, and gradients with respect to model parameters (against
+Pinocchio and pytorch-kinematics: ``tests/validation/test_jacobian_validation.py``)."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import pinocchio as pin
 import pytest
-import pytorch_kinematics as pk
-import torch
-from conftest import BUILTIN, URDF_ROBOTS, random_q
+from _reference import BUILTIN, CHAIN_KINDS, URDF_ROBOTS, every_model_kind, random_q
 
 import diffkin as dk
 from diffkin import se3
 
 FRAMES = ("world", "space", "body")
-PIN_FRAME = {"world": pin.LOCAL_WORLD_ALIGNED, "space": pin.WORLD, "body": pin.LOCAL}
-N = 100
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("name", list(URDF_ROBOTS))
-def test_jacobians_match_pinocchio(name, urdf_chains):
-    chain = urdf_chains[name]
-    path, end = URDF_ROBOTS[name]
-    with open(path) as fh:
-        model = pin.buildModelFromXML(fh.read())
-    data, fid = model.createData(), model.getFrameId(end)
-    idx_q = [model.joints[model.getJointId(n)].idx_q for n in chain.joint_names]
-    idx_v = [model.joints[model.getJointId(n)].idx_v for n in chain.joint_names]
-    q = random_q(chain, N, seed=20)
-    ours = {f: np.asarray(dk.jacobian(chain, q, f)) for f in FRAMES}
-    worst = dict.fromkeys(FRAMES, 0.0)
-    for k in range(N):
-        qp = np.zeros(model.nq)
-        qp[idx_q] = q[k]
-        pin.computeJointJacobians(model, data, qp)
-        pin.updateFramePlacements(model, data)
-        for f in FRAMES:
-            ref = pin.getFrameJacobian(model, data, fid, PIN_FRAME[f])[:, idx_v]
-            worst[f] = max(worst[f], np.abs(ref - ours[f][k]).max())
-    assert max(worst.values()) < 1e-10, worst
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("name", list(URDF_ROBOTS))
-def test_world_jacobian_matches_pytorch_kinematics(name, urdf_chains):
-    path, end = URDF_ROBOTS[name]
-    with open(path, "rb") as fh:
-        ref_chain = pk.build_serial_chain_from_urdf(fh.read(), end).to(dtype=torch.float64)
-    q = random_q(urdf_chains[name], N, seed=21)
-    ref = ref_chain.jacobian(torch.tensor(q)).numpy()
-    np.testing.assert_allclose(dk.jacobian(urdf_chains[name], q), ref, atol=1e-6)
 
 
 def _models():
@@ -181,9 +142,10 @@ def test_jacobian_batch_shapes(shape):
     assert dk.manipulability(chain, q).shape == shape
 
 
+@every_model_kind(*CHAIN_KINDS)
 @pytest.mark.parametrize("method", ["autodiff", "analytic"])
-def test_jacobian_jit_vmap_and_float32(method):
-    chain = MODELS["panda"]
+def test_jacobian_jit_vmap_and_float32(model, method):
+    chain = model
     q = random_q(chain, 6, seed=26)
     ref = dk.jacobian(chain, q, "body", method=method)
     fn = jax.jit(lambda x: dk.jacobian(chain, x, "body", method=method))

@@ -1,12 +1,10 @@
 """The benchmark suite ``experiments/bench.py`` (a source-checkout script): its table, options and ratios."""
 
-import os
 import re
 import sys
 
 import pytest
-
-EXPERIMENTS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "experiments")
+from _reference import EXPERIMENTS
 
 
 @pytest.fixture
@@ -20,7 +18,6 @@ def bench(monkeypatch):
     return bench
 
 
-@pytest.mark.slow
 def test_quick_fk_table(bench, capsys, tmp_path):
     assert bench.main(bench.parse_args(["--quick", "--only", "fk", "--out", str(tmp_path / "bench.md")])) == 0
     out = capsys.readouterr().out
@@ -31,7 +28,6 @@ def test_quick_fk_table(bench, capsys, tmp_path):
     assert (tmp_path / "bench.md").read_text().strip() in out
 
 
-@pytest.mark.slow
 def test_without_pytorch_kinematics(bench, capsys, monkeypatch):
     import _bench
 
@@ -42,7 +38,6 @@ def test_without_pytorch_kinematics(bench, capsys, monkeypatch):
     assert len(rows) == 4 and all("| n/a | n/a |" in r for r in rows), rows
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize(
     "argv, match",
     [
@@ -58,7 +53,6 @@ def test_usage_errors(bench, capsys, argv, match):
     assert exit_.value.code == 2 and match in capsys.readouterr().err
 
 
-@pytest.mark.slow
 def test_implausible_ratios_are_marked(bench):
     assert bench._ratio(42.0) == "**42x**"
     assert bench._ratio(850.0) == "850x (implausible: busy machine? rerun)"

@@ -9,24 +9,30 @@ import jax.numpy as jnp
 import numpy as np
 import pinocchio as pin
 import pytest
-from test_robot import ERD, PANDA, _pin_q
+from _reference import (
+    BAXTER,
+    ERD,
+    FEET,
+    HANDS,
+    PANDA,
+    POS_TOL,
+    ROT_TOL,
+    SLACK_POS,
+    SLACK_ROT,
+    SOLO,
+)
+from _reference import frame_errors as _errors
+from _reference import pin_poses as _pin_poses
+from _reference import pin_q as _pin_q
+from _reference import random_q as _random_q
+from _reference import success_rate as _rate
 
 import diffkin as dk
 from diffkin import se3
 from diffkin.ik import _secondary
 
 pytestmark = pytest.mark.skipif(not ERD, reason="example-robot-data is not installed (pip install -e '.[test]')")
-POS_TOL, ROT_TOL = 1e-5, 1e-4
-# float32 solutions re-checked in float64 against the float64 targets: no slack (the solver decides
-# success with a margin for float32 rounding: diffkin.ik._solve.ROUNDING_POS/ROT).
-SLACK_POS, SLACK_ROT = 0.0, 0.0
 N = 100
-
-
-def _random_q(robot, n, seed):
-    lo = np.where(np.isfinite(robot.lower), robot.lower, -np.pi)
-    hi = np.where(np.isfinite(robot.upper), robot.upper, np.pi)
-    return np.random.default_rng(seed).uniform(lo, hi, (n, robot.dof))
 
 
 def _rotations(w):
@@ -34,34 +40,6 @@ def _rotations(w):
     theta = np.linalg.norm(w, axis=-1)[:, None, None]
     K = np.asarray(se3.skew(w / np.maximum(theta[..., 0], 1e-300)))
     return np.eye(3) + np.sin(theta) * K + (1 - np.cos(theta)) * K @ K
-
-
-def _pin_poses(path, robot, q, names, base=None):
-    """``(n, k, 4, 4)`` world poses of frames ``names`` by Pinocchio (float64), the root at ``base``."""
-    model = pin.buildModelFromUrdf(path)
-    data = model.createData()
-    out = np.zeros((len(q), len(names), 4, 4))
-    for i in range(len(q)):
-        pin.framesForwardKinematics(model, data, _pin_q(model, robot, np.asarray(q[i], np.float64)))
-        for k, name in enumerate(names):
-            M = data.oMf[model.getFrameId(name, pin.BODY)].homogeneous
-            out[i, k] = M if base is None else np.asarray(base[i], np.float64) @ M
-    return out
-
-
-def _errors(T, targets):
-    """Position (m) and rotation (rad) errors ``(n, k)`` between poses ``T`` and ``targets`` (float64)."""
-    targets = np.asarray(targets, np.float64)
-    pos = np.linalg.norm(T[..., :3, 3] - targets[..., :3, 3], axis=-1)
-    with jax.enable_x64(True):
-        rot = np.asarray(se3.rotation_angle(targets[..., :3, :3] @ np.swapaxes(T[..., :3, :3], -1, -2)))
-    return pos, rot
-
-
-def _rate(success) -> float:
-    """Fraction of successes, counted exactly (a float32 mean of 99 of 100 reads 0.98999995)."""
-    success = np.asarray(success)
-    return np.count_nonzero(success) / success.size
 
 
 def _check_successes(res, T_pin, targets):
@@ -74,11 +52,7 @@ def _check_successes(res, T_pin, targets):
     assert np.all(np.isfinite(np.asarray(res.q)))
 
 
-BAXTER = os.path.join(ERD, "baxter_description/urdf/baxter.urdf") if ERD else ""
-SOLO = os.path.join(ERD, "solo_description/robots/solo12.urdf") if ERD else ""
 TALOS = os.path.join(ERD, "talos_data/robots/talos_reduced.urdf") if ERD else ""
-HANDS = ["left_gripper", "right_gripper"]
-FEET = ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
 
 
 @pytest.fixture(scope="module")

@@ -1,80 +1,16 @@
-"""Forward kinematics against Pinocchio, pytorch-kinematics, textbook closed forms and identities."""
+"""Forward kinematics against textbook closed forms, the NumPy references and identities (against Pinocchio
+and pytorch-kinematics: ``tests/validation/test_fk_validation.py``)."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import pinocchio as pin
 import pytest
-import pytorch_kinematics as pk
-import torch
-from _reference import dh_fk, poe_fk
-from conftest import BUILTIN, URDF_ROBOTS, random_q
+from _reference import BUILTIN, CHAIN_KINDS, URDF_ROBOTS, dh_fk, every_model_kind, frames_of, poe_fk, random_q
 
 import diffkin as dk
 from diffkin import se3
 
 N = 200
-
-
-def _pin_model(name):
-    path, _ = URDF_ROBOTS[name]
-    with open(path) as fh:
-        model = pin.buildModelFromXML(fh.read())
-    return model, model.createData()
-
-
-def _pin_q(model, chain, q):
-    qp = np.zeros(model.nq)
-    for i, name in enumerate(chain.joint_names):
-        qp[model.joints[model.getJointId(name)].idx_q] = q[i]
-    return qp
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("name", list(URDF_ROBOTS))
-def test_fk_and_link_poses_match_pinocchio(name, urdf_chains):
-    chain = urdf_chains[name]
-    model, data = _pin_model(name)
-    end = model.getFrameId(URDF_ROBOTS[name][1])
-    joint_ids = [model.getJointId(n) for n in chain.joint_names]
-    q = random_q(chain, N, seed=1)
-    T = np.asarray(dk.fk(chain, q))
-    links = np.asarray(dk.link_poses(chain, q))
-    assert T.dtype == np.float64 and links.shape == (N, chain.dof + 1, 4, 4)
-    err_T = err_links = 0.0
-    for k in range(N):
-        pin.framesForwardKinematics(model, data, _pin_q(model, chain, q[k]))
-        err_T = max(err_T, np.abs(data.oMf[end].homogeneous - T[k]).max())
-        ref = np.stack([data.oMi[j].homogeneous for j in joint_ids])
-        err_links = max(err_links, np.abs(ref - links[k, 1:]).max())
-    np.testing.assert_allclose(links[:, 0], np.broadcast_to(np.eye(4), (N, 4, 4)), atol=0)
-    assert err_T < 1e-10 and err_links < 1e-10
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("name", list(URDF_ROBOTS))
-def test_fk_and_link_poses_match_pytorch_kinematics(name, urdf_chains):
-    path, end = URDF_ROBOTS[name]
-    with open(path, "rb") as fh:
-        ref_chain = pk.build_serial_chain_from_urdf(fh.read(), end).to(dtype=torch.float64)
-    chain = urdf_chains[name]
-    q = random_q(chain, N, seed=2)
-    ref = ref_chain.forward_kinematics(torch.tensor(q), end_only=False)
-    links = np.asarray(dk.link_poses(chain, q))
-    child_of = {j.name: j.child for j in _urdf_joints(path)}
-    for i, joint in enumerate(chain.joint_names):
-        np.testing.assert_allclose(links[:, i + 1], ref[child_of[joint]].get_matrix().numpy(), atol=1e-6)
-    np.testing.assert_allclose(np.asarray(dk.fk(chain, q)), ref[end].get_matrix().numpy(), atol=1e-6)
-
-
-def _urdf_joints(path):
-    import xml.etree.ElementTree as ET
-
-    class J:
-        def __init__(self, el):
-            self.name, self.child = el.get("name"), el.find("child").get("link")
-
-    return [J(el) for el in ET.parse(path).getroot().findall("joint")]
 
 
 @pytest.mark.parametrize("name", BUILTIN)
@@ -205,15 +141,13 @@ def test_base_and_tool_transforms_apply():
     np.testing.assert_allclose(dk.fk(moved, q), base @ np.asarray(dk.fk(chain, q)) @ tool, atol=1e-14)
 
 
-# --- batching, transformations, dtypes -------------------------------------------------------
-
-_CHAINS = {"dh": dk.robots.panda(), "poe": dk.load_urdf(*URDF_ROBOTS["ur5"])}
+# --- batching, transformations, dtypes: every kind of chain (standard and modified DH, PoE) ----------
 
 
-@pytest.mark.parametrize("kind", list(_CHAINS))
+@every_model_kind(*CHAIN_KINDS)
 @pytest.mark.parametrize("shape", [(), (5,), (2, 3)])
-def test_batch_shapes(kind, shape):
-    chain = _CHAINS[kind]
+def test_batch_shapes(model, shape):
+    chain = model
     q = random_q(chain, int(np.prod(shape)), seed=13).reshape(shape + (chain.dof,))
     T = dk.fk(chain, q)
     assert T.shape == shape + (4, 4)
@@ -222,9 +156,9 @@ def test_batch_shapes(kind, shape):
     np.testing.assert_allclose(np.asarray(T).reshape(-1, 4, 4), flat, atol=1e-15)
 
 
-@pytest.mark.parametrize("kind", list(_CHAINS))
-def test_jit_vmap_grad_match_eager(kind):
-    chain = _CHAINS[kind]
+@every_model_kind(*CHAIN_KINDS)
+def test_jit_vmap_grad_match_eager(model):
+    chain = model
     q = jnp.asarray(random_q(chain, 8, seed=14))
     eager = dk.fk(chain, q)
     np.testing.assert_allclose(jax.jit(lambda x: dk.fk(chain, x))(q), eager, atol=1e-15)
@@ -247,13 +181,30 @@ def test_jit_vmap_grad_match_eager(kind):
     assert jf.shape == (4, 4, chain.dof) and np.all(np.isfinite(jf))
 
 
-@pytest.mark.parametrize("kind", list(_CHAINS))
-def test_float32_close_to_float64(kind):
-    chain = _CHAINS[kind]
+@every_model_kind(*CHAIN_KINDS)
+def test_float32_close_to_float64(model):
+    chain = model
     q = random_q(chain, 100, seed=15)
     T32 = jax.jit(lambda x: dk.fk(chain, x))(jnp.asarray(q, jnp.float32))
     assert T32.dtype == jnp.float32
     np.testing.assert_allclose(np.asarray(T32, np.float64), dk.fk(chain, q), atol=1e-5)
+
+
+@every_model_kind()
+def test_every_kind_compiled_equals_eager(model):
+    """fk, link_poses and the Jacobian by both methods, of every model kind (a tree at its last frame):
+    compiled equals eager, and the two Jacobians agree."""
+    frames = frames_of(model)
+    q = random_q(model, 4, seed=16)
+
+    def kinematics(q):
+        jacobians = tuple(dk.jacobian(model, q, *frames, method=m) for m in ("analytic", "autodiff"))
+        return dk.fk(model, q, *frames), dk.link_poses(model, q), *jacobians
+
+    eager, compiled = kinematics(q), jax.jit(kinematics)(q)
+    for a, b in zip(eager, compiled, strict=True):
+        np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(eager[2], eager[3], rtol=0, atol=1e-13)
 
 
 def test_fk_at_zero_angle_is_exact_and_gradient_finite():

@@ -16,13 +16,13 @@ import pytest
 pytest.importorskip("viser")
 pytest.importorskip("trimesh")
 
+from _reference import DATA, ROOT
 from test_cli import ARM, INTERRUPTIBLE, SCENE, SCENE_FILE
 
 import diffkin as dk  # noqa: E402
 from diffkin.viewer import _visuals, show  # noqa: E402
 from diffkin.viewer._viewer import GC_OPTIONS  # noqa: E402
 
-DATA = os.path.join(os.path.dirname(__file__), "data")
 FINGER = os.path.join(DATA, "example-robot-data", "robots", "finger_edu_description", "robots", "finger_edu.urdf")
 FINGER_MESHES = {"finger_base_link": 4, "finger_upper_link": 1, "finger_middle_link": 1, "finger_lower_link": 1}
 
@@ -734,7 +734,7 @@ def test_cli_view_serves_the_page():
     import urllib.request
 
     port = _free_port()
-    env = dict(os.environ, PYTHONPATH=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    env = dict(os.environ, PYTHONPATH=ROOT)
     proc = subprocess.Popen(
         [*INTERRUPTIBLE, "view", "iiwa14", "--port", str(port)],
         stdout=subprocess.PIPE,

@@ -8,22 +8,19 @@ a shelf and spheres, every success re-checked by coal on the real meshes (marked
 
 from __future__ import annotations
 
-import os
 import sys
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import robot_poses
+from _reference import EXPERIMENTS, robot_poses
 
 import diffkin as dk
 from diffkin import _rigid as rg
 from diffkin.collision import Box, Plane, Sphere, World
 from diffkin.ik._problem import Problem
 from diffkin.ik._terms.avoid import BAND, AvoidTerm
-
-EXPERIMENTS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "experiments")
 
 ARM = """<robot name="arm">
   <link name="base"/>

@@ -6,22 +6,22 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from test_ik_robot import (
+from _reference import (
     BAXTER,
     ERD,
     FEET,
     HANDS,
+    PANDA,
     POS_TOL,
     ROT_TOL,
     SLACK_POS,
     SLACK_ROT,
     SOLO,
-    _errors,
-    _pin_poses,
-    _random_q,
-    _rate,
 )
-from test_robot import PANDA
+from _reference import frame_errors as _errors
+from _reference import pin_poses as _pin_poses
+from _reference import random_q as _random_q
+from _reference import success_rate as _rate
 
 import diffkin as dk
 from diffkin import _rigid as rg

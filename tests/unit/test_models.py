@@ -5,7 +5,7 @@ import re
 import jax
 import numpy as np
 import pytest
-from conftest import URDF_ROBOTS
+from _reference import URDF_ROBOTS
 
 import diffkin as dk
 

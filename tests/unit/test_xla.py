@@ -7,7 +7,7 @@ import os
 import jax
 import numpy as np
 import pytest
-from conftest import DATA, random_q
+from _reference import DATA, random_q
 
 import diffkin as dk
 

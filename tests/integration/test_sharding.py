@@ -6,8 +6,7 @@ import subprocess
 import sys
 import textwrap
 
-import pytest
-from conftest import DATA
+from _reference import DATA
 
 FINGER = os.path.join(DATA, "example-robot-data", "robots", "finger_edu_description", "robots", "finger_edu.urdf")
 
@@ -57,7 +56,6 @@ SCRIPT = """
 """
 
 
-@pytest.mark.slow
 def test_fk_and_ik_sharded_over_4_devices_match_one_device():
     env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=4", "JAX_PLATFORMS": "cpu"}
     out = subprocess.run(

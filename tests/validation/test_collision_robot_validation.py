@@ -1,8 +1,6 @@
-"""A robot's collision geometry (``dk.collision.load``), its pairs and distances.
-
-Small files here; dm_control's humanoids against MuJoCo, example-robot-data against Pinocchio
-and coal, and the mesh fits of the Panda and UR5 (marked slow: cross-library).
-"""
+"""A robot's collision geometry (``dk.collision.load``) against other libraries: dm_control's humanoids
+against MuJoCo, example-robot-data against Pinocchio and coal, and the mesh fits of the Panda and UR5;
+a toy arm's batches, jit and gradients against finite differences, and large batches in steps."""
 
 from __future__ import annotations
 
@@ -12,70 +10,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _reference import ERD, toy_robot
 
 import diffkin as dk
-from diffkin.collision import Box, Plane, Sphere, World
-
-URDF = """<robot name="toy">
-  <link name="base"><collision><geometry><box size="0.4 0.4 0.1"/></geometry></collision></link>
-  <link name="upper">
-    <collision><origin xyz="0 0 0.25"/><geometry><cylinder radius="0.05" length="0.5"/></geometry></collision>
-    <collision><origin xyz="0 0 0.5"/><geometry><sphere radius="0.07"/></geometry></collision>
-  </link>
-  <link name="lower"><collision><origin xyz="0 0 0.2" rpy="0 1.5707963267948966 0"/>
-    <geometry><capsule radius="0.04" length="0.4"/></geometry></collision></link>
-  <link name="hand"><collision><geometry><sphere radius="0.06"/></geometry></collision></link>
-  <joint name="j1" type="revolute"><parent link="base"/><child link="upper"/><origin xyz="0 0 0.05"/>
-    <axis xyz="0 1 0"/><limit lower="-3" upper="3"/></joint>
-  <joint name="j2" type="revolute"><parent link="upper"/><child link="lower"/><origin xyz="0 0 0.5"/>
-    <axis xyz="0 1 0"/><limit lower="-3" upper="3"/></joint>
-  <joint name="fixed" type="fixed"><parent link="lower"/><child link="hand"/><origin xyz="0 0 0.4"/></joint>
-</robot>"""
-
-SRDF = """<robot name="toy"><disable_collisions link1="base" link2="hand" reason="Never"/></robot>"""
+from diffkin.collision import Box, Sphere, World
 
 
 @pytest.fixture(scope="module")
 def toy():
-    robot = dk.load_robot(URDF)
-    return robot, dk.collision.load(URDF, robot)
-
-
-def test_urdf_shapes_and_pairs(toy):
-    robot, geom = toy
-    assert geom.counts == (2, 2, 1)  # spheres, capsules (the cylinder fitted), box
-    assert geom.shape_names == ("upper_1", "hand_0", "upper_0", "lower_0", "base_0")
-    assert geom.shape_links == ("upper", "hand", "upper", "lower", "base")
-    assert geom.shape_bodies == ("upper", "lower", "upper", "lower", "base")  # hand merged onto lower
-    # same body and body-parent pairs are left out: only base-lower remain (box-hand, box-capsule)
-    assert set(geom.pair_bodies) == {("lower", "base")}
-    assert geom.pairs.shape == (2, 2)
-    srdf = dk.collision.load(URDF, robot, srdf=SRDF)
-    assert [geom.shape_names[i] for i in srdf.pairs.ravel()] == ["lower_0", "base_0"]
-    # the cylinder's capsule contains it, and the overhead is reported for its link
-    ((name, source, volume, fitted),) = geom.fits
-    assert (name, source) == ("upper_0", "cylinder") and fitted >= volume
-    assert set(geom.volume_overhead()) == {"upper"}
-
-
-def test_distances_closed_form(toy):
-    """Arm folded down onto the base: the hand sphere against the box is computed by hand."""
-    robot, geom = toy
-    q = jnp.array([0.0, np.pi])  # lower points straight down from the elbow at z = 0.55
-    d = jax.jit(dk.collision.self_distances)(robot, geom, q)
-    hand = dict(zip(map(tuple, geom.pairs), d, strict=True))[(1, 4)]
-    # hand centre: elbow (0.55) - 0.4 = 0.15; box top at 0.05; sphere radius 0.06
-    np.testing.assert_allclose(hand, 0.15 - 0.05 - 0.06, atol=1e-12)
-    world = World(
-        Plane(jnp.array([0.0, 0, 1]), -1.0), Sphere(jnp.array([[0.0, 0, 2], [5, 5, 5]]), jnp.array([0.1, 0.1]))
-    )
-    w = jax.jit(dk.collision.world_distances)(robot, geom, q, world)
-    assert w.shape == (5, 3) and world.size == 3
-    # obstacles by kind: the two spheres, then the half-space
-    np.testing.assert_allclose(w[4, 2], 1.0 - 0.05, atol=1e-12)  # the base box above the floor at -1
-    np.testing.assert_allclose(w[0, 0], 2 - 0.55 - 0.07 - 0.1, atol=1e-12)  # upper's sphere below the ball
-    c = jax.jit(dk.collision.clearance)(robot, geom, q, world)
-    np.testing.assert_allclose(c, min(d.min(), w.min()))
+    return toy_robot()
 
 
 def test_batches_base_jit_and_gradients(toy):
@@ -121,78 +64,6 @@ def test_large_batches_go_in_steps(toy, monkeypatch):
     ball = World(Sphere(jnp.array([0.3, 0, 0.5]), 0.1))
     g = jax.jit(jax.grad(lambda q: dk.collision.clearance(robot, geom, q, ball).sum()))(q)
     assert g.shape == q.shape and np.all(np.isfinite(g))
-
-
-def test_bad_input():
-    robot = dk.load_robot(URDF)
-    with pytest.raises(ValueError, match="meshes"):
-        dk.collision.load(URDF, robot, meshes="spheres")
-    with pytest.raises(TypeError, match="robot"):
-        dk.collision.load(URDF, dk.load_urdf(URDF, "lower"))
-    with pytest.raises(ValueError, match="unknown frame 'nowhere'"):
-        dk.collision.load(URDF.replace('link name="hand"', 'link name="nowhere"'), robot)
-    with pytest.raises(ValueError, match="radius.*expected 1 finite"):
-        dk.collision.load(URDF.replace('radius="0.06"', 'radius="x"'), robot)
-    with pytest.raises(TypeError, match="World: argument 0"):
-        World(np.zeros(3))
-
-
-MJCF = """<mujoco>
-  <default><default class="limb"><geom type="capsule" size="0.03"/></default></default>
-  <option><flag filterparent="enable"/></option>
-  <worldbody>
-    <geom name="floor" type="plane" size="5 5 .1"/>
-    <body name="a" childclass="limb"><joint name="ja" type="hinge" axis="0 1 0"/>
-      <geom name="ga" fromto="0 0 0 0 0 0.4"/>
-      <geom name="ghost" type="sphere" size="0.1" contype="0" conaffinity="0"/>
-      <site name="tip" pos="0 0 0.4"/>
-      <body name="b" pos="0 0 0.4"><joint name="jb" type="hinge" axis="0 1 0"/>
-        <geom name="gb" fromto="0 0 0 0 0 0.4"/>
-        <frame pos="0 0 0.4"><body name="c"><joint name="jc" type="hinge" axis="1 0 0"/>
-          <geom name="gc" type="ellipsoid" size="0.05 0.02 0.1"/>
-          <geom name="gd" type="box" size="0.05 0.05 0.05" contype="2" conaffinity="2"/>
-        </body></frame>
-      </body>
-    </body>
-  </worldbody>
-  <contact><exclude body1="a" body2="c"/></contact>
-</mujoco>"""
-
-
-def test_mjcf_classes_filters_and_fits():
-    robot = dk.load_robot(MJCF)
-    geom = dk.collision.load(MJCF, robot)
-    assert geom.shape_names == ("ga", "gb", "gc", "gd")  # no floor (the world's), no ghost (no contact bits)
-    assert geom.counts == (0, 3, 1)
-    # a-b and b-c are parent and child, a-c excluded by <exclude>: no pair is left; without the exclude, a-c
-    assert geom.pairs.shape == (0, 2)
-    assert dk.collision.self_distances(robot, geom, jnp.zeros(3)).shape == (0,)
-    free = dk.collision.load(MJCF.replace('<contact><exclude body1="a" body2="c"/></contact>', ""), robot)
-    assert [(free.shape_names[i], free.shape_names[j]) for i, j in free.pairs] == [("ga", "gc")]  # gd: bits 2 vs 1
-    c = dict(zip(geom.shape_names, range(4), strict=True))
-    a, b = geom.capsules.a[c["gc"]], geom.capsules.b[c["gc"]]
-    np.testing.assert_allclose(np.abs(b - a), [0, 0, 2 * (0.1 - 0.05)], atol=1e-12)  # the ellipsoid's capsule
-    np.testing.assert_allclose(geom.capsules.radius[c["gc"]], 0.05)
-
-
-@pytest.mark.parametrize("radius, half", [(0.1, 1.0), (0.5, 0.05), (0.2, 0.2)])
-def test_cylinder_and_ellipsoid_fits_contain_them(radius, half):
-    """Points of the cylinder's rims and of the ellipsoid's surface are inside their capsules."""
-    from diffkin.collision import _fit
-
-    R, L = _fit.cylinder(radius, half)
-    phi = np.linspace(0, 2 * np.pi, 97)
-    rim = np.stack([radius * np.cos(phi), radius * np.sin(phi), np.full_like(phi, half)], 1)
-    for points in (rim, rim * [1, 1, -1]):
-        d = np.linalg.norm(points - np.clip(points * [0, 0, 1], -L, L), axis=1)
-        assert np.all(d <= R + 1e-15)
-    semi = np.array([radius, 0.7 * half + 0.01, half])
-    k, R, L = _fit.ellipsoid(semi)
-    u, v = np.meshgrid(np.linspace(0, np.pi, 61), phi)
-    surface = np.stack([np.sin(u) * np.cos(v), np.sin(u) * np.sin(v), np.cos(u)], -1).reshape(-1, 3) * semi
-    axial = surface[:, k]
-    radial = np.linalg.norm(np.delete(surface, k, axis=1), axis=1)
-    assert np.all(np.hypot(radial, np.maximum(np.abs(axial) - L, 0)) <= R + 1e-15)
 
 
 # -------------------------------------------------------------------------------- against MuJoCo
@@ -248,7 +119,6 @@ def _mujoco_configs(robot, m, mujoco, n, seed):
     return q, base, qpos
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("model", ["humanoid.xml", "humanoid_CMU.xml"])
 def test_humanoids_against_mujoco(model):
     """Active pairs equal MuJoCo's filter; every pair's distance equals mj_geomDistance to 1e-9 at 200
@@ -283,15 +153,12 @@ def test_humanoids_against_mujoco(model):
 
 
 def _erd(*parts: str) -> str:
-    from test_robot import ERD
-
     path = os.path.join(ERD, *parts) if ERD else ""
     if not os.path.isfile(path):
         pytest.skip(f"example-robot-data lacks {parts}")
     return path
 
 
-@pytest.mark.slow
 def test_primitive_urdf_against_pinocchio():
     """panda_collision.urdf (spheres, cylinders, meshes): every self pair of two exact shapes against
     pin.computeDistances to 1e-9 at 50 configurations; pairs with a fitted shape never farther."""
@@ -327,7 +194,6 @@ def test_primitive_urdf_against_pinocchio():
     assert np.all(d[:, ~exact] <= ref[:, ~exact] + 1e-9)
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize(
     "parts", [("panda_description", "urdf", "panda.urdf"), ("ur_description", "urdf", "ur5_robot.urdf")]
 )

@@ -12,13 +12,12 @@ import sys
 
 import numpy as np
 import pytest
-from _reference import dh_fk, pose, pose_errors
+from _reference import DATA, ROOT, dh_fk, pose, pose_errors
 
 import diffkin as dk
 from diffkin import cli
 
-DATA = os.path.join(os.path.dirname(__file__), "data")
-DOCS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "docs")
+DOCS = os.path.join(ROOT, "docs")
 FINGER = os.path.join(DATA, "example-robot-data", "robots", "finger_edu_description", "robots", "finger_edu.urdf")
 SCENE_FILE = os.path.join(DOCS, "scene.json")  # the documented example
 TARGET = pose(np.diag([1.0, -1.0, -1.0]), [0.5, 0.1, 0.6])  # --pose 0.5 0.1 0.6 0 1 0 0: a half-turn about x

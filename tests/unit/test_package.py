@@ -3,9 +3,9 @@
 import os
 import tomllib
 
-import diffkin as dk
+from _reference import ROOT
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+import diffkin as dk
 
 
 def test_license_and_typing_marker():
@@ -18,8 +18,9 @@ def test_license_and_typing_marker():
     assert "py.typed" in project["tool"]["setuptools"]["package-data"]["diffkin"]
     assert os.path.isfile(os.path.join(os.path.dirname(dk.__file__), "py.typed"))
     extras = project["project"]["optional-dependencies"]
-    assert {"demo", "ik", "plot", "progress", "validate", "test"} <= set(extras)
-    assert "slow" in " ".join(project["tool"]["pytest"]["ini_options"]["markers"])
+    assert {"demo", "ik", "plot", "progress", "validate", "dev", "test"} <= set(extras)
+    markers = " ".join(project["tool"]["pytest"]["ini_options"]["markers"])
+    assert all(f"{name}:" in markers for name in ("unit", "validation", "integration", "slow"))
 
 
 def test_public_names():

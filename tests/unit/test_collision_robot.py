@@ -1,0 +1,134 @@
+"""A robot's collision geometry (``dk.collision.load``), its pairs and distances.
+
+Small files here; dm_control's humanoids against MuJoCo, example-robot-data against Pinocchio
+and coal, the mesh fits of the Panda and UR5, and the toy's batches, jit, gradients and large batches
+in steps (long compilations): ``tests/validation/test_collision_robot_validation.py``.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from _reference import TOY_COLLISION_URDF as URDF
+from _reference import toy_robot
+
+import diffkin as dk
+from diffkin.collision import Plane, Sphere, World
+
+SRDF = """<robot name="toy"><disable_collisions link1="base" link2="hand" reason="Never"/></robot>"""
+
+
+@pytest.fixture(scope="module")
+def toy():
+    return toy_robot()
+
+
+def test_urdf_shapes_and_pairs(toy):
+    robot, geom = toy
+    assert geom.counts == (2, 2, 1)  # spheres, capsules (the cylinder fitted), box
+    assert geom.shape_names == ("upper_1", "hand_0", "upper_0", "lower_0", "base_0")
+    assert geom.shape_links == ("upper", "hand", "upper", "lower", "base")
+    assert geom.shape_bodies == ("upper", "lower", "upper", "lower", "base")  # hand merged onto lower
+    # same body and body-parent pairs are left out: only base-lower remain (box-hand, box-capsule)
+    assert set(geom.pair_bodies) == {("lower", "base")}
+    assert geom.pairs.shape == (2, 2)
+    srdf = dk.collision.load(URDF, robot, srdf=SRDF)
+    assert [geom.shape_names[i] for i in srdf.pairs.ravel()] == ["lower_0", "base_0"]
+    # the cylinder's capsule contains it, and the overhead is reported for its link
+    ((name, source, volume, fitted),) = geom.fits
+    assert (name, source) == ("upper_0", "cylinder") and fitted >= volume
+    assert set(geom.volume_overhead()) == {"upper"}
+
+
+def test_distances_closed_form(toy):
+    """Arm folded down onto the base: the hand sphere against the box is computed by hand."""
+    robot, geom = toy
+    q = jnp.array([0.0, np.pi])  # lower points straight down from the elbow at z = 0.55
+    d = jax.jit(dk.collision.self_distances)(robot, geom, q)
+    hand = dict(zip(map(tuple, geom.pairs), d, strict=True))[(1, 4)]
+    # hand centre: elbow (0.55) - 0.4 = 0.15; box top at 0.05; sphere radius 0.06
+    np.testing.assert_allclose(hand, 0.15 - 0.05 - 0.06, atol=1e-12)
+    world = World(
+        Plane(jnp.array([0.0, 0, 1]), -1.0), Sphere(jnp.array([[0.0, 0, 2], [5, 5, 5]]), jnp.array([0.1, 0.1]))
+    )
+    w = jax.jit(dk.collision.world_distances)(robot, geom, q, world)
+    assert w.shape == (5, 3) and world.size == 3
+    # obstacles by kind: the two spheres, then the half-space
+    np.testing.assert_allclose(w[4, 2], 1.0 - 0.05, atol=1e-12)  # the base box above the floor at -1
+    np.testing.assert_allclose(w[0, 0], 2 - 0.55 - 0.07 - 0.1, atol=1e-12)  # upper's sphere below the ball
+    c = jax.jit(dk.collision.clearance)(robot, geom, q, world)
+    np.testing.assert_allclose(c, min(d.min(), w.min()))
+
+
+def test_bad_input():
+    robot = dk.load_robot(URDF)
+    with pytest.raises(ValueError, match="meshes"):
+        dk.collision.load(URDF, robot, meshes="spheres")
+    with pytest.raises(TypeError, match="robot"):
+        dk.collision.load(URDF, dk.load_urdf(URDF, "lower"))
+    with pytest.raises(ValueError, match="unknown frame 'nowhere'"):
+        dk.collision.load(URDF.replace('link name="hand"', 'link name="nowhere"'), robot)
+    with pytest.raises(ValueError, match="radius.*expected 1 finite"):
+        dk.collision.load(URDF.replace('radius="0.06"', 'radius="x"'), robot)
+    with pytest.raises(TypeError, match="World: argument 0"):
+        World(np.zeros(3))
+
+
+MJCF = """<mujoco>
+  <default><default class="limb"><geom type="capsule" size="0.03"/></default></default>
+  <option><flag filterparent="enable"/></option>
+  <worldbody>
+    <geom name="floor" type="plane" size="5 5 .1"/>
+    <body name="a" childclass="limb"><joint name="ja" type="hinge" axis="0 1 0"/>
+      <geom name="ga" fromto="0 0 0 0 0 0.4"/>
+      <geom name="ghost" type="sphere" size="0.1" contype="0" conaffinity="0"/>
+      <site name="tip" pos="0 0 0.4"/>
+      <body name="b" pos="0 0 0.4"><joint name="jb" type="hinge" axis="0 1 0"/>
+        <geom name="gb" fromto="0 0 0 0 0 0.4"/>
+        <frame pos="0 0 0.4"><body name="c"><joint name="jc" type="hinge" axis="1 0 0"/>
+          <geom name="gc" type="ellipsoid" size="0.05 0.02 0.1"/>
+          <geom name="gd" type="box" size="0.05 0.05 0.05" contype="2" conaffinity="2"/>
+        </body></frame>
+      </body>
+    </body>
+  </worldbody>
+  <contact><exclude body1="a" body2="c"/></contact>
+</mujoco>"""
+
+
+def test_mjcf_classes_filters_and_fits():
+    robot = dk.load_robot(MJCF)
+    geom = dk.collision.load(MJCF, robot)
+    assert geom.shape_names == ("ga", "gb", "gc", "gd")  # no floor (the world's), no ghost (no contact bits)
+    assert geom.counts == (0, 3, 1)
+    # a-b and b-c are parent and child, a-c excluded by <exclude>: no pair is left; without the exclude, a-c
+    assert geom.pairs.shape == (0, 2)
+    assert dk.collision.self_distances(robot, geom, jnp.zeros(3)).shape == (0,)
+    free = dk.collision.load(MJCF.replace('<contact><exclude body1="a" body2="c"/></contact>', ""), robot)
+    assert [(free.shape_names[i], free.shape_names[j]) for i, j in free.pairs] == [("ga", "gc")]  # gd: bits 2 vs 1
+    c = dict(zip(geom.shape_names, range(4), strict=True))
+    a, b = geom.capsules.a[c["gc"]], geom.capsules.b[c["gc"]]
+    np.testing.assert_allclose(np.abs(b - a), [0, 0, 2 * (0.1 - 0.05)], atol=1e-12)  # the ellipsoid's capsule
+    np.testing.assert_allclose(geom.capsules.radius[c["gc"]], 0.05)
+
+
+@pytest.mark.parametrize("radius, half", [(0.1, 1.0), (0.5, 0.05), (0.2, 0.2)])
+def test_cylinder_and_ellipsoid_fits_contain_them(radius, half):
+    """Points of the cylinder's rims and of the ellipsoid's surface are inside their capsules."""
+    from diffkin.collision import _fit
+
+    R, L = _fit.cylinder(radius, half)
+    phi = np.linspace(0, 2 * np.pi, 97)
+    rim = np.stack([radius * np.cos(phi), radius * np.sin(phi), np.full_like(phi, half)], 1)
+    for points in (rim, rim * [1, 1, -1]):
+        d = np.linalg.norm(points - np.clip(points * [0, 0, 1], -L, L), axis=1)
+        assert np.all(d <= R + 1e-15)
+    semi = np.array([radius, 0.7 * half + 0.01, half])
+    k, R, L = _fit.ellipsoid(semi)
+    u, v = np.meshgrid(np.linspace(0, np.pi, 61), phi)
+    surface = np.stack([np.sin(u) * np.cos(v), np.sin(u) * np.sin(v), np.cos(u)], -1).reshape(-1, 3) * semi
+    axial = surface[:, k]
+    radial = np.linalg.norm(np.delete(surface, k, axis=1), axis=1)
+    assert np.all(np.hypot(radial, np.maximum(np.abs(axial) - L, 0)) <= R + 1e-15)

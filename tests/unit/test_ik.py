@@ -1,0 +1,205 @@
+"""dk.ik.solve on small chains: the 2R closed form, input checks, traced tolerances, compilations, the
+seeds' draws (the arms' solvers, whose compilations are long: round trips of 1,000 poses checked by
+pytorch-kinematics / NumPy DH, warm starts, honest failure, batches, implicit gradients, non-rigid
+targets and the optax method, in ``tests/validation/test_ik_validation.py``; a fresh interpreter
+without optax: ``tests/integration/test_ik_subprocess.py``)."""
+
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+from _reference import dh_fk, random_q
+
+import diffkin as dk
+import diffkin.ik as ik
+
+
+def test_planar_2r_matches_closed_form():
+    """Textbook 2R: theta2 = +-acos(D), D = (x^2 + y^2 - a1^2 - a2^2) / (2 a1 a2); q0 picks the branch."""
+    a1, a2 = 1.0, 0.7
+    chain = dk.robots.planar([a1, a2])
+    rng = np.random.default_rng(6)
+    r = rng.uniform(0.4, 1.6, 100)
+    phi = rng.uniform(-np.pi, np.pi, 100)
+    x, y = r * np.cos(phi), r * np.sin(phi)
+    D = (x**2 + y**2 - a1**2 - a2**2) / (2 * a1 * a2)
+    for sign in (1.0, -1.0):
+        t2 = sign * np.arccos(D)
+        t1 = np.arctan2(y, x) - np.arctan2(a2 * np.sin(t2), a1 + a2 * np.cos(t2))
+        q_cf = np.stack([np.angle(np.exp(1j * t1)), t2], -1)
+        q0 = q_cf + rng.normal(0, 0.1, q_cf.shape)
+        target = jnp.asarray(np.stack([x, y, np.zeros_like(x)], -1))
+        res = ik.solve(chain, target, q0=jnp.asarray(q0), num_seeds=4, pos_tol=1e-10)
+        assert np.all(res.success)
+        np.testing.assert_allclose(np.angle(np.exp(1j * np.asarray(res.q))), q_cf, atol=1e-7)
+
+
+def test_bad_arguments_raise_before_tracing():
+    chain = dk.robots.ur5()
+    T = jnp.eye(4)
+    cases = [
+        (dict(target=jnp.zeros((4, 5))), ValueError, "target"),
+        (dict(target=jnp.zeros((3, 4))), ValueError, "target"),
+        (dict(q0=jnp.zeros(5)), ValueError, "q0"),
+        (dict(q0=jnp.zeros((3, 6))), ValueError, "q0"),
+        (dict(method="bfgs"), ValueError, "method"),
+        (dict(num_seeds=0), ValueError, "num_seeds"),
+        (dict(max_iters=-1), ValueError, "max_iters"),
+        (dict(pos_tol=-1e-5), ValueError, "pos_tol"),
+        (dict(rot_tol=-1.0), ValueError, "rot_tol"),
+        (dict(method="optax", optimizer=lambda g: g), TypeError, "optimizer"),
+        (dict(optimizer=optax.adam(1e-2)), ValueError, "optimizer"),
+    ]
+    for kwargs, error, name in cases:
+        kwargs = {"target": T, **kwargs}
+        with pytest.raises(error, match=name):
+            ik.solve(chain, **kwargs)
+    with pytest.raises(TypeError, match="chain"):
+        ik.solve("ur5", T)
+
+
+def test_rigid_check_on_the_host_equals_the_traced_check():
+    """diffkin._checks.rigid_poses: NumPy (the host-side check of a concrete target) and jax.numpy
+    (inside the solver) judge the same poses alike: rigid ones, ones perturbed below and above the
+    tolerance (rotation, last row), non-finite ones; float32 and float64."""
+    from diffkin._checks import rigid_poses, rigid_tol
+
+    chain = dk.robots.ur5()
+    rng = np.random.default_rng(4)
+    T = dh_fk(chain, random_q(chain, 400, seed=9))
+    for dtype in (np.float32, np.float64):
+        tol = rigid_tol(dtype)
+        poses = T.astype(dtype).copy()
+        scale = rng.choice([0.0, 0.1, 10.0], size=(400, 1, 1)) * tol  # exact, below, above the tolerance
+        poses[:200, :3, :3] *= 1.0 + scale[:200]
+        poses[200:, 3, :3] += scale[200:, 0]
+        poses[7, 0, 0] = np.nan
+        host = rigid_poses(poses)
+        assert isinstance(host, np.ndarray) and host.shape == (400,)
+        np.testing.assert_array_equal(host, np.asarray(jax.jit(rigid_poses)(poses)))
+        exact, above = scale[:, 0, 0] == 0, scale[:, 0, 0] > tol
+        exact[7] = False
+        assert not host[7] and host[exact].all() and not host[above].any() and exact.sum() > 50
+
+
+def test_empty_batch_gives_empty_results():
+    chain = dk.robots.ur5()
+    for target, batch in ((np.zeros((0, 4, 4)), (0,)), (np.zeros((2, 0, 3), np.float32), (2, 0))):
+        res = ik.solve(chain, target)
+        assert res.q.shape == batch + (6,) and res.q.dtype == target.dtype
+        assert res.success.shape == res.pos_err.shape == res.rot_err.shape == res.iters.shape == batch
+        assert res.success.dtype == bool and res.iters.dtype == np.int32
+    res = jax.jit(lambda t: ik.solve(chain, t))(np.zeros((0, 4, 4), np.float32))
+    assert res.q.shape == (0, 6)
+
+
+def _compilations(fn) -> list[str]:
+    """The programs XLA compiled while running ``fn()`` (from ``jax.log_compiles``)."""
+    import logging
+
+    class Collect(logging.Handler):
+        def __init__(self):
+            super().__init__(logging.DEBUG)
+            self.names = []
+
+        def emit(self, record):
+            message = record.getMessage()
+            if message.startswith("Compiling "):
+                self.names.append(message.split(" with ")[0])
+
+    handler, logger = Collect(), logging.getLogger("jax")
+    logger.addHandler(handler)
+    try:
+        with jax.log_compiles():
+            jax.block_until_ready(fn())
+    finally:
+        logger.removeHandler(handler)
+    return handler.names
+
+
+def test_eager_solve_compiles_once_per_shape():
+    """A second eager call with new values of the same shapes (and an equal, new chain) compiles nothing;
+    jitted, the same. (Each eager call used to rebuild its loop closures and recompile them.)"""
+    chain = dk.robots.planar([1.0, 1.0])
+    T = np.asarray(dk.fk(chain, jnp.array([[0.3, 0.5], [0.1, -0.4], [1.0, 1.0]])))
+    first = ik.solve(chain, T, key=jax.random.key(0), num_seeds=4)
+    assert np.all(first.success)
+    T2 = np.asarray(dk.fk(chain, jnp.array([[0.2, 0.6], [-0.3, 0.9], [0.7, -1.1]])))  # new values, before counting
+    key2 = jax.random.key(1)
+    again = dk.robots.planar([1.0, 1.0])
+    assert _compilations(lambda: ik.solve(again, T2, key=key2, num_seeds=4, pos_tol=2e-5)) == []
+    solve = jax.jit(lambda t, k: ik.solve(chain, t, key=k, num_seeds=4))
+    solve(T, key2)
+    assert _compilations(lambda: solve(T2, key2)) == []
+    # a different chain (by value) or shape compiles anew
+    assert _compilations(lambda: ik.solve(dk.robots.planar([1.0, 0.5]), T2, key=key2, num_seeds=4)) != []
+
+
+def test_lm_needs_no_optax(monkeypatch):
+    """Without optax, LM works and method='optax' names the extra to install."""
+    monkeypatch.setitem(sys.modules, "optax", None)  # import optax raises ImportError
+    monkeypatch.delitem(sys.modules, "diffkin.ik._optax", raising=False)
+    chain = dk.robots.planar([1.0, 1.0])
+    T = np.asarray(dk.fk(chain, jnp.array([[0.3, 0.5], [0.1, -0.4], [1.0, 1.0]])))
+    assert np.all(ik.solve(chain, T, key=jax.random.key(0), num_seeds=4).success)
+    with pytest.raises(ImportError, match=r"diffkin\[ik\]"):
+        ik.solve(chain, T, method="optax")
+
+
+def test_tolerances_are_traced():
+    """New tolerances reuse the compiled solver (the shapes and settings of the test above), and a traced
+    tolerance (a jit argument) is accepted."""
+    chain = dk.robots.planar([1.0, 1.0])
+    T = np.asarray(dk.fk(chain, jnp.array([[0.3, 0.5], [0.1, -0.4], [1.0, 1.0]])))
+    loose = ik.solve(chain, T, key=jax.random.key(0), num_seeds=4, pos_tol=1e-3, rot_tol=1e-3)
+    assert np.all(loose.success)
+    key = jax.random.key(0)
+    tight = []
+    assert (
+        _compilations(
+            lambda: tight.append(ik.solve(chain, T, key=key, num_seeds=4, pos_tol=1e-12, rot_tol=1e-12)) or tight[0].q
+        )
+        == []
+    )
+    assert np.all(tight[0].iters >= loose.iters) and np.any(tight[0].iters > loose.iters)  # the value is used
+    jaxpr = jax.make_jaxpr(lambda tol: ik.solve(chain, T, num_seeds=4, pos_tol=tol, rot_tol=tol).q)(1e-3)
+    assert jaxpr.out_avals[0].shape == (3, 2)
+
+
+def test_seed_draws_are_uniform_independent_and_per_target():
+    """The seeds' hash (diffkin.ik._uniform): 24-bit values in [0, 1) whose moments, histogram per
+    joint and joint-pair grid match a uniform law, uncorrelated across joints, draws and targets; a
+    target's draws depend on its own index and round only (not on the rest of the batch), and on the key."""
+    from diffkin.ik import _uniform
+
+    key = jax.random.key(3)
+    targets, rounds = jnp.arange(2000), jnp.zeros(2000, jnp.int32)
+    u = np.asarray(_uniform.uniform(key, targets, rounds, 8, 7, jnp.float64))
+    assert u.shape == (8, 2000, 7) and u.min() >= 0.0 and u.max() < 1.0
+    assert np.all(u * 2**24 == np.round(u * 2**24))  # 24 bits, exact
+    flat = u.reshape(-1, 7)  # 16,000 draws of 7 joints
+    assert abs(flat.mean() - 0.5) < 0.005 and abs(flat.var() - 1 / 12) < 0.002
+    for j in range(7):  # Kolmogorov-Smirnov distance of each joint: 1.63 / sqrt(n) is the 1 % level
+        x = np.sort(flat[:, j])
+        ks = np.max(np.abs(x - np.arange(1, x.size + 1) / x.size))
+        assert ks < 1.63 / np.sqrt(x.size)
+    # joint pairs on a 10 x 10 grid: chi-square with 99 degrees of freedom (1e-3 level: 148)
+    counts = np.histogram2d(flat[:, 0], flat[:, 1], bins=10, range=[[0, 1], [0, 1]])[0]
+    expected = flat.shape[0] / 100
+    assert np.sum((counts - expected) ** 2 / expected) < 148
+    # joints, draws 0 and 1, neighbouring targets: |r| < 0.1 (n = 2,000: 4.5 standard deviations)
+    corr = np.corrcoef(np.concatenate([u[0], u[1], np.roll(u[0], 1, axis=0)], axis=1).T)
+    assert np.max(np.abs(corr - np.eye(21))) < 0.1
+    # per target: targets 5 and 1999 alone give the same draws as inside the batch; another round or key differs
+    alone = np.asarray(_uniform.uniform(key, jnp.asarray([1999, 5]), jnp.zeros(2, jnp.int32), 8, 7, jnp.float64))
+    np.testing.assert_array_equal(alone[:, 0], u[:, 1999])
+    np.testing.assert_array_equal(alone[:, 1], u[:, 5])
+    other_round = np.asarray(_uniform.uniform(key, targets, rounds + 1, 8, 7, jnp.float64))
+    other_key = np.asarray(_uniform.uniform(jax.random.key(4), targets, rounds, 8, 7, jnp.float64))
+    raw_key = np.asarray(_uniform.uniform(jax.random.PRNGKey(3), targets, rounds, 8, 7, jnp.float64))
+    for v in (other_round, other_key):
+        assert np.mean(v == u) < 1e-3
+    np.testing.assert_array_equal(raw_key, u)  # a raw key holds the same words as the typed one

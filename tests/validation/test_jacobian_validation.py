@@ -1,0 +1,47 @@
+"""Jacobians of the URDF robots in three frames against Pinocchio and pytorch-kinematics (float64)."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import pytorch_kinematics as pk
+import torch
+from _reference import URDF_ROBOTS, random_q
+
+import diffkin as dk
+
+FRAMES = ("world", "space", "body")
+PIN_FRAME = {"world": pin.LOCAL_WORLD_ALIGNED, "space": pin.WORLD, "body": pin.LOCAL}
+N = 100
+
+
+@pytest.mark.parametrize("name", list(URDF_ROBOTS))
+def test_jacobians_match_pinocchio(name, urdf_chains):
+    chain = urdf_chains[name]
+    path, end = URDF_ROBOTS[name]
+    with open(path) as fh:
+        model = pin.buildModelFromXML(fh.read())
+    data, fid = model.createData(), model.getFrameId(end)
+    idx_q = [model.joints[model.getJointId(n)].idx_q for n in chain.joint_names]
+    idx_v = [model.joints[model.getJointId(n)].idx_v for n in chain.joint_names]
+    q = random_q(chain, N, seed=20)
+    ours = {f: np.asarray(dk.jacobian(chain, q, f)) for f in FRAMES}
+    worst = dict.fromkeys(FRAMES, 0.0)
+    for k in range(N):
+        qp = np.zeros(model.nq)
+        qp[idx_q] = q[k]
+        pin.computeJointJacobians(model, data, qp)
+        pin.updateFramePlacements(model, data)
+        for f in FRAMES:
+            ref = pin.getFrameJacobian(model, data, fid, PIN_FRAME[f])[:, idx_v]
+            worst[f] = max(worst[f], np.abs(ref - ours[f][k]).max())
+    assert max(worst.values()) < 1e-10, worst
+
+
+@pytest.mark.parametrize("name", list(URDF_ROBOTS))
+def test_world_jacobian_matches_pytorch_kinematics(name, urdf_chains):
+    path, end = URDF_ROBOTS[name]
+    with open(path, "rb") as fh:
+        ref_chain = pk.build_serial_chain_from_urdf(fh.read(), end).to(dtype=torch.float64)
+    q = random_q(urdf_chains[name], N, seed=21)
+    ref = ref_chain.jacobian(torch.tensor(q)).numpy()
+    np.testing.assert_allclose(dk.jacobian(urdf_chains[name], q), ref, atol=1e-6)
