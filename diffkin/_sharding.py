@@ -15,7 +15,7 @@ def automatic_axes(fn: Callable, batched: jax.Array, batch_ndim: int) -> Callabl
     In explicit mode JAX must infer every intermediate's sharding while tracing, and refuses what
     it cannot infer: the IK solver's gathers across the batch (the unsolved targets packed into
     small chunks) raise ``ShardingTypeError``. With the axes automatic, XLA partitions the solver
-    as it does for a plain ``Mesh`` (the same numbers as on one device, ``tests/test_sharding.py``),
+    as it does for a plain ``Mesh`` (the same numbers as on one device, ``tests/integration/test_sharding.py``),
     and every output is sharded like the first ``batch_ndim`` axes of ``batched``. Inputs
     without explicit axes (one device, a plain ``Mesh``) get ``fn`` itself.
 

@@ -10,7 +10,7 @@ by ``jit``, or passed to a function that jits itself); it is *traced* under a tr
   from the program and only the arithmetic a robot needs is compiled (2.5-3x faster FK,
   docs/performance.md).
 - Traced numbers stay program inputs, and the same code takes the general path with the same
-  result (``tests/test_xla.py``).
+  result (``tests/unit/test_xla.py``).
 
 The library's own jitted solvers keep that rule across their ``jit`` boundary with the names JAX
 users know from Equinox: :func:`partition` splits a model into its static part (a

@@ -1,6 +1,5 @@
 """The tests' one module of shared helpers, importable from every tier (``tests/conftest.py`` puts
-``tests/`` on ``sys.path``; test modules do not import each other, but for ``test_viewer.py``'s
-``INTERRUPTIBLE`` from ``test_cli.py``): data paths and test robots, the
+``tests/`` on ``sys.path``; test modules do not import each other): data paths and test robots, the
 model kinds of :func:`every_model_kind`, random configurations, a time limit, random collision shapes,
 MJCF snippets, fuzzing budgets, independent float64 NumPy references (forward kinematics written from
 the textbook formulas, not from diffkin's kernels; pose errors; the iiwa's global configurations) and,
@@ -12,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import sys
 from importlib import metadata
 
 import hypothesis
@@ -454,3 +454,43 @@ def pin_poses(path, robot, q, names, base=None):
             M = data.oMf[model.getFrameId(name, pin.BODY)].homogeneous
             out[i, k] = M if base is None else np.asarray(base[i], np.float64) @ M
     return out
+
+
+# ------------------------------------------------------------------------------ collision scenes, the CLI
+
+#: an arm of capsules and a ball hand (URDF collision geometry), and a scene of a turned box and a floor
+#: (``dk.collision.load_scene``); ``SCENE_FILE`` the documented example scene
+CAPSULE_ARM = """<robot name="arm">
+  <link name="base"/>
+  <link name="l1"><collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.04" length="0.4"/></geometry>
+    </collision></link>
+  <link name="l2"><collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.04" length="0.4"/></geometry>
+    </collision></link>
+  <link name="l3"><collision><origin xyz="0 0 0.15"/><geometry><capsule radius="0.03" length="0.3"/></geometry>
+    </collision></link>
+  <link name="hand"><collision><geometry><sphere radius="0.05"/></geometry></collision></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.05"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.4"/>
+    <axis xyz="0 1 0"/><limit lower="-2.5" upper="2.5"/></joint>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0 0 0.4"/>
+    <axis xyz="0 1 0"/><limit lower="-2.8" upper="2.8"/></joint>
+  <joint name="tip" type="fixed"><parent link="l3"/><child link="hand"/><origin xyz="0 0 0.3"/></joint>
+</robot>"""
+BOX_CENTER = [0.45, -0.1, 0.25]
+SCENE = {
+    "margin": 0.02,
+    "boxes": [{"position": BOX_CENTER, "quaternion": [0.9800666, 0, 0, 0.1986693], "half_extents": [0.12, 0.08, 0.1]}],
+    "planes": [{"normal": [0, 0, 2], "offset": -0.2}],  # z <= -0.1, the normal's length divided out
+}
+SCENE_FILE = os.path.join(ROOT, "docs", "scene.json")
+
+#: ``python -m diffkin`` with Ctrl-C handled as usual even when started from a shell's background
+#: job (which inherits SIGINT ignored): ``[*INTERRUPTIBLE, "demo", ...]``.
+INTERRUPTIBLE = [
+    sys.executable,
+    "-c",
+    "import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+    "sys.argv = sys.argv[1:]; runpy.run_module('diffkin', run_name='__main__', alter_sys=True)",
+    "diffkin",
+]

@@ -7,7 +7,7 @@ a chain of ``lowbias32`` (C. Wellons' hash-prospector: a bijection of 32-bit wor
 avalanche) over the key's words, the target, the round and the draw's counter, about 15x cheaper to
 compile and 10x to run (docs/performance.md, "The IK's seeds"). Seeds need an even cover of the
 joint box, not cryptographic strength;
-``tests/test_ik.py`` checks the draws' moments, uniformity and independence.
+``tests/unit/test_ik.py`` checks the draws' moments, uniformity and independence.
 """
 
 from __future__ import annotations

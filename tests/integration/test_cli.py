@@ -12,14 +12,13 @@ import sys
 
 import numpy as np
 import pytest
-from _reference import DATA, ROOT, dh_fk, pose, pose_errors
+from _reference import BOX_CENTER, DATA, INTERRUPTIBLE, SCENE, SCENE_FILE, dh_fk, pose, pose_errors
+from _reference import CAPSULE_ARM as ARM
 
 import diffkin as dk
 from diffkin import cli
 
-DOCS = os.path.join(ROOT, "docs")
 FINGER = os.path.join(DATA, "example-robot-data", "robots", "finger_edu_description", "robots", "finger_edu.urdf")
-SCENE_FILE = os.path.join(DOCS, "scene.json")  # the documented example
 TARGET = pose(np.diag([1.0, -1.0, -1.0]), [0.5, 0.1, 0.6])  # --pose 0.5 0.1 0.6 0 1 0 0: a half-turn about x
 
 
@@ -327,7 +326,7 @@ def test_info_says_home_is_outside_the_limits(capsys):
         (["demo", "--quick"], "matplotlib", "demo"),
         (["workspace", "iiwa14", "--samples", "100", "--out", "m.npz", "--plot", "s.png"], "matplotlib", "plot"),
         (
-            ["ik", FINGER, "--position", "0", "0", "0.3", "--avoid", os.path.join(DOCS, "scene.json")],
+            ["ik", FINGER, "--position", "0", "0", "0.3", "--avoid", SCENE_FILE],
             "trimesh",
             "collision",
         ),
@@ -399,17 +398,6 @@ def test_without_optional_dependencies_subprocess(tmp_path):
     assert res.returncode == 0 and (tmp_path / "m.npz").is_file(), res.stderr
 
 
-#: ``python -m diffkin`` with Ctrl-C handled as usual even when started from a shell's background
-#: job (which inherits SIGINT ignored): ``[*INTERRUPTIBLE, "demo", ...]``.
-INTERRUPTIBLE = [
-    sys.executable,
-    "-c",
-    "import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-    "sys.argv = sys.argv[1:]; runpy.run_module('diffkin', run_name='__main__', alter_sys=True)",
-    "diffkin",
-]
-
-
 @pytest.mark.slow
 def test_ctrl_c_exits_130(tmp_path):
     import signal
@@ -448,31 +436,6 @@ def test_info_and_fk_of_whole_robots(capsys):
 
 
 # ------------------------------------------------------------------------------------ scenes and ik --avoid
-
-# an arm of capsules and a ball hand (tests/test_ik_avoid.py's), and a scene of a turned box and a floor
-ARM = """<robot name="arm">
-  <link name="base"/>
-  <link name="l1"><collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.04" length="0.4"/></geometry>
-    </collision></link>
-  <link name="l2"><collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.04" length="0.4"/></geometry>
-    </collision></link>
-  <link name="l3"><collision><origin xyz="0 0 0.15"/><geometry><capsule radius="0.03" length="0.3"/></geometry>
-    </collision></link>
-  <link name="hand"><collision><geometry><sphere radius="0.05"/></geometry></collision></link>
-  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.05"/>
-    <axis xyz="0 0 1"/><limit lower="-3" upper="3"/></joint>
-  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.4"/>
-    <axis xyz="0 1 0"/><limit lower="-2.5" upper="2.5"/></joint>
-  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0 0 0.4"/>
-    <axis xyz="0 1 0"/><limit lower="-2.8" upper="2.8"/></joint>
-  <joint name="tip" type="fixed"><parent link="l3"/><child link="hand"/><origin xyz="0 0 0.3"/></joint>
-</robot>"""
-BOX_CENTER = [0.45, -0.1, 0.25]
-SCENE = {
-    "margin": 0.02,
-    "boxes": [{"position": BOX_CENTER, "quaternion": [0.9800666, 0, 0, 0.1986693], "half_extents": [0.12, 0.08, 0.1]}],
-    "planes": [{"normal": [0, 0, 2], "offset": -0.2}],  # z <= -0.1, the normal's length divided out
-}
 
 
 @pytest.fixture(scope="module")

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _reference import CAPSULE_ARM as ARM
 from _reference import EXPERIMENTS, robot_poses
 
 import diffkin as dk
@@ -21,24 +22,6 @@ from diffkin import _rigid as rg
 from diffkin.collision import Box, Plane, Sphere, World
 from diffkin.ik._problem import Problem
 from diffkin.ik._terms.avoid import BAND, AvoidTerm
-
-ARM = """<robot name="arm">
-  <link name="base"/>
-  <link name="l1"><collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.04" length="0.4"/></geometry>
-    </collision></link>
-  <link name="l2"><collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.04" length="0.4"/></geometry>
-    </collision></link>
-  <link name="l3"><collision><origin xyz="0 0 0.15"/><geometry><capsule radius="0.03" length="0.3"/></geometry>
-    </collision></link>
-  <link name="hand"><collision><geometry><sphere radius="0.05"/></geometry></collision></link>
-  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.05"/>
-    <axis xyz="0 0 1"/><limit lower="-3" upper="3"/></joint>
-  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.4"/>
-    <axis xyz="0 1 0"/><limit lower="-2.5" upper="2.5"/></joint>
-  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0 0 0.4"/>
-    <axis xyz="0 1 0"/><limit lower="-2.8" upper="2.8"/></joint>
-  <joint name="tip" type="fixed"><parent link="l3"/><child link="hand"/><origin xyz="0 0 0.3"/></joint>
-</robot>"""
 
 
 def _box(center, half, angle=0.0):

@@ -16,8 +16,8 @@ import pytest
 pytest.importorskip("viser")
 pytest.importorskip("trimesh")
 
-from _reference import DATA, ROOT
-from test_cli import ARM, INTERRUPTIBLE, SCENE, SCENE_FILE
+from _reference import CAPSULE_ARM as ARM
+from _reference import DATA, INTERRUPTIBLE, ROOT, SCENE, SCENE_FILE
 
 import diffkin as dk  # noqa: E402
 from diffkin.viewer import _visuals, show  # noqa: E402
