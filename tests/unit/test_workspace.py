@@ -13,6 +13,7 @@ from _reference import DATA
 import diffkin as dk
 from diffkin import workspace as ws
 from diffkin._static import partition
+from diffkin.workspace import _bins
 
 KEY = jax.random.key(7)
 
@@ -53,7 +54,7 @@ def test_sample_configs_within_limits_and_uniform():
 def test_manipulability_matches_core():
     for chain in (dk.robots.iiwa14(), dk.robots.ur5(), dk.robots.planar([1.0, 0.5, 0.3])):  # 7, 6 and 3 joints
         q = ws.sample_configs(chain, 500, KEY)
-        ours = jax.jit(lambda q, chain=chain: ws._manipulability(chain.forward(list(q.T)), chain.dof))(q)
+        ours = jax.jit(lambda q, chain=chain: _bins._manipulability(chain.forward(list(q.T)), chain.dof))(q)
         np.testing.assert_allclose(ours, dk.manipulability(chain, q), rtol=1e-9, atol=1e-12)
 
 
@@ -66,13 +67,13 @@ def test_orientation_bins_partition_so3_evenly():
         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
     ]
-    bins = np.asarray(ws._orientation_bin([[jnp.asarray(e) for e in row] for row in R], 8))
+    bins = np.asarray(_bins._orientation_bin([[jnp.asarray(e) for e in row] for row in R], 8))
     counts = np.bincount(bins, minlength=48)
     assert counts.size == 48  # every bin in [0, 48)
     assert np.all(np.abs(counts - n / 48) < 5.5 * np.sqrt(n / 48))  # equal measure (binomial, 5.5 sd)
     phi = jnp.asarray(-np.pi + (np.arange(8) + 0.5) * np.pi / 4)  # rotations about z by each sector's centre
     c, s, zero, one = jnp.cos(phi), jnp.sin(phi), jnp.zeros(8), jnp.ones(8)
-    planar = np.asarray(ws._orientation_bin([[c, -s, zero], [s, c, zero], [zero, zero, one]], 8))
+    planar = np.asarray(_bins._orientation_bin([[c, -s, zero], [s, c, zero], [zero, zero, one]], 8))
     np.testing.assert_array_equal(planar, 32 + np.arange(8))  # distinct planar angles, distinct bins
 
 
@@ -242,8 +243,8 @@ def test_voxel_and_sector_indices_do_not_depend_on_the_compilation():
         ]
     ).astype(dtype)
     P = [jnp.asarray(x), jnp.zeros_like(x), jnp.zeros_like(x)]
-    alone = jax.jit(lambda P: ws._flat_index(P, origin, inv, shape))
-    fused = jax.jit(lambda P, s: ws._flat_index([P[0] * s + 0.0 * P[1], P[1], P[2]], origin, inv, shape))
+    alone = jax.jit(lambda P: _bins._flat_index(P, origin, inv, shape))
+    fused = jax.jit(lambda P, s: _bins._flat_index([P[0] * s + 0.0 * P[1], P[1], P[2]], origin, inv, shape))
     (flat_a, in_a), (flat_f, in_f) = alone(P), fused(P, jnp.ones(x.shape, dtype))
     np.testing.assert_array_equal(np.asarray(flat_a), np.asarray(flat_f))
     np.testing.assert_array_equal(np.asarray(in_a), np.asarray(in_f))
@@ -260,9 +261,9 @@ def test_voxel_and_sector_indices_do_not_depend_on_the_compilation():
     c, s = np.cos(phi).astype(dtype), np.sin(phi).astype(dtype)
     z, one = np.zeros_like(c), np.ones_like(c)
     R = tuple(tuple(jnp.asarray(v) for v in row) for row in ((c, -s, z), (s, c, z), (z, z, one)))
-    bins_a = np.asarray(jax.jit(lambda R: ws._orientation_bin(R, n_roll))(R))
+    bins_a = np.asarray(jax.jit(lambda R: _bins._orientation_bin(R, n_roll))(R))
     bins_f = np.asarray(
-        jax.jit(lambda R, k: ws._orientation_bin(tuple(tuple(v * k for v in row) for row in R), n_roll))(
+        jax.jit(lambda R, k: _bins._orientation_bin(tuple(tuple(v * k for v in row) for row in R), n_roll))(
             R, jnp.ones_like(R[0][0])
         )
     )

@@ -1,0 +1,213 @@
+"""Workspace analysis: reachability, manipulability and dexterity maps over millions of samples.
+
+Configurations are drawn uniformly within the joint limits, chunk by chunk; each chunk is run
+through forward kinematics, its end-effector positions are binned on a voxel grid and reduced
+into per-voxel sample counts, best manipulability and the set of orientation bins reached.
+Memory is ``O(chunk + grid)`` whatever the number of samples. Chunks are spread over devices
+with a :class:`jax.sharding.Mesh` and ``shard_map``; every device keeps a partial map and the
+partial maps are reduced at the end with integer sums, float maxima and logical ors, which
+do not depend on the order of reduction, so the map is identical for any number of devices.
+For that, each sample's bins must not depend on how its device's program is compiled: the
+per-device program receives its chunk index as data (it is the same program for any number of
+devices), and the binning uses no division (XLA's CPU division rounds differently in different
+compilations); see ``_flat_index`` and ``_orientation_bin``.
+
+Orientation bins are a fixed partition of SO(3) into ``orientation_bins = 6 * n_roll`` cells
+of equal measure: the tool z axis picks a face of the cube (its largest component and that
+component's sign), and the rotation about the tool z axis picks one of ``n_roll`` sectors of
+the roll angle ``atan2(-R[u, 1], R[u, 0])``, where ``u = (a + 1) % 3`` for the face axis
+``a``: the angle of the tool x axis from the projection of the base axis ``u`` on the plane
+orthogonal to the tool z axis (never degenerate, since that axis is at most 54.8 degrees from
+``a``). For a planar arm (rotation about the base z axis by ``phi``) the bin is the sector of
+``phi``, so different planar angles land in different bins.
+
+The package: the driver :func:`reachability` here; the map and its file format
+(``_map.py``), what is sampled and the grid (``_sampling.py``), the per-sample bins and
+manipulability (``_bins.py``), the compiled sharded step and its reduction (``_step.py``), the
+plot (``_plot.py``).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
+
+from diffkin._checks import positive_int
+from diffkin._static import partition
+from diffkin.workspace._map import ReachabilityMap
+from diffkin.workspace._plot import plot_slice
+from diffkin.workspace._sampling import _as_chain, _grid, sample_configs
+from diffkin.workspace._step import _AXIS, _collision_check, _compiled
+
+MAX_GRID_BYTES = 2 * 1024**3
+"""Largest memory of the maps of :func:`reachability` (an estimate: every device's counts, manipulability
+and orientation flags per voxel, their reduction and the host's copies); a finer grid is a ValueError
+naming ``voxel_size``. Raise it (``diffkin.workspace.MAX_GRID_BYTES = ...``) to allow more."""
+_INT32_MAX = 2**31 - 1
+
+
+def _host(x: jax.Array) -> np.ndarray:
+    """A replicated array as numpy (one local copy; works on every process of a multi-host run)."""
+    return np.asarray(x.addressable_data(0))
+
+
+def _progress(total: int, show: bool | None):
+    """A tqdm bar over chunks, or ``None``: ``show=None`` shows it on a terminal on process 0."""
+    if show is False or jax.process_index() != 0:
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    if show is None and not sys.stderr.isatty():
+        return None
+    return tqdm(total=total, unit="sample", unit_scale=True, desc="reachability")
+
+
+def reachability(
+    chain,
+    n_samples: int,
+    *,
+    key,
+    voxel_size: float = 0.05,
+    bounds=None,
+    chunk: int = 1 << 16,
+    devices: Sequence[jax.Device] | None = None,
+    orientation_bins: int = 48,
+    dtype=None,
+    progress: bool | None = None,
+    avoid=None,
+) -> ReachabilityMap:
+    """Reachability, best manipulability and dexterity of ``chain`` on a voxel grid.
+
+    ``n_samples`` configurations uniform within the joint limits (see :func:`sample_configs`)
+    are drawn in ``ceil(n_samples / chunk)`` chunks, chunk ``c`` from
+    ``jax.random.fold_in(key, c)`` (the last one masked to the remaining samples), and reduced
+    chunk by chunk, so memory is ``O(chunk + grid)`` per device. Chunks are spread over
+    ``devices``; the map is identical for any number of devices. Each step is one jitted call,
+    compiled once per chain, grid shape, chunk, orientation bins, dtype and device set.
+
+    Args:
+        chain: a :class:`DHChain` or :class:`PoEChain` with concrete (not traced) numbers, or a
+            ``(robot, frame_name)`` pair: the map of that frame of a :class:`Robot`, in its root
+            frame (the path's joints only; see :meth:`Robot.chain`).
+        n_samples: number of configurations.
+        key: a JAX PRNG key.
+        voxel_size: voxel edge, metres (default 0.05, as the ``diffkin workspace`` command).
+        bounds: ``(2, 3)`` ``[[xmin, ymin, zmin], [xmax, ymax, zmax]]`` box in the base frame,
+            metres; the grid starts at the min corner and has ``ceil((max - min) / voxel_size)``
+            voxels per axis. Default: a cube centred on the base origin (at a voxel centre) that
+            holds every reachable point, from an upper bound on the reach (the sum of the
+            distances between consecutive joint axes, plus prismatic travel).
+        chunk: samples per device per step (at most ``n_samples``: a larger value is capped).
+        devices: devices to use (all processes' devices in a multi-host run); default
+            ``jax.devices()``.
+        orientation_bins: cells of the SO(3) partition, a multiple of 6 (6 cube faces of the
+            tool z axis times ``orientation_bins / 6`` roll sectors).
+        dtype: float dtype of the computation; default the default float (float32, or float64
+            with x64).
+        progress: show a tqdm progress bar; ``None`` (default): only on a terminal.
+        avoid: for a ``(robot, frame_name)`` pair, a :class:`~diffkin.ik.Avoid` (the robot's collision
+            geometry, obstacles, margin): only samples whose clearance is at least the margin count
+            (in every map; ``n_outside`` then also counts the colliding samples). The robot's joints
+            off the frame's path are held at the middle of their limits (a one-sided limit's bound, 0
+            where unlimited).
+
+    Returns:
+        The :class:`ReachabilityMap`.
+
+    Raises:
+        ValueError, TypeError: bad arguments (named in the message).
+    """
+    collision = None if avoid is None else _collision_check(chain, avoid)
+    chain = _as_chain(chain)
+    n_samples = positive_int(n_samples, "n_samples")
+    chunk = positive_int(chunk, "chunk")
+    orientation_bins = positive_int(orientation_bins, "orientation_bins")
+    if orientation_bins % 6:
+        raise ValueError(
+            f"orientation_bins: expected a multiple of 6 (6 cube faces x roll sectors), got {orientation_bins}"
+        )
+    origin, voxel_size, shape = _grid(chain, voxel_size, bounds)
+    n_chunks = -(-n_samples // chunk)
+    if n_chunks > _INT32_MAX:
+        raise ValueError(f"n_samples: expected at most {_INT32_MAX} chunks of {chunk} samples, got {n_samples} samples")
+    chunk = min(chunk, n_samples)  # a larger chunk would only compute masked samples
+    n_slots = math.prod(shape) * orientation_bins
+    if n_slots >= _INT32_MAX:
+        raise ValueError(
+            f"voxel_size: grid of {shape} voxels x {orientation_bins} orientation bins exceeds 2**31 "
+            f"cells; expected a coarser voxel_size, smaller bounds or fewer orientation_bins"
+        )
+    devices = list(jax.devices() if devices is None else devices)
+    if not devices or not all(isinstance(d, jax.Device) for d in devices):
+        raise TypeError(f"devices: expected a non-empty sequence of jax.Device, got {devices!r}")
+    dtype = jnp.dtype(dtype or jnp.result_type(float))
+    # Per voxel: every device's counts, best manipulability and orientation flags; the reduction's
+    # maximum of the flags and its three maps; the host's int64 counts and copies of the maps.
+    item = dtype.itemsize
+    grid_bytes = math.prod(shape) * (
+        len(devices) * (4 + item + orientation_bins) + orientation_bins + 2 * (8 + item) + 8
+    )
+    if grid_bytes > MAX_GRID_BYTES:
+        raise ValueError(
+            f"voxel_size: {voxel_size} m gives a grid of {shape} voxels x {orientation_bins} orientation "
+            f"bins on {len(devices)} device(s), about {grid_bytes / 2**30:.1f} GiB of maps (limit "
+            f"diffkin.workspace.MAX_GRID_BYTES = {MAX_GRID_BYTES / 2**30:.1f} GiB); expected a coarser "
+            f"voxel_size, smaller bounds or fewer orientation_bins"
+        )
+    mesh = Mesh(np.array(devices), (_AXIS,))
+    zeros, step, reduce = _compiled(partition(chain)[0], shape, orientation_bins, chunk, dtype, mesh, collision)
+
+    n_full, n_last = divmod(n_samples, chunk)
+    n_steps = -(-(n_full + (n_last > 0)) // len(devices))
+    steps_per_flush = max(1, _INT32_MAX // (chunk * len(devices)))  # int32 device counts cannot overflow
+    args = (
+        jnp.asarray(n_full, jnp.int32),
+        jnp.asarray(n_last, jnp.int32),
+        jnp.asarray(origin, dtype),
+        jnp.asarray(1.0 / voxel_size, dtype),
+        jnp.asarray(n_slots, jnp.int32),
+        jnp.zeros((), dtype) if avoid is None else avoid.cast(dtype),
+    )
+    sharded = NamedSharding(mesh, P(_AXIS))
+    state, counts, bar = zeros(), np.zeros(shape, np.int64), _progress(n_samples, progress)
+    done: jax.Array | None = None  # the valid samples of the step in flight
+    for s in range(n_steps):
+        indices = np.arange(s * len(devices), (s + 1) * len(devices), dtype=np.int32)
+        chunks = jax.make_array_from_callback(indices.shape, sharded, indices.__getitem__)
+        *state, n_step = step(*state, key, chunks, *args)
+        if bar is not None:
+            if done is not None:
+                bar.update(int(done))  # waits for the previous step only: one step stays in flight
+            done = n_step
+        if (s + 1) % steps_per_flush == 0 or s + 1 == n_steps:
+            counts_s, best, dexterity = reduce(*state)
+            counts += _host(counts_s).reshape(shape)
+            if s + 1 < n_steps:
+                state = [zeros()[0], *state[1:]]
+    if bar is not None and done is not None:
+        bar.update(int(done))
+    if bar is not None:
+        bar.close()
+    return ReachabilityMap(
+        counts=counts,
+        manipulability=_host(best).reshape(shape),
+        dexterity=_host(dexterity).reshape(shape),
+        origin=origin,
+        voxel_size=voxel_size,
+        n_samples=n_samples,
+        n_outside=n_samples - int(counts.sum()),
+        orientation_bins=orientation_bins,
+        chain_name=chain.name,
+    )
+
+
+__all__ = ["MAX_GRID_BYTES", "ReachabilityMap", "plot_slice", "reachability", "sample_configs"]

@@ -1,0 +1,82 @@
+"""The map of :func:`diffkin.workspace.reachability`: its grid, counts, manipulability and orientation
+bins, and its file format (``.npz``, read without pickle)."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+
+import numpy as np
+
+from diffkin._npz import read_npz
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ReachabilityMap:
+    """Per-voxel statistics of the end-effector positions of sampled configurations.
+
+    Voxel ``(i, j, k)`` is the box ``origin + voxel_size * ([i, i+1) x [j, j+1) x [k, k+1))`` in
+    the chain's base frame; a sample whose end-effector position ``p`` (metres, base frame) has
+    ``floor((p - origin) / voxel_size) == (i, j, k)`` counts in that voxel (computed as
+    ``(p - origin) * (1 / voxel_size)`` in the computation's dtype, so a point within rounding of a
+    face may count on either side of it, the same side on any number of devices). Samples outside
+    the grid count in no voxel: ``counts.sum() + n_outside == n_samples``.
+
+    Attributes:
+        counts: ``(nx, ny, nz)`` int64, number of samples per voxel.
+        manipulability: ``(nx, ny, nz)`` float, best Yoshikawa manipulability of the samples in
+            the voxel (as :func:`diffkin.manipulability`), 0 where there are none.
+        dexterity: ``(nx, ny, nz)`` int32, number of distinct orientation bins (of
+            ``orientation_bins``, see the module docstring) reached in the voxel.
+        origin: ``(3,)`` float64, corner of voxel ``(0, 0, 0)``, metres, base frame.
+        voxel_size: edge of the cubic voxels, metres.
+        n_samples: number of sampled configurations.
+        n_outside: number of samples whose end effector fell outside the grid.
+        orientation_bins: number of cells of the SO(3) partition.
+        chain_name: name of the chain (informational).
+    """
+
+    counts: np.ndarray
+    manipulability: np.ndarray
+    dexterity: np.ndarray
+    origin: np.ndarray
+    voxel_size: float
+    n_samples: int
+    n_outside: int
+    orientation_bins: int
+    chain_name: str = ""
+
+    def save(self, path) -> None:
+        """Write the map to ``path`` as a ``.npz`` archive (numpy appends ``.npz`` if missing)."""
+        fields = {f.name: np.asarray(getattr(self, f.name)) for f in dataclasses.fields(self)}
+        np.savez_compressed(path, **fields)  # type: ignore[arg-type]  # numpy's stub reads **fields as allow_pickle
+
+    @classmethod
+    def load(cls, path) -> ReachabilityMap:
+        """Read a map written by :meth:`save` (``load("map")`` reads the ``map.npz`` that ``save("map")`` wrote).
+
+        Raises:
+            ValueError: a file that is empty, truncated, not a ``.npz`` archive, or lacks a field
+                of the map (the message names the file and the field).
+            FileNotFoundError: no such file.
+        """
+        path = os.fspath(path)
+        if not os.path.exists(path) and not path.endswith(".npz") and os.path.exists(path + ".npz"):
+            path += ".npz"  # as np.savez named it
+        fields = read_npz(path, "written by ReachabilityMap.save")
+        missing = [f.name for f in dataclasses.fields(cls) if f.name not in fields]
+        if missing:
+            raise ValueError(f"{path}: not a complete reachability map, missing field(s) {', '.join(missing)}")
+        if fields["counts"].ndim != 3:
+            raise ValueError(f"{path}: field counts: expected a 3-d grid, got shape {fields['counts'].shape}")
+        return cls(
+            counts=fields["counts"],
+            manipulability=fields["manipulability"],
+            dexterity=fields["dexterity"],
+            origin=fields["origin"],
+            voxel_size=float(fields["voxel_size"]),
+            n_samples=int(fields["n_samples"]),
+            n_outside=int(fields["n_outside"]),
+            orientation_bins=int(fields["orientation_bins"]),
+            chain_name=str(fields["chain_name"]),
+        )
