@@ -43,7 +43,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from diffkin.models import _mjcf_mass, _xml
-from diffkin.models.robot import JointSpec, Robot, build
+from diffkin.models._tree import JointSpec, build
+from diffkin.models.robot import Robot
 
 _ORIENTATIONS = ("quat", "axisangle", "euler", "xyaxes", "zaxis")
 _REJECTED = ("attach", "replicate", "composite", "flexcomp")

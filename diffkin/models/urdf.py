@@ -7,8 +7,9 @@ import xml.etree.ElementTree as ET
 import numpy as np
 
 from diffkin.models import _xml
+from diffkin.models._tree import JointSpec, build
 from diffkin.models.poe import PoEChain
-from diffkin.models.robot import JointSpec, Robot, build
+from diffkin.models.robot import Robot
 
 _KINDS = {"revolute": "R", "continuous": "R", "prismatic": "P", "fixed": "F"}
 
