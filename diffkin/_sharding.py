@@ -24,7 +24,7 @@ def automatic_axes(fn: Callable, batched: jax.Array, batch_ndim: int) -> Callabl
     """
     sharding = getattr(jax.typeof(batched), "sharding", None)
     mesh = getattr(sharding, "mesh", None)
-    if sharding is None or not getattr(mesh, "explicit_axes", ()):
+    if sharding is None or mesh is None or not getattr(mesh, "explicit_axes", ()):
         return fn
     spec = (tuple(sharding.spec) + (None,) * batch_ndim)[:batch_ndim]
 

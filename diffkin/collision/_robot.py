@@ -97,7 +97,11 @@ class World:
                 )
             else:
                 stacked.append(unchecked(cls, **{k: jnp.zeros(v, dtype) for k, v in empty[cls].items()}))
-        self.spheres, self.capsules, self.boxes, self.planes = stacked
+        self.spheres: Sphere
+        self.capsules: Capsule
+        self.boxes: Box
+        self.planes: Plane
+        self.spheres, self.capsules, self.boxes, self.planes = stacked  # type: ignore[assignment]
 
     @property
     def size(self) -> int:

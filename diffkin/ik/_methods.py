@@ -12,7 +12,7 @@ import dataclasses
 import functools
 import importlib
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from diffkin.ik import _lm
 
@@ -20,9 +20,9 @@ from diffkin.ik import _lm
 class Steps(NamedTuple):
     """An iterative method's functions (see the module docstring)."""
 
-    init: Callable
-    propose: Callable
-    judge: Callable
+    init: Callable[..., Any]  # (x) -> aux
+    propose: Callable[..., tuple[Any, Any]]  # (problem, x, ev, aux) -> (x_try, aux)
+    judge: Callable[..., tuple[Any, Any, Any]]  # (cost, cost_try, aux) -> (accepted, aux, stalled)
 
 
 @dataclasses.dataclass(frozen=True)

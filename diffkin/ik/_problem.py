@@ -230,7 +230,7 @@ def settle(entries: Entries) -> Eval:
     return _arrays(entries, done[: len(head)], _jacobian(J, computed, done[len(head) :]), entries.blocks)
 
 
-def settle_choosing(entries: Entries, old: Eval, choose) -> tuple[Eval, jax.Array, object]:
+def settle_choosing(entries: Entries, old: Eval, choose) -> tuple[Eval, jax.Array, Any]:
     """The entries computed once where ``choose`` takes them, ``old``'s values elsewhere.
 
     ``choose(cost)`` maps the new cost ``(P,)`` to ``(take, extra)``, ``take`` ``(P,)`` bool;

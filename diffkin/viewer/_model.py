@@ -137,6 +137,7 @@ def make_ik_avoiding(kin: Kinematics, end: str, num_seeds: int, avoid) -> tuple[
     and ``avoid`` (a ``dk.ik.Avoid`` of its geometry) are closed over.
     """
     robot = kin.model
+    assert isinstance(robot, dk.Robot)  # (checked by show)
 
     def solve(T, q0, key, T_world_root):
         base = T_world_root if robot.floating else None

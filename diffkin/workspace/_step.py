@@ -91,7 +91,7 @@ def _compiled(
             counted = counted & (avoid.clearance(robot, q_robot.T) >= avoid.margin)
         kin = chain.forward(list(q))
         ee = kin.pose()
-        p = [jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in ee.p]
+        p = tuple(jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in ee.p)
         R = tuple(tuple(jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in row) for row in ee.R)
         flat, inside = _flat_index(p, origin, inv_voxel, shape)
         slot = jnp.where(
