@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 import string
 import threading
 from collections.abc import Sequence
@@ -18,19 +17,15 @@ import diffkin as dk
 from diffkin._npz import read_npz
 from diffkin.collision._robot import check_geometry
 from diffkin.viewer import _overlays, _visuals
+from diffkin.viewer._arm_panel import ArmPanel
+from diffkin.viewer._gui import shown
 from diffkin.viewer._model import kinematics, make_ik, make_ik_avoiding
 from diffkin.viewer._results import check_results, describe
 
-GC_OPTIONS = tuple(" ".join(f"{s:+d}" for s in signs) for signs in itertools.product((1, -1), repeat=3))
 IIWA_READY = np.array([0.0, 0.5, 0.0, -1.2, 0.0, 0.7, 0.0])  # a bent pose: the arm angle is defined
 _ARM_NAMES = ("iiwa7", "iiwa14")
 BUILTIN = dk.robots.BUILTIN
 FPS_RANGE = (0.1, 1000.0)  # playback rates of batch results, results per second
-
-
-def _shown(x: float) -> float:
-    """A value as a slider shows it: 6 decimals (the browser breaks on values such as ``1e-17``)."""
-    return round(float(x), 6) + 0.0
 
 
 _MARKDOWN_ESCAPES = {
@@ -62,11 +57,6 @@ def _wxyz(R: np.ndarray) -> np.ndarray:
     return vtf.SO3.from_matrix(np.asarray(R, dtype=np.float64)).wxyz
 
 
-def _signs(text: str) -> np.ndarray:
-    """``(3,)`` global configuration of a dropdown entry ``"+1 -1 +1"``."""
-    return np.array([float(s) for s in text.split()])
-
-
 def _pose(position, wxyz) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3] = vtf.SO3(np.asarray(wxyz, dtype=np.float64)).as_matrix()
@@ -78,11 +68,6 @@ def _clearance_text(clearance: float, margin: float) -> str:
     """``clearance 0.034 m (margin 0.01 m): collision-free`` (or ``within the margin``, ``in collision``)."""
     word = "collision-free" if clearance >= margin else "within the margin" if clearance >= 0 else "in collision"
     return f"clearance {clearance:.4f} m (margin {margin:g} m): {word}"
-
-
-def _intervals_text(intervals: np.ndarray, mask: np.ndarray) -> str:
-    used = [f"[{lo:+.3f}, {hi:+.3f}]" for (lo, hi), m in zip(np.asarray(intervals), np.asarray(mask), strict=True) if m]
-    return " ∪ ".join(used) if used else "none (no arm angle keeps every joint within its limits)"
 
 
 class Viewer:
@@ -306,7 +291,7 @@ class Viewer:
             self.sliders = []
             for i, joint in enumerate(self.kin.joint_names):
                 lo, hi = float(self.kin.lower[i]), float(self.kin.upper[i])
-                slider = gui.add_slider(joint, min=lo, max=hi, step=1e-3, initial_value=_shown(self.q[i]))
+                slider = gui.add_slider(joint, min=lo, max=hi, step=1e-3, initial_value=shown(self.q[i]))
 
                 def moved(_event, i: int = i) -> None:
                     self._on_slider(i)
@@ -360,23 +345,7 @@ class Viewer:
                 for handle in self.obstacles.values():
                     handle.visible = self.show_obstacles.value
 
-        if self.arm is not None:
-            arm = self.arm
-            chain = arm.chain()
-            self._srs_fk = jax.jit(lambda q: dk.fk(chain, q))
-            self._srs_ik = jax.jit(lambda T, psi, gc: dk.srs.ik(arm, T, psi, gc))
-            self._srs_angle = jax.jit(lambda q: dk.srs.arm_angle(arm, q))
-            self._srs_feasible = jax.jit(lambda T, gc: dk.srs.feasible_arm_angles(arm, T, gc))
-            with gui.add_folder("Arm angle (iiwa)") as self._arm_folder:
-                self.psi_slider = gui.add_slider("arm angle psi", min=-np.pi, max=np.pi, step=1e-3, initial_value=0.0)
-                self.srs_status = gui.add_markdown("")
-            self.gc_dropdown: viser.GuiDropdownHandle[str] | None = None
-            self._show_gc(GC_OPTIONS[0])
-
-            @self.psi_slider.on_update
-            def _(_event) -> None:
-                if not self._quiet:
-                    self.set_arm_angle(self.psi_slider.value)
+        self.arm_panel = None if self.arm is None else ArmPanel(self, self.arm)
 
         self.map = workspace_map
         if workspace_map is not None:
@@ -415,28 +384,6 @@ class Viewer:
                 else:
                     self.play()
 
-    def _show_gc(self, text: str) -> None:
-        """Show the global configuration ``text`` in its dropdown.
-
-        The dropdown is rebuilt rather than updated: viser 1.1.1's page goes blank when a
-        dropdown's value is changed from Python after the page has loaded other updates.
-        """
-        old = self.gc_dropdown
-        if old is not None and old.value == text:
-            return
-        with self._arm_folder:
-            dropdown = self.server.gui.add_dropdown(
-                "gc (signs q2 q4 q6)", GC_OPTIONS, initial_value=text, order=None if old is None else old.order
-            )
-        self.gc_dropdown = dropdown
-        if old is not None:
-            old.remove()
-
-        @dropdown.on_update
-        def _(_event) -> None:
-            if not self._quiet:
-                self.set_arm_angle(self.psi_slider.value, _signs(dropdown.value), nearest=True)
-
     def _draw_map(self) -> None:
         points, colors = _overlays.map_points(self.map, self.map_quantity.value)
         self.map_cloud = self.server.scene.add_point_cloud(
@@ -461,13 +408,13 @@ class Viewer:
             try:
                 if source != "slider":
                     for slider, value in zip(self.sliders, self.q, strict=True):
-                        slider.value = _shown(value)  # type: ignore[misc]  # viser's stub: read-only; its API sets it
+                        slider.value = shown(value)  # type: ignore[misc]  # viser's stub: read-only; its API sets it
                 for end, gizmo in self.targets.items():
                     if source != ("gizmo", end):
                         f = self.kin.frame_names.index(end)
                         gizmo.position, gizmo.wxyz = poses[f, :3, 3], _wxyz(poses[f, :3, :3])
-                if self.arm is not None and source != "srs":
-                    self._sync_arm_angle()
+                if self.arm_panel is not None and source != "srs":
+                    self.arm_panel.sync(self.q)
                 if self.avoid is not None:
                     self.clearance = float(self._clearance(jnp.asarray(self.q), jnp.asarray(self.T_world_root)))
                     self.clearance_status.content = _clearance_text(self.clearance, float(self.avoid.margin))
@@ -560,23 +507,6 @@ class Viewer:
 
     # ------------------------------------------------------------------------------------- arm angle
 
-    def _sync_arm_angle(self) -> None:
-        """Arm angle, global configuration and feasible intervals of the current flange pose."""
-        q = jnp.asarray(self.q)
-        self._flange = self._srs_fk(q)
-        psi, gc = (np.asarray(x) for x in self._srs_angle(q))
-        self.psi_slider.value = _shown(float(psi)) if np.isfinite(psi) else 0.0  # type: ignore[misc]  # viser: read-only stub
-        self._show_gc(" ".join(f"{int(s):+d}" for s in gc))
-        self._show_intervals(gc, "" if np.isfinite(psi) else "arm angle undefined here (elbow stretched)")
-
-    def _show_intervals(self, gc, note: str = "") -> np.ndarray:
-        gc = jnp.asarray(np.asarray(gc, dtype=np.float64))
-        intervals, mask = (np.asarray(x) for x in self._srs_feasible(self._flange, gc))
-        self.srs_status.content = f"feasible psi for this flange pose and gc: {_intervals_text(intervals, mask)}" + (
-            f"  \n{note}" if note else ""
-        )
-        return intervals[mask]
-
     def set_arm_angle(self, psi: float, gc=None, *, nearest: bool = False) -> bool:
         """Move the iiwa along the self-motion of its current flange pose to arm angle ``psi``.
 
@@ -588,32 +518,9 @@ class Viewer:
         Returns:
             Whether the arm moved (``False``: no solution within the joint limits; the arm stays).
         """
-        if self.arm is None:
+        if self.arm_panel is None:
             raise ValueError("set_arm_angle: the arm-angle controls need an iiwa (show(..., arm=dk.srs.iiwa14()))")
-        with self._lock:
-            if gc is None and self.gc_dropdown is not None:  # (always built with the arm controls)
-                gc = _signs(self.gc_dropdown.value)
-            gc = np.asarray(gc, dtype=np.float64)
-            q, valid = self._srs_ik(self._flange, float(psi), jnp.asarray(gc))
-            feasible = self._show_intervals(gc)
-            if not bool(valid) and nearest and len(feasible):
-                psi = float(
-                    np.clip(psi, feasible[:, 0], feasible[:, 1])[
-                        np.argmin(np.abs(np.clip(psi, feasible[:, 0], feasible[:, 1]) - psi))
-                    ]
-                )
-                q, valid = self._srs_ik(self._flange, psi, jnp.asarray(gc))
-            self._quiet = True
-            try:
-                self.psi_slider.value = _shown(psi)  # type: ignore[misc]  # viser's stub: read-only; its API sets it
-                self._show_gc(" ".join(f"{int(s):+d}" for s in gc))
-            finally:
-                self._quiet = False
-            if not bool(valid):
-                self.srs_status.content += "  \n**no solution within the joint limits at this arm angle**"
-                return False
-            self._apply(np.asarray(q, dtype=np.float64), source="srs")
-            return True
+        return self.arm_panel.set_arm_angle(psi, gc, nearest=nearest)
 
     # ------------------------------------------------------------------------------------- results
 

@@ -21,7 +21,7 @@ from _reference import DATA, INTERRUPTIBLE, ROOT, SCENE, SCENE_FILE
 
 import diffkin as dk  # noqa: E402
 from diffkin.viewer import _visuals, show  # noqa: E402
-from diffkin.viewer._viewer import GC_OPTIONS  # noqa: E402
+from diffkin.viewer._arm_panel import GC_OPTIONS  # noqa: E402
 
 FINGER = os.path.join(DATA, "example-robot-data", "robots", "finger_edu_description", "robots", "finger_edu.urdf")
 FINGER_MESHES = {"finger_base_link": 4, "finger_upper_link": 1, "finger_middle_link": 1, "finger_lower_link": 1}
@@ -175,10 +175,10 @@ def test_arm_angle_moves_along_the_self_motion(viewer_of):
     viewer = viewer_of("iiwa14")
     T0 = np.asarray(dk.fk(chain, viewer.q))
     psi0, gc0 = (np.asarray(x) for x in dk.srs.arm_angle(arm, viewer.q))
-    assert viewer.psi_slider.value == pytest.approx(float(psi0), abs=1e-6)  # shown to 6 decimals
-    assert viewer.gc_dropdown.value == " ".join(f"{int(s):+d}" for s in gc0)
-    assert "feasible psi" in viewer.srs_status.content and "[" in viewer.srs_status.content
-    viewer.psi_slider.value = psi0 + 0.6  # as the browser slider does
+    assert viewer.arm_panel.psi_slider.value == pytest.approx(float(psi0), abs=1e-6)  # shown to 6 decimals
+    assert viewer.arm_panel.gc_dropdown.value == " ".join(f"{int(s):+d}" for s in gc0)
+    assert "feasible psi" in viewer.arm_panel.srs_status.content and "[" in viewer.arm_panel.srs_status.content
+    viewer.arm_panel.psi_slider.value = psi0 + 0.6  # as the browser slider does
     q_ref, valid = dk.srs.ik(arm, T0, psi0 + 0.6, gc0)
     assert bool(valid)
     np.testing.assert_allclose(viewer.q, np.asarray(q_ref), atol=1e-9)
@@ -193,11 +193,11 @@ def test_arm_angle_moves_along_the_self_motion(viewer_of):
         q_before = viewer.q.copy()
         assert viewer.set_arm_angle(gaps[len(gaps) // 2]) is False
         np.testing.assert_array_equal(viewer.q, q_before)
-        assert "no solution" in viewer.srs_status.content
+        assert "no solution" in viewer.arm_panel.srs_status.content
     # another global configuration: the same flange pose, the joint signs asked for
-    other = next(g for g in GC_OPTIONS if g != viewer.gc_dropdown.value and g.split()[1] == "-1")
-    viewer.gc_dropdown.value = other
-    if viewer.gc_dropdown.value == other and "no solution" not in viewer.srs_status.content:
+    other = next(g for g in GC_OPTIONS if g != viewer.arm_panel.gc_dropdown.value and g.split()[1] == "-1")
+    viewer.arm_panel.gc_dropdown.value = other
+    if viewer.arm_panel.gc_dropdown.value == other and "no solution" not in viewer.arm_panel.srs_status.content:
         np.testing.assert_allclose(viewer.frame_pose("ee"), T0, atol=1e-6)
         np.testing.assert_array_equal(np.sign(viewer.q[[1, 3, 5]]), [float(s) for s in other.split()])
 
