@@ -240,11 +240,17 @@ def _segment_in_box(a: Capsule, b: Box) -> tuple[Vec, Vec, Vec, Vec]:
     return p, q, sub(q, p), vec(b.half_extents)
 
 
+def _segment_face_separations(mid: Vec, u: Vec, h: Vec) -> list[jax.Array]:
+    """The separations of a segment (midpoint ``mid``, direction ``u``, box frame) and a box of half
+    extents ``h`` along the box's axes ``e_i``."""
+    return [jnp.abs(mid[i]) - 0.5 * jnp.abs(u[i]) - h[i] for i in range(3)]
+
+
 def _segment_box_separations(a: Capsule, b: Box) -> tuple[jax.Array, jax.Array]:
     """The largest separation along the box's axes ``e_i`` (code ``i``) and ``e_i x u`` (``3 + i``), and its code."""
     p, q, u, h = _segment_in_box(a, b)
     mid = tuple(0.5 * (p[i] + q[i]) for i in range(3))
-    seps = [(jnp.abs(mid[i]) - 0.5 * jnp.abs(u[i]) - h[i], i) for i in range(3)]
+    seps = [(sep, i) for i, sep in enumerate(_segment_face_separations(mid, u, h))]
     for i in range(3):
         n, ok = _unit(_cross_axis(i, u))
         sep = jnp.abs(dot(n, mid)) - sum(jnp.abs(n[m]) * h[m] for m in range(3))
@@ -312,7 +318,7 @@ def capsule_box_bound(a: Capsule, b: Box) -> jax.Array:
     """A lower bound of :func:`capsule_box`: the largest separation along the box's face axes (a few
     operations: the projection on any axis separates no more than the distance or the depth)."""
     p, q, u, h = _segment_in_box(a, b)
-    seps = [jnp.abs(0.5 * (p[i] + q[i])) - 0.5 * jnp.abs(u[i]) - h[i] for i in range(3)]
+    seps = _segment_face_separations(tuple(0.5 * (p[i] + q[i]) for i in range(3)), u, h)
     return jnp.maximum(jnp.maximum(seps[0], seps[1]), seps[2]) - a.radius
 
 
@@ -333,14 +339,19 @@ def _relative(a: Box, b: Box) -> tuple[Vec, Vec, tuple[Vec, Vec, Vec], Vec]:
     return vec(a.half_extents), vec(b.half_extents), cols, c  # type: ignore[return-value]
 
 
+def _box_face_separations(ha: Vec, hb: Vec, cols: tuple[Vec, Vec, Vec], c: Vec) -> list[jax.Array]:
+    """The separations of two boxes (:func:`_relative`) along ``a``'s axes ``e_i``, then ``b``'s ``b_m``."""
+    cb = to_frame(cols, c)  # b's centre in b's frame
+    absR = [[jnp.abs(cols[m][i]) for m in range(3)] for i in range(3)]  # |e_i . b_m|
+    seps = [jnp.abs(c[i]) - ha[i] - sum(absR[i][m] * hb[m] for m in range(3)) for i in range(3)]
+    return seps + [jnp.abs(cb[m]) - sum(absR[i][m] * ha[i] for i in range(3)) - hb[m] for m in range(3)]
+
+
 def _box_box_separations(a: Box, b: Box) -> tuple[jax.Array, jax.Array]:
     """The largest separation along the axes ``e_i`` (code ``i``), ``b_m`` (``3 + m``) and ``e_i x b_m``
     (``6 + 3 i + m``) (frame of ``a``), and its code."""
     ha, hb, cols, c = _relative(a, b)
-    cb = to_frame(cols, c)  # b's centre in b's frame
-    absR = [[jnp.abs(cols[m][i]) for m in range(3)] for i in range(3)]  # |e_i . b_m|
-    seps = [(jnp.abs(c[i]) - ha[i] - sum(absR[i][m] * hb[m] for m in range(3)), i) for i in range(3)]
-    seps += [(jnp.abs(cb[m]) - sum(absR[i][m] * ha[i] for i in range(3)) - hb[m], 3 + m) for m in range(3)]
+    seps = [(sep, k) for k, sep in enumerate(_box_face_separations(ha, hb, cols, c))]
     for i, m in itertools.product(range(3), repeat=2):
         n, ok = _unit(_cross_axis(i, cols[m]))
         rb = sum(jnp.abs(dot(n, cols[k])) * hb[k] for k in range(3))
@@ -424,11 +435,7 @@ _box_box_apart = _chosen(_box_box_closest, _gap(_box_box_witness, _box_point, _b
 def box_box_bound(a: Box, b: Box) -> jax.Array:
     """A lower bound of :func:`box_box`: the largest separation along the six face axes (as
     :func:`capsule_box_bound`)."""
-    ha, hb, cols, c = _relative(a, b)
-    cb = to_frame(cols, c)
-    absR = [[jnp.abs(cols[m][i]) for m in range(3)] for i in range(3)]
-    seps = [jnp.abs(c[i]) - ha[i] - sum(absR[i][m] * hb[m] for m in range(3)) for i in range(3)]
-    seps += [jnp.abs(cb[m]) - sum(absR[i][m] * ha[i] for i in range(3)) - hb[m] for m in range(3)]
+    seps = _box_face_separations(*_relative(a, b))
     out = seps[0]
     for sep in seps[1:]:
         out = jnp.maximum(out, sep)
