@@ -14,6 +14,7 @@ from diffkin import _rigid as rg
 from diffkin._static import is_concrete
 from diffkin._xla import configurations_in_steps
 from diffkin.models import forward
+from diffkin.models._scanned import ScannedPass
 from diffkin.models.forward import Model
 from diffkin.models.robot import Robot
 
@@ -37,7 +38,7 @@ def _pass(model: Model, q, base=None):
     """Check ``q`` and run the model's forward pass; returns the pass, its batch shape and its dtype."""
     q = forward.joint_values(model, q)
     B = _base(model, base)
-    kin = model.forward([q[..., i] for i in range(model.dof)], B)
+    kin = model.forward(forward.JointValues(q), B)
     arrays = [e for e in rg.leaves(B) if not isinstance(e, float)]
     shape = jnp.broadcast_shapes(q.shape[:-1], *(jnp.shape(e) for e in arrays))
     return kin, shape, jnp.result_type(q, *arrays)
@@ -79,7 +80,7 @@ def fk(model: Model, q: ArrayLike, frames: str | Sequence[str] | None = None, *,
     kin, shape, dtype = _pass(model, q, base)
     if single:
         return rg.to_matrix(kin.pose(indices[0]), shape, dtype)
-    return rg.to_matrices([kin.pose(f) for f in indices], shape, dtype)
+    return _matrices(kin, indices, shape, dtype)
 
 
 def link_poses(model: Model, q: ArrayLike, *, base=None) -> jax.Array:
@@ -97,21 +98,46 @@ def link_poses(model: Model, q: ArrayLike, *, base=None) -> jax.Array:
         A robot: ``(..., len(robot.frame_names), 4, 4)`` in ``robot.frame_names`` order, in the world.
     """
     kin, shape, dtype = _pass(model, q, base)
+    if isinstance(kin, ScannedPass):
+        return _matrices(kin, list(range(len(kin.robot.frame_names))), shape, dtype)
     return rg.to_matrices(kin.poses(), shape, dtype)
+
+
+def _matrices(kin, frames: list[int], shape: tuple[int, ...], dtype) -> jax.Array:
+    """``shape + (len(frames), 4, 4)``: the poses of ``frames``, a scanned pass's as one stacked pose."""
+    if isinstance(kin, ScannedPass):
+        return jnp.moveaxis(rg.to_matrix(kin.stacked_poses(frames), (len(frames), *shape), dtype), 0, -3)
+    return rg.to_matrices([kin.pose(f) for f in frames], shape, dtype)
 
 
 def _analytic(model: Model, q, frame: str, f: int | None, base, include_base: bool) -> jax.Array:
     kin, shape, dtype = _pass(model, q, base)
     T = kin.pose(f)
-    columns = kin.columns(f)
-    if include_base:
-        columns = rg.root_screws(_base(model, base)) + columns
+    if isinstance(kin, ScannedPass):  # one twist whose entries have a leading axis of columns
+        assert f is not None
+        columns = [kin.stacked_columns(f)]
+        if include_base:
+            columns = [_stacked_twists(rg.root_screws(_base(model, base)), shape, dtype), *columns]
+    else:
+        columns = kin.columns(f)
+        if include_base:
+            columns = rg.root_screws(_base(model, base)) + columns
     if frame != "space":
         columns = rg.world_from_space(columns, T.p)
     if frame == "body":
         Rt = tuple(rg.column(T.R, j) for j in range(3))
         columns = [(rg.rotate(Rt, v), rg.rotate(Rt, w)) for v, w in columns]
+    if isinstance(kin, ScannedPass):
+        blocks = [rg.stack([*v, *w], (jnp.shape(v[0])[0], *shape), dtype, axis=0) for v, w in columns]  # (6, n) + shape
+        return jnp.moveaxis(jnp.concatenate(blocks, axis=1), (0, 1), (-2, -1))
     return _stack_columns(columns, shape, dtype)
+
+
+def _stacked_twists(twists: list[forward.Twist], shape: tuple[int, ...], dtype) -> forward.Twist:
+    """Twists ``(v, w)`` (entries) as one twist whose entries are ``(len(twists),) + shape``."""
+    return tuple(  # type: ignore[return-value]
+        tuple(rg.stack([t[part][i] for t in twists], shape, dtype, axis=0) for i in range(3)) for part in (0, 1)
+    )
 
 
 def _autodiff(model: Model, q, frame: str, f: int | None, base, include_base: bool) -> jax.Array:

@@ -133,6 +133,18 @@ def time_limit(seconds: float, what: str):
         signal.signal(signal.SIGALRM, previous)
 
 
+def snake_robot(n: int):
+    """A URDF snake of ``n`` joints (revolute about z and y in turn, every seventh prismatic), 1 cm apart."""
+    links = "".join(f'<link name="l{i}"/>' for i in range(n + 1))
+    joints = "".join(
+        f'<joint name="j{i}" type="{"prismatic" if i % 7 == 3 else "revolute"}"><parent link="l{i}"/>'
+        f'<child link="l{i + 1}"/><origin xyz="0 0 0.01" rpy="0.1 0 0"/><axis xyz="0 {i % 2} {1 - i % 2}"/>'
+        f'<limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
+        for i in range(n)
+    )
+    return dk.load_robot(f'<robot name="snake">{links}{joints}</robot>')
+
+
 def random_q(chain, n, seed=0):
     """``(n, dof)`` float64 configurations uniform within limits (unlimited joints over one turn)."""
     lo = np.where(np.isfinite(chain.lower), chain.lower, -np.pi)

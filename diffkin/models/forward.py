@@ -83,6 +83,31 @@ class ChainPass:
         return self.links
 
 
+class JointValues(Sequence):
+    """The ``dof`` entries of a ``(..., dof)`` array of joint values, each sliced when read.
+
+    A model's :meth:`~Model.forward` reads ``q`` entry by entry; one that scans over its joints
+    reads the whole :attr:`array` instead (slicing a thousand joints out of an array and stacking them
+    again costs seconds of compile time).
+    """
+
+    def __init__(self, array: jax.Array):
+        self.array = array
+
+    def __len__(self) -> int:
+        return self.array.shape[-1]
+
+    def __getitem__(self, i):  # type: ignore[override]
+        if isinstance(i, slice):
+            return [self.array[..., k] for k in range(len(self))[i]]
+        if not -len(self) <= i < len(self):
+            raise IndexError(f"joint {i} of {len(self)}")
+        return self.array[..., i]
+
+    def __iter__(self):
+        return (self.array[..., k] for k in range(len(self)))
+
+
 def check(model, name: str = "chain") -> None:
     """Raise a TypeError unless ``model`` is a model (it implements :class:`Model`)."""
     if not isinstance(model, Model):

@@ -185,6 +185,10 @@ class Robot:
             q: ``dof`` joint values (arrays of any batch shape, or Python floats).
             base: ``T_world_root``.
         """
+        from diffkin.models import _scanned  # it builds on this module's RobotPass
+
+        if _scanned.longest_path(self.parents) > _scanned.LONG:
+            return _scanned.forward(self, q, base)
         P, S, m, o = (host(x) for x in (self.joint_poses, self.screws, self.multipliers, self.offsets))
         m, o = rg.per_joint(m), rg.per_joint(o)
         axes = [(rg.vector(S[j, :3]), rg.vector(S[j, 3:])) for j in range(len(self.parents))]

@@ -1,19 +1,19 @@
 """Whole robots against Pinocchio: every frame and Jacobian of the URDFs of example-robot-data (centre of
-mass too), URDF limits as urdfdom reads them, the files that are rejected, and a long serial path."""
+mass too), URDF limits as urdfdom reads them, the files that are rejected, and IK of a long serial path."""
 
 import glob
 import os
-import time
 
 import jax
 import numpy as np
 import pinocchio as pin
 import pytest
-from _reference import ERD
+from _reference import ERD, robot_poses, snake_robot
 from _reference import pin_q as _pin_q
 from _reference import random_robot_q as _random_q
 
 import diffkin as dk
+from diffkin.models import _scanned
 
 ERD_URDFS = sorted(glob.glob(os.path.join(ERD, "**", "*.urdf"), recursive=True)) if ERD else []
 # Files of example-robot-data that are not loadable robots, and why (checked in test_rejected_files).
@@ -141,34 +141,13 @@ def test_rejected_files(name, match):
         dk.load_robot(os.path.join(ERD, name))
 
 
-def test_a_long_serial_path_runs_in_linear_time():
-    """A 200-joint snake: its jitted FK ran > 40 s (190 joints: 0.85 s, 180: 1 ms) before the tree's
-    forward pass was materialised every 8 joints along a path, as a chain's is; now about 1 ms."""
-    n = 200
-    links = "".join(f'<link name="l{i}"/>' for i in range(n + 1))
-    joints = "".join(
-        f'<joint name="j{i}" type="revolute"><parent link="l{i}"/><child link="l{i + 1}"/>'
-        f'<origin xyz="0 0 0.01" rpy="0.1 0 0"/><axis xyz="0 {i % 2} {1 - i % 2}"/>'
-        f'<limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
-        for i in range(n)
-    )
-    snake = dk.load_robot(f'<robot name="snake">{links}{joints}</robot>')
-    q = np.random.default_rng(0).uniform(-1, 1, (4, n))
-    fk = jax.jit(lambda q: dk.fk(snake, q, f"l{n}"))
-    jax.block_until_ready(fk(q))
-    start = time.perf_counter()
-    T = jax.block_until_ready(fk(q))
-    assert time.perf_counter() - start < 1.0
-    for k in range(len(q)):  # the product of the joints' transforms, in NumPy
-        expected = np.eye(4)
-        for i in range(n):
-            c, s = np.cos(0.1), np.sin(0.1)
-            origin = np.array([[1, 0, 0, 0], [0, c, -s, 0], [0, s, c, 0.01], [0, 0, 0, 1.0]])
-            ct, st = np.cos(q[k, i]), np.sin(q[k, i])
-            turn = np.eye(4)
-            if i % 2:  # about y
-                turn[:3, :3] = [[ct, 0, st], [0, 1, 0], [-st, 0, ct]]
-            else:  # about z
-                turn[:3, :3] = [[ct, -st, 0], [st, ct, 0], [0, 0, 1]]
-            expected = expected @ origin @ turn
-        np.testing.assert_allclose(np.asarray(T[k]), expected, atol=1e-10)
+def test_ik_of_a_long_robot():
+    """Inverse kinematics on a scanned robot: a 40-joint snake reaches poses of its own (round trip)."""
+    snake = snake_robot(40)
+    assert _scanned.longest_path(snake.parents) > _scanned.LONG
+    q = np.random.default_rng(3).uniform(-0.5, 0.5, (4, 40))
+    targets = np.asarray(dk.fk(snake, q, "l40"))
+    result = dk.ik.solve(snake, {"l40": targets}, key=jax.random.PRNGKey(0))
+    assert np.all(result.success)
+    reached = np.stack([robot_poses(snake, x)[snake.frame_index("l40")] for x in np.asarray(result.q)])
+    np.testing.assert_allclose(reached[:, :3, 3], targets[:, :3, 3], atol=1e-5)
