@@ -115,7 +115,9 @@ def _parent_bodies(robot: Robot) -> list[int | None]:
 
 
 def _srdf_disabled(srdf) -> set[frozenset[str]]:
-    """Link pairs of ``<disable_collisions link1= link2=>`` of an SRDF (a path or the XML text)."""
+    """Link pairs of ``<disable_collisions link1= link2=>`` of an SRDF (a path or the XML text), or of several."""
+    if isinstance(srdf, (list, tuple)):
+        return set().union(*(_srdf_disabled(s) for s in srdf))
     text = os.fspath(srdf)
     root = ET.fromstring(text) if text.lstrip().startswith("<") else ET.parse(text).getroot()
     return {frozenset((el.get("link1", ""), el.get("link2", ""))) for el in root.iter("disable_collisions")}
@@ -132,7 +134,8 @@ def load(source, robot: Robot, *, meshes: str = "capsules", srdf=None, dtype=Non
         robot: the :class:`diffkin.Robot`: shapes are placed on its frames.
         meshes: ``"capsules"``: every mesh, cylinder and ellipsoid becomes one capsule that
             contains all its vertices (the only fit for now).
-        srdf: an SRDF (path or XML text) whose ``<disable_collisions>`` link pairs are not checked.
+        srdf: an SRDF (path or XML text) whose ``<disable_collisions>`` link pairs are not checked,
+            or a list of them (the file's own and one from :func:`diffkin.collision.sample_pairs`).
         dtype: float dtype of the arrays (default: JAX's default float).
 
     Returns:

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin._checks import instance, positive_int
-from diffkin.models import forward
+from diffkin.models._ranges import sampling_ranges, uniform
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain, to_poe
 from diffkin.models.robot import Robot
@@ -23,24 +23,6 @@ def _as_chain(chain):
         return robot.chain(frame)
     instance(chain, (DHChain, PoEChain), "chain", "a DHChain, PoEChain or (Robot, frame_name)")
     return chain
-
-
-def _joint_ranges(chain) -> tuple[np.ndarray, np.ndarray]:
-    """``(lo, hi)`` sampling ranges: the limits, one turn ``[-pi, pi)`` for unlimited revolute joints."""
-    forward.check(chain)
-    lo, hi = np.asarray(chain.lower, np.float64), np.asarray(chain.upper, np.float64)
-    for i, kind in enumerate(chain.actuated_types if isinstance(chain, Robot) else chain.joint_types):
-        if kind == "P" and not (np.isfinite(lo[i]) and np.isfinite(hi[i])):
-            raise ValueError(
-                f"chain.lower/upper[{i}]: expected finite limits for prismatic joint {i}, got [{lo[i]}, {hi[i]}]"
-            )
-    return np.where(np.isfinite(lo), lo, -np.pi), np.where(np.isfinite(hi), hi, np.pi)
-
-
-def _uniform(key, lo: np.ndarray, hi: np.ndarray, n: int, dtype) -> jax.Array:
-    """``(dof, n)`` uniform joint values, one row per joint (the layout the kernel consumes)."""
-    u = jax.random.uniform(key, (lo.size, n), dtype)
-    return jnp.asarray(lo[:, None], dtype) + u * jnp.asarray((hi - lo)[:, None], dtype)
 
 
 def sample_configs(chain, n: int, key, *, dtype=None) -> jax.Array:
@@ -59,9 +41,9 @@ def sample_configs(chain, n: int, key, *, dtype=None) -> jax.Array:
     Returns:
         ``(n, dof)`` joint values, radians (revolute) or metres (prismatic).
     """
-    lo, hi = _joint_ranges(chain)
+    lo, hi = sampling_ranges(chain)
     n = positive_int(n, "n")
-    return _uniform(key, lo, hi, n, jnp.dtype(dtype or jnp.result_type(float))).T
+    return uniform(key, lo, hi, n, jnp.dtype(dtype or jnp.result_type(float))).T
 
 
 def _reach(chain) -> float:
@@ -74,7 +56,7 @@ def _reach(chain) -> float:
     """
     poe = to_poe(chain) if isinstance(chain, DHChain) else chain
     screws, home = np.asarray(poe.screws, np.float64), np.asarray(poe.home, np.float64)
-    lo, hi = _joint_ranges(chain)
+    lo, hi = sampling_ranges(chain)
     points, reach = [np.zeros(3)], 0.0
     for i, kind in enumerate(chain.joint_types):
         v, w = screws[i, :3], screws[i, 3:]

@@ -16,9 +16,9 @@ from jax.sharding import PartitionSpec as P
 from diffkin._checks import instance
 from diffkin._static import ModelKey, partition
 from diffkin._xla import opaque_index
+from diffkin.models._ranges import sampling_ranges, uniform
 from diffkin.models.robot import Robot
 from diffkin.workspace._bins import _flat_index, _manipulability, _orientation_bin
-from diffkin.workspace._sampling import _joint_ranges, _uniform
 
 _AXIS = "devices"  # the mesh axis the samples are sharded over
 
@@ -68,7 +68,7 @@ def _compiled(
     device axis sharded over the mesh. Step ``s`` runs chunk ``s * n_devices + d`` on device ``d``.
     """
     chain = chain_key.model
-    lo, hi = _joint_ranges(chain)
+    lo, hi = sampling_ranges(chain)
     n_dev, nvox = mesh.devices.size, math.prod(shape)
     sharded, replicated = NamedSharding(mesh, P(_AXIS)), NamedSharding(mesh, P())
 
@@ -82,7 +82,7 @@ def _compiled(
     def local_step(counts, best, seen, key, chunk_index, n_full, n_last, origin, inv_voxel, n_slots, avoid):
         c = chunk_index[0]  # this device's chunk: no axis_index, so one per-device program for any device count
         n_valid = jnp.where(c < n_full, chunk, jnp.where(c == n_full, n_last, 0))
-        q = _uniform(jax.random.fold_in(key, c), lo, hi, chunk, dtype)
+        q = uniform(jax.random.fold_in(key, c), lo, hi, chunk, dtype)
         counted = jnp.arange(chunk) < n_valid
         if collision is not None:  # only the samples clear of the obstacles (and of the robot itself) count
             robot = collision.robot.model

@@ -132,3 +132,52 @@ def test_cylinder_and_ellipsoid_fits_contain_them(radius, half):
     axial = surface[:, k]
     radial = np.linalg.norm(np.delete(surface, k, axis=1), axis=1)
     assert np.all(np.hypot(radial, np.maximum(np.abs(axial) - L, 0)) <= R + 1e-15)
+
+
+PAIRS_URDF = """<robot name="pairs">
+  <link name="base"><collision><geometry><sphere radius="0.05"/></geometry></collision></link>
+  <link name="l1"><collision><origin xyz="0 0 1.5"/><geometry><sphere radius="0.1"/></geometry></collision></link>
+  <link name="l2"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>
+  <link name="far"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>
+  <link name="swing"><collision><origin xyz="0 0 0.5"/><geometry><sphere radius="0.1"/></geometry></collision></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3"/></joint>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="far"/><origin xyz="0 0 5"/><axis xyz="1 0 0"/>
+    <limit lower="-3" upper="3"/></joint>
+  <joint name="j4" type="revolute"><parent link="l1"/><child link="swing"/><origin xyz="0.5 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3"/></joint>
+</robot>"""
+
+
+def test_sampled_pairs_never_always_and_their_srdf():
+    """Pairs chosen by sampling, as MoveIt's setup assistant: ``base``/``l2`` overlap at the origin in every
+    configuration (always), ``far`` is 5 m above everything but ``l2``'s child, never near (never), ``swing``
+    meets ``base`` only near ``j4 = -pi/2`` (sometimes: kept). The fractions are those of the sampled
+    configurations' own self distances; the SRDF round trip through ``load(srdf=)`` drops exactly those pairs."""
+    robot = dk.load_robot(PAIRS_URDF)
+    geom = dk.collision.load(PAIRS_URDF, robot)
+    sample = dk.collision.sample_pairs(robot, geom, 2000, key=jax.random.key(0))
+    assert sample.always == (("base", "l2"),)
+    assert set(sample.never) == {("base", "far"), ("far", "l1"), ("far", "swing")}
+    swing = sample.colliding[sample.link_pairs.index(("base", "swing"))]
+    # j4 uniform in [-3, 3]; the swing's centre is 2 sin(t/2) * 0.5 from the origin at t = j4 + pi/2: within
+    # the radii (0.15) for |t| < 2 asin(0.15) = 0.3011 rad: a fraction of 0.6022 / 6 (+-0.02: 3 standard
+    # deviations of a fraction of 2,000 samples).
+    assert abs(swing - 4 * np.arcsin(0.15) / 6) < 0.02
+
+    kept = sample.apply(geom)
+    srdf = sample.to_srdf()
+    assert 'reason="Always"' in srdf and 'reason="Never"' in srdf
+    assert dk.collision.load(PAIRS_URDF, robot, srdf=srdf).pair_list == kept.pair_list
+    assert {frozenset((geom.shape_links[i], geom.shape_links[j])) for i, j in kept.pair_list} == {
+        frozenset(("base", "swing")),
+        frozenset(("l2", "swing")),
+    }
+    both = dk.collision.load(PAIRS_URDF, robot, srdf=[srdf, SRDF])  # several SRDFs: the union of their pairs
+    assert both.pair_list == kept.pair_list
+    with pytest.raises(TypeError, match="n: expected a positive int"):
+        dk.collision.sample_pairs(robot, geom, 10.5, key=jax.random.key(0))
+    with pytest.raises(ValueError, match="margin: expected a finite distance"):
+        dk.collision.sample_pairs(robot, geom, 10, key=jax.random.key(0), margin=float("nan"))
