@@ -4,9 +4,10 @@
     diffkin info ROBOT_OR_FILE [--end-link L] [--base-link B]
     diffkin fk ROBOT_OR_FILE q1 ... qn | --q-file configs.npy [--format text|json|npy] [--output FILE]
     diffkin ik ROBOT_OR_FILE --pose x y z qw qx qy qz | --position x y z [--seeds N] [--q0 ...] [--all ...]
-        [--avoid scene.json [--margin M]]
+        [--avoid scene.json [--margin M] [--srdf FILE.srdf ...]]
     diffkin workspace ROBOT_OR_FILE --samples N --voxel V --out map.npz [--plot slice.png]
-    diffkin view ROBOT_OR_FILE [--map map.npz] [--ik-results res.npz] [--end FRAME ...] [--avoid scene.json]
+    diffkin view ROBOT_OR_FILE [--map map.npz] [--ik-results res.npz] [--end FRAME ...]
+        [--avoid scene.json [--margin M] [--srdf FILE.srdf ...]]
 
 ``ROBOT_OR_FILE`` is a built-in robot (``iiwa7``, ``iiwa14``, ``panda``, ``ur5``, ``puma560``) or a
 URDF or MJCF file (``info`` prints its tree; ``fk --frame NAME`` any frame of it; the other commands use

@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import functools
 import sys
+from collections.abc import Sequence
 
 import numpy as np
 
-from diffkin.cli._robots import chain_for, jax_x64, robot_key, robot_with_geometry
+from diffkin.cli._robots import chain_for, jax_x64, robot_key, robot_with_geometry, srdf_key
 
 IK_CHUNK = 64  # targets per jitted IK call: one compilation serves every batch size
 
@@ -89,10 +90,11 @@ def solve_ik(
 
 
 @functools.lru_cache(maxsize=8)
-def _avoid_ik_fn(spec: str, key: tuple, end: str, num_seeds: int, self_collision: bool):
+def _avoid_ik_fn(spec: str, key: tuple, end: str, num_seeds: int, self_collision: bool, srdf: tuple):
     """A jitted one-target ``dk.ik.solve`` of a file's whole robot with ``avoid``, compiled once per
-    robot file (``key``: its :func:`~diffkin.cli._robots.robot_key`), end frame, seed count and
-    ``self_collision``; the robot and its collision geometry are closed over.
+    robot file (``key``: its :func:`~diffkin.cli._robots.robot_key`), end frame, seed count,
+    ``self_collision`` and SRDF files (``srdf``: :func:`~diffkin.cli._robots.srdf_key`); the robot and
+    its collision geometry are closed over.
 
     Its arguments are ``(target, key, q0 or None, pos_tol, rot_tol, world, margin)``: the obstacles
     (a ``dk.collision.World``; one compilation per count of each kind), the tolerances and the margin
@@ -102,7 +104,7 @@ def _avoid_ik_fn(spec: str, key: tuple, end: str, num_seeds: int, self_collision
     import diffkin as dk
     from diffkin._xla import SOLVER_COMPILE
 
-    robot, geom = robot_with_geometry(spec)
+    robot, geom = robot_with_geometry(spec, [path for path, _ in srdf])
     return jax.jit(
         lambda T, k, q0, pos_tol, rot_tol, world, margin: dk.ik.solve(
             robot,
@@ -129,6 +131,7 @@ def solve_ik_avoiding(
     seed: int = 1,
     pos_tol: float = 1e-5,
     rot_tol: float = 1e-4,
+    srdf: Sequence[str] | None = None,
 ):
     """IK of one target of a URDF/MJCF file's whole robot, keeping clear of a scene's obstacles.
 
@@ -139,6 +142,7 @@ def solve_ik_avoiding(
         scene: a ``dk.collision.Scene`` (obstacles in the root frame, ``margin``, ``self_collision``),
             its arrays in float64.
         q0: ``(dof,)`` warm start (every actuated joint of the robot), or ``None``.
+        srdf: SRDF files whose ``<disable_collisions>`` pairs are not checked.
 
     Returns:
         ``dict`` of numpy values: ``q (dof,)``, ``success``, ``pos_err``, ``rot_err``, ``iters`` and
@@ -147,9 +151,9 @@ def solve_ik_avoiding(
     jax = jax_x64()
     import diffkin as dk
 
-    robot, geom = robot_with_geometry(spec)
+    robot, geom = robot_with_geometry(spec, srdf)
     dk.ik.Avoid(geom, scene.world, scene.margin, scene.self_collision)  # its checks on the host, before compiling
-    fn = _avoid_ik_fn(spec, robot_key(spec, None, None), end, num_seeds, scene.self_collision)
+    fn = _avoid_ik_fn(spec, robot_key(spec, None, None), end, num_seeds, scene.self_collision, srdf_key(srdf))
     res = fn(
         np.asarray(target, dtype=np.float64),
         jax.random.key(seed),

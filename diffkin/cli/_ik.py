@@ -85,7 +85,7 @@ def _ik_avoid(args, target: np.ndarray) -> int:
         raise CLIError("--psi, --gc and --samples go with --all")
     if args.base_link is not None:
         raise CLIError("--base-link does not apply to --avoid (the whole robot is solved, targets in its root frame)")
-    robot, geom = robot_with_geometry(args.robot)
+    robot, geom = robot_with_geometry(args.robot, args.srdf)
     end = frame_of(robot, args.end_link, "--end-link") if args.end_link else single_end(robot)
     scene = read_scene(args.avoid, args.margin)
     if args.q0 is not None and len(args.q0) != robot.dof:
@@ -100,6 +100,7 @@ def _ik_avoid(args, target: np.ndarray) -> int:
         seed=args.seed,
         pos_tol=args.pos_tol,
         rot_tol=args.rot_tol,
+        srdf=args.srdf,
     )
     ok = bool(res["success"])
     what = "pose" if target.shape == (4, 4) else "position (orientation free)"
@@ -110,7 +111,8 @@ def _ik_avoid(args, target: np.ndarray) -> int:
     )
     print(
         f"avoiding {scene.world.size} obstacles of {args.avoid}, margin {scene.margin:g} m, "
-        f"self-collision {'on' if scene.self_collision else 'off'} ({len(geom.shape_names)} shapes on the robot)"
+        f"self-collision {'on' if scene.self_collision else 'off'} ({len(geom.shape_names)} shapes on the robot, "
+        f"{len(geom.pair_list)} self pairs)"
     )
     print(f"q          {fmt(res['q'], 10)} rad")
     print(f"success    {ok}")
@@ -124,8 +126,9 @@ def _ik_avoid(args, target: np.ndarray) -> int:
 def cmd_ik(args) -> int:
     """IK of one pose or position: LM from random seeds, among obstacles with ``--avoid``, or every
     exact iiwa solution with ``--all``."""
-    if args.margin is not None and args.avoid is None:
-        raise CLIError("--margin goes with --avoid")
+    for flag, value in (("--margin", args.margin), ("--srdf", args.srdf)):
+        if value is not None and args.avoid is None:
+            raise CLIError(f"{flag} goes with --avoid")
     if args.avoid is not None:
         target = target_pose(args.pose) if args.pose else np.asarray(args.position)
         _note_quaternion(args.pose)

@@ -152,6 +152,13 @@ def _add_avoid(p: argparse.ArgumentParser, what: str) -> None:
         metavar="M",
         help="with --avoid: the clearance asked for, m (default: the scene's margin, else 0)",
     )
+    p.add_argument(
+        "--srdf",
+        action="append",
+        metavar="FILE.srdf",
+        help="with --avoid: an SRDF whose <disable_collisions> link pairs are not checked for self-collision "
+        "(repeat for several: the robot's own, one saved from dk.collision.sample_pairs)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:

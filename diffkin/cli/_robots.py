@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import functools
 import os
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from pathlib import Path
 
 from diffkin.cli._errors import CLIError
@@ -92,19 +94,35 @@ def single_end(robot) -> str:
 
 
 @functools.lru_cache(maxsize=4)
-def _geometry_for(path: str, mtime: int):
-    """The collision geometry (``dk.collision.Geometry``) of a URDF or MJCF file's whole robot."""
+def _geometry_for(path: str, mtime: int, srdf: tuple[tuple[str, int], ...]):
+    """The collision geometry (``dk.collision.Geometry``) of a URDF or MJCF file's whole robot, without the
+    pairs of the SRDFs ``srdf`` (``(path, mtime)`` each)."""
     import diffkin as dk
 
-    return dk.collision.load(path, _tree_for(path, mtime))
+    return dk.collision.load(path, _tree_for(path, mtime), srdf=[p for p, _ in srdf] or None)
 
 
-def robot_with_geometry(spec: str):
-    """The whole robot (``dk.Robot``) of a URDF or MJCF file and its collision geometry.
+def srdf_key(srdf: Sequence[str] | None) -> tuple[tuple[str, int], ...]:
+    """``--srdf`` files as ``(absolute path, mtime)`` (a cache key: an edited file is read again).
 
     Raises:
-        CLIError: a built-in robot (no collision geometry), a file without collision shapes, or
-            collision meshes without trimesh (the ``diffkin[collision]`` extra).
+        CLIError: a file that does not exist.
+    """
+    out = []
+    for path in srdf or ():
+        if not os.path.isfile(path):
+            raise CLIError(f"--srdf: no such file {path!r}")
+        out.append((os.path.abspath(path), os.stat(path).st_mtime_ns))
+    return tuple(out)
+
+
+def robot_with_geometry(spec: str, srdf: Sequence[str] | None = None):
+    """The whole robot (``dk.Robot``) of a URDF or MJCF file and its collision geometry, without the
+    self-collision pairs that the SRDF files ``srdf`` disable.
+
+    Raises:
+        CLIError: a built-in robot (no collision geometry), a file without collision shapes, a
+            missing or malformed SRDF, or collision meshes without trimesh (the ``diffkin[collision]`` extra).
         ValueError: a malformed file or collision element (from :func:`diffkin.collision.load`).
     """
     if spec in ROBOTS:
@@ -115,7 +133,9 @@ def robot_with_geometry(spec: str):
     jax_x64()
     path, mtime = robot_key(spec, None, None)[:2]
     try:
-        geom = _geometry_for(path, mtime)
+        geom = _geometry_for(path, mtime, srdf_key(srdf))
+    except ET.ParseError as e:
+        raise CLIError(f"--srdf: not an XML file: {e}") from None
     except ImportError:
         raise CLIError(
             f"--avoid: the collision meshes of {spec!r} need trimesh, which is not installed: "

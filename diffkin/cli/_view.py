@@ -17,8 +17,9 @@ def cmd_view(args) -> int:
         from diffkin import viewer
     except ImportError as e:
         raise CLIError(str(e)) from None
-    if args.margin is not None and args.avoid is None:
-        raise CLIError("--margin goes with --avoid")
+    for flag, value in (("--margin", args.margin), ("--srdf", args.srdf)):
+        if value is not None and args.avoid is None:
+            raise CLIError(f"{flag} goes with --avoid")
     if args.robot not in ROBOTS:
         robot_file(args.robot)
     for flag, path in (("--map", args.map), ("--ik-results", args.ik_results)):
@@ -28,7 +29,7 @@ def cmd_view(args) -> int:
     if args.avoid is not None:
         import diffkin as dk
 
-        model, geom = robot_with_geometry(args.robot)
+        model, geom = robot_with_geometry(args.robot, args.srdf)
         scene = read_scene(args.avoid, args.margin)
         source, avoid = args.robot, dk.ik.Avoid(geom, scene.world, scene.margin, scene.self_collision)
     viewer.show(

@@ -70,17 +70,17 @@ class Primitive:
     size: tuple[float, ...]
 
 
-def obstacle_primitives(world, center, extent: float) -> list[Primitive]:
-    """The primitives that draw the obstacles of a ``dk.collision.World``.
+def shape_primitives(spheres, capsules, boxes, names: list[str]) -> list[Primitive]:
+    """The primitives that draw spheres, capsules and boxes (``dk.collision`` shapes), in their own frame.
 
     A sphere is a sphere; a capsule a cylinder between its end points and a sphere at each end; a
-    box a box; a half-space ``n . x <= offset`` a square slab ``extent`` wide and
-    :data:`PLANE_SLAB` thick whose top face is the boundary plane, centred below ``center``.
+    box a box.
 
     Args:
-        world: the obstacles (world frame).
-        center: ``(3,)`` the point of the scene the slabs are centred on (projected on each plane).
-        extent: edge length of the slabs, metres.
+        spheres, capsules, boxes: the shapes (a :class:`~diffkin.collision.World`'s, or a robot's
+            :class:`~diffkin.collision.Geometry`'s in the frames that carry them).
+        names: the scene-tree path of each shape: spheres, then capsules, then boxes (a capsule's
+            three primitives are ``<name>/axis``, ``<name>/a``, ``<name>/b``).
     """
     out: list[Primitive] = []
     eye = np.eye(3)
@@ -88,18 +88,36 @@ def obstacle_primitives(world, center, extent: float) -> list[Primitive]:
     def host(x) -> np.ndarray:
         return np.asarray(x, dtype=np.float64)
 
-    s, c, b = world.spheres, world.capsules, world.boxes
-    for i, (x, r) in enumerate(zip(host(s.center), host(s.radius), strict=True)):
-        out.append(Primitive(f"/obstacles/sphere{i}", "sphere", x, eye, (float(r),)))
-    for i, (a, e, r) in enumerate(zip(host(c.a), host(c.b), host(c.radius), strict=True)):
-        name, length = f"/obstacles/capsule{i}", float(np.linalg.norm(e - a))
+    paths = iter(names)
+    for x, r in zip(host(spheres.center), host(spheres.radius), strict=True):
+        out.append(Primitive(next(paths), "sphere", x, eye, (float(r),)))
+    for a, e, r in zip(host(capsules.a), host(capsules.b), host(capsules.radius), strict=True):
+        name, length = next(paths), float(np.linalg.norm(e - a))
         out.append(Primitive(f"{name}/axis", "cylinder", (a + e) / 2, z_to(e - a), (float(r), length)))
         out.append(Primitive(f"{name}/a", "sphere", a, eye, (float(r),)))
         out.append(Primitive(f"{name}/b", "sphere", e, eye, (float(r),)))
-    for i, (T, h) in enumerate(zip(host(b.pose), host(b.half_extents), strict=True)):
-        out.append(Primitive(f"/obstacles/box{i}", "box", T[:3, 3], T[:3, :3], tuple(float(v) for v in 2 * h)))
+    for T, h in zip(host(boxes.pose), host(boxes.half_extents), strict=True):
+        out.append(Primitive(next(paths), "box", T[:3, 3], T[:3, :3], tuple(float(v) for v in 2 * h)))
+    return out
+
+
+def obstacle_primitives(world, center, extent: float) -> list[Primitive]:
+    """The primitives that draw the obstacles of a ``dk.collision.World`` (:func:`shape_primitives`), and a
+    half-space ``n . x <= offset`` as a square slab ``extent`` wide and :data:`PLANE_SLAB` thick whose top
+    face is the boundary plane, centred below ``center``.
+
+    Args:
+        world: the obstacles (world frame).
+        center: ``(3,)`` the point of the scene the slabs are centred on (projected on each plane).
+        extent: edge length of the slabs, metres.
+    """
+    counts = {"sphere": world.spheres.radius.shape[0], "capsule": world.capsules.radius.shape[0]}
+    counts["box"] = world.boxes.half_extents.shape[0]
+    names = [f"/obstacles/{kind}{i}" for kind, n in counts.items() for i in range(n)]
+    out = shape_primitives(world.spheres, world.capsules, world.boxes, names)
     center = np.asarray(center, dtype=np.float64)
-    for i, (n, d) in enumerate(zip(host(world.planes.normal), host(world.planes.offset), strict=True)):
+    normals, offsets = np.asarray(world.planes.normal, np.float64), np.asarray(world.planes.offset, np.float64)
+    for i, (n, d) in enumerate(zip(normals, offsets, strict=True)):
         on_plane = center - (float(n @ center) - float(d)) * n
         position = on_plane - n * PLANE_SLAB / 2
         out.append(Primitive(f"/obstacles/plane{i}", "box", position, z_to(n), (extent, extent, PLANE_SLAB)))

@@ -37,6 +37,9 @@ _MARKDOWN_ESCAPES = {
 }
 
 
+CLEAR, NEAR = (70, 130, 220), (230, 50, 40)  # a robot's collision shape: clear of everything, within the margin
+
+
 def _plain(text: str) -> str:
     """``text`` (a name or path from a file or the command line) as Markdown that shows it verbatim.
 
@@ -166,8 +169,11 @@ class Viewer:
 
         self._build_robot(source, size)
         self.obstacles: dict[str, Any] = {}
+        self.collision: list[list[Any]] = []
         if self.avoid is not None and self.avoid.world is not None:
             self._build_obstacles(center, 2 * size)
+        if self.avoid is not None:
+            self._build_collision()
         self._build_gui(workspace_map)
         self._apply(self.q, source=None)
         if warmup:
@@ -222,25 +228,61 @@ class Viewer:
 
     def _build_obstacles(self, center: np.ndarray, extent: float) -> None:
         """The obstacles of :attr:`avoid` as translucent red primitives (half-spaces as slabs ``extent`` wide)."""
-        scene = self.server.scene
-        color, opacity = (220, 70, 60), 0.6
         for shape in _overlays.obstacle_primitives(self.avoid.world, center, extent):
-            position, wxyz = shape.position, _wxyz(shape.rotation)
-            handle: Any
-            if shape.kind == "sphere":
-                handle = scene.add_icosphere(
-                    shape.name, radius=shape.size[0], color=color, opacity=opacity, position=position, wxyz=wxyz
-                )
-            elif shape.kind == "cylinder":
-                radius, height = shape.size
-                handle = scene.add_cylinder(
-                    shape.name, radius, height, color, opacity=opacity, position=position, wxyz=wxyz
-                )
-            else:
-                handle = scene.add_box(
-                    shape.name, color, np.asarray(shape.size), opacity=opacity, position=position, wxyz=wxyz
-                )
-            self.obstacles[shape.name] = handle
+            self.obstacles[shape.name] = self._add_primitive(shape, (220, 70, 60), opacity=0.6)
+
+    def _build_collision(self) -> None:
+        """The robot's own collision shapes (:attr:`avoid`'s geometry) on the frames that carry them, hidden
+        until shown; :attr:`collision` holds each shape's handles (a capsule has three), coloured by
+        :meth:`_colour_collision`; :attr:`shape_gaps` the distance of each to whatever it is checked against."""
+        avoid, model = self.avoid, self.model
+        geom = avoid.geom
+        paths = [f"/robot/{_node(link)}/collision{k}" for k, link in enumerate(geom.shape_links)]
+        index = {path: k for k, path in enumerate(paths)}
+        self.collision = [[] for _ in paths]
+        for shape in _overlays.shape_primitives(geom.spheres, geom.capsules, geom.boxes, paths):
+            k = index[shape.name] if shape.name in index else index[shape.name.rsplit("/", 1)[0]]  # capsule: 3 parts
+            self.collision[k].append(self._add_primitive(shape, CLEAR, opacity=0.5, visible=False))
+        pairs = geom.pairs if avoid.self_collision else np.zeros((0, 2), np.int64)
+
+        def gaps(q, base) -> jax.Array:
+            """``(shapes,)`` each shape's smallest distance over its checked pairs and the obstacles (``inf``: none)."""
+            out = jnp.full(len(paths), jnp.inf, q.dtype)
+            if len(pairs):
+                d = dk.collision.self_distances(model, geom, q, base)
+                out = out.at[pairs[:, 0]].min(d).at[pairs[:, 1]].min(d)
+            if avoid.world is not None:
+                out = jnp.minimum(out, dk.collision.world_distances(model, geom, q, avoid.world, base).min(axis=-1))
+            return out
+
+        self._shape_gaps = jax.jit(gaps)
+        self.shape_gaps = np.full(len(paths), np.inf)
+
+    def _colour_collision(self) -> None:
+        """Each collision shape red where it is within the margin of what it is checked against, else blue."""
+        self.shape_gaps = np.asarray(self._shape_gaps(jnp.asarray(self.q), jnp.asarray(self.T_world_root)))
+        margin = float(self.avoid.margin)
+        for handles, gap in zip(self.collision, self.shape_gaps, strict=True):
+            color = NEAR if gap < margin else CLEAR
+            for handle in handles:
+                if tuple(handle.color) != color:
+                    handle.color = color
+
+    def _add_primitive(self, shape: _overlays.Primitive, color, opacity: float, visible: bool = True) -> Any:
+        """A sphere, cylinder or box of the scene (:class:`_overlays.Primitive`)."""
+        scene = self.server.scene
+        position, wxyz = shape.position, _wxyz(shape.rotation)
+        if shape.kind == "sphere":
+            return scene.add_icosphere(
+                shape.name, shape.size[0], color=color, opacity=opacity, position=position, wxyz=wxyz, visible=visible
+            )
+        if shape.kind == "cylinder":
+            radius, height = shape.size
+            return scene.add_cylinder(
+                shape.name, radius, height, color, opacity=opacity, position=position, wxyz=wxyz, visible=visible
+            )
+        size = np.asarray(shape.size)
+        return scene.add_box(shape.name, color, size, opacity=opacity, position=position, wxyz=wxyz, visible=visible)
 
     def _update_scene(self, poses: np.ndarray) -> None:
         names = self.kin.frame_names
@@ -339,6 +381,14 @@ class Viewer:
                 )
                 self.clearance_status = gui.add_markdown("")
                 self.show_obstacles = gui.add_checkbox("Show obstacles", initial_value=True)
+                self.show_collision = gui.add_checkbox("Show the robot's collision shapes", initial_value=False)
+                gui.add_markdown("Red: within the margin of an obstacle or of a link it is checked against.")
+
+            @self.show_collision.on_update
+            def _(_event) -> None:
+                for handles in self.collision:
+                    for handle in handles:
+                        handle.visible = self.show_collision.value
 
             @self.show_obstacles.on_update
             def _(_event) -> None:
@@ -418,6 +468,7 @@ class Viewer:
                 if self.avoid is not None:
                     self.clearance = float(self._clearance(jnp.asarray(self.q), jnp.asarray(self.T_world_root)))
                     self.clearance_status.content = _clearance_text(self.clearance, float(self.avoid.margin))
+                    self._colour_collision()
             finally:
                 self._quiet = False
 

@@ -533,7 +533,8 @@ def test_ik_avoid_solves_clear_of_a_box(capsys, arm_scene):
     code, out, err = run(capsys, "ik", urdf, "--position", 0.3, 0.2, 0.4, "--avoid", scene, "--seeds", 8)
     assert code == 0, err
     assert "arm: IK of a position (orientation free) of hand, LM, 8 seeds" in out
-    assert f"avoiding 2 obstacles of {scene}, margin 0.02 m, self-collision on (4 shapes on the robot)" in out
+    robot_line = "self-collision on (4 shapes on the robot, 2 self pairs)"
+    assert f"avoiding 2 obstacles of {scene}, margin 0.02 m, {robot_line}" in out
     assert "success    True" in out and "m: collision-free" in out
     robot = dk.load_robot(ARM)
     geom = dk.collision.load(ARM, robot)
@@ -571,9 +572,31 @@ def test_ik_avoid_user_errors(capsys, arm_scene, tmp_path):
     bare.write_text(re.sub(r"<collision>.*?</collision>", "", ARM, flags=re.DOTALL))
     assert_user_error(capsys, "ik", bare, *target, "--avoid", scene, match="has no collision geometry")
     assert_user_error(capsys, "ik", urdf, *target, "--margin", 0.1, match="--margin goes with --avoid")
+    assert_user_error(capsys, "ik", urdf, *target, "--srdf", scene, match="--srdf goes with --avoid")
+    missing = tmp_path / "no.srdf"
+    assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--srdf", missing, match="--srdf: no such")
+    assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--srdf", scene, match="--srdf: not an XML file")
     assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--margin", -1, match="non-negative")
     assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--q0", 0, 0, match="--q0: arm has 3 joints")
     assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--end-link", "hnd", match="--end-link")
     assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--base-link", "l1", match="--base-link does not")
     assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--all", match="--avoid does not apply to --all")
     assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--psi", 0.1, match="go with --all")
+
+
+def test_srdf_files_disable_self_pairs(arm_scene, tmp_path):
+    """``--srdf`` (repeatable): the robot's geometry without the link pairs the files disable (what ``ik`` and
+    ``view`` solve with), read again when a file changes."""
+    from diffkin.cli._robots import robot_with_geometry
+
+    urdf, _ = arm_scene
+    srdf = tmp_path / "arm.srdf"
+    srdf.write_text('<robot name="arm"><disable_collisions link1="l1" link2="hand" reason="Never"/></robot>')
+    robot, geom = robot_with_geometry(urdf)
+    _, fewer = robot_with_geometry(urdf, [str(srdf)])
+    assert geom.pair_bodies == (("l3", "l1"), ("l1", "l3")) and fewer.pair_bodies == (("l1", "l3"),)
+    expected = dk.collision.load(urdf, robot, srdf=str(srdf)).pair_list
+    assert fewer.pair_list == expected
+    srdf.write_text('<robot name="arm"></robot>')
+    os.utime(srdf, ns=(0, 10**18))  # a new modification time, whatever the clock's resolution
+    assert robot_with_geometry(urdf, [str(srdf)])[1].pair_list == geom.pair_list

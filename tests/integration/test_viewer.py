@@ -828,3 +828,37 @@ def test_browser_draws_the_robot(viewer_of, tmp_path):
             shutil.copy(tmp_path / name, os.path.join(os.environ["DIFFKIN_ARTIFACTS"], name))
     assert changed > _ROBOT_PIXELS, changed
     assert robot[canvas].std() > 5  # not a blank canvas
+
+
+def test_the_robots_collision_shapes_are_drawn_and_coloured(viewer_of, arm_avoid):
+    """With ``avoid``, every shape of the robot's geometry is drawn on the frame that carries it (hidden until
+    "Show the robot's collision shapes"), at its place in that frame, red where its distance to an obstacle or
+    to a link it is checked against is below the margin (dk.collision's self and world distances), else blue."""
+    from diffkin.viewer._viewer import CLEAR, NEAR
+
+    robot, geom, avoid = arm_avoid
+    viewer = viewer_of(robot, avoid=avoid)
+    assert len(viewer.collision) == len(geom.shape_names)
+    spheres, capsules, _ = geom.counts
+    for k, handles in enumerate(viewer.collision):
+        assert len(handles) == (3 if spheres <= k < spheres + capsules else 1)
+        assert all(h.name.startswith(f"/robot/{geom.shape_links[k]}/collision{k}") for h in handles)
+        assert not any(h.visible for h in handles)
+    c = geom.capsules
+    axis = viewer.collision[spheres][0]  # the first capsule's cylinder, in its frame
+    np.testing.assert_allclose(axis.position, (np.asarray(c.a[0]) + np.asarray(c.b[0])) / 2, atol=1e-12)
+    assert axis.height == pytest.approx(float(np.linalg.norm(np.asarray(c.b[0]) - np.asarray(c.a[0]))))
+    viewer.show_collision.value = True
+    assert all(h.visible for handles in viewer.collision for h in handles)
+
+    for q in (viewer.q, np.array([-0.2, 1.3, 1.0])):  # the start, then the hand pushed into the box
+        for i, value in enumerate(q):
+            viewer.sliders[i].value = float(value)
+        world = np.asarray(dk.collision.world_distances(robot, geom, viewer.q, avoid.world)).min(axis=-1)
+        own = np.full(len(world), np.inf)
+        for (i, j), d in zip(geom.pairs, np.asarray(dk.collision.self_distances(robot, geom, viewer.q)), strict=True):
+            own[i], own[j] = min(own[i], d), min(own[j], d)
+        np.testing.assert_allclose(viewer.shape_gaps, np.minimum(world, own), atol=1e-9)
+        colours = [tuple(handles[0].color) for handles in viewer.collision]
+        assert colours == [NEAR if gap < 0.02 else CLEAR for gap in viewer.shape_gaps]
+    assert NEAR in colours
