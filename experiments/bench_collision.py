@@ -2,9 +2,13 @@
 
 diffkin's ``self_distances`` + ``world_distances`` (one jitted function, forward kinematics
 included) against a Python loop of coal's ``distance`` on the same primitives (the shapes placed
-by diffkin's poses beforehand: coal's time is the distances alone). Batch 1, 1,000 and 100,000,
-float32 and float64; the coal loop is timed on 200 configurations and reported per configuration
-times the batch. Medians of 5 warm calls. ``--compile``: instead, the seconds to trace, lower and
+by diffkin's poses beforehand: coal's time is the distances alone), and against PyRoki's
+``compute_self_collision_distance`` + ``compute_world_collision_distance`` on its own geometry (one
+capsule per link fitted to the meshes, the SRDF's pairs ignored as diffkin's: ``_pyroki_peer.py``;
+PyRoki has no box, so each box is its six face half-spaces, as the IK benchmark does: the same
+number of obstacles to check, a cheaper kind). Batch 1, 1,000 and 100,000, float32 and float64; the
+coal loop is timed on 200 configurations and reported per configuration times the batch. Medians
+of 5 warm calls; PyRoki's compile apart (first call). ``--compile``: instead, the seconds to trace, lower and
 compile (at batch 1,000) the value of ``self_distances`` + ``world_distances`` and the gradient of
 their sum with respect to ``q`` (what IK and the tests differentiate).
 
@@ -104,6 +108,34 @@ def distances(robot, geom, world, dtype):
     return lambda q: (dk.collision.self_distances(r, g, q), dk.collision.world_distances(r, g, q, w))
 
 
+def pyroki_distances(urdf: str, srdf: str, world):
+    """``q -> (self, world)`` distances of PyRoki's Panda (jitted), or ``None`` without PyRoki."""
+    try:
+        import jax.numpy as jnp
+        from _pyroki_peer import _box_halfspaces, panda_robot
+        from pyroki.collision import HalfSpace, Sphere
+    except ImportError:
+        return None
+    robot, coll = panda_robot(urdf, srdf)
+    spheres = Sphere.from_center_and_radius(jnp.asarray(world.spheres.center), jnp.asarray(world.spheres.radius))
+    boxes = list(zip(np.asarray(world.boxes.pose), np.asarray(world.boxes.half_extents), strict=True))
+    points, normals = _box_halfspaces(boxes)
+    n, o = np.asarray(world.planes.normal), np.asarray(world.planes.offset)
+    faces = HalfSpace.from_point_and_normal(
+        jnp.asarray(np.concatenate([points.reshape(-1, 3), n * o[:, None]])),
+        jnp.asarray(np.concatenate([normals.reshape(-1, 3), n])),
+    )
+
+    def one(q):  # one configuration: PyRoki's batched calls fail on a batch of configurations (jax_dataclasses)
+        return (
+            coll.compute_self_collision_distance(robot, q),
+            coll.compute_world_collision_distance(robot, q, spheres),
+            coll.compute_world_collision_distance(robot, q, faces),
+        )
+
+    return jax.jit(jax.vmap(one))
+
+
 def compile_times(robot, geom, world, q, dtypes) -> int:
     """Print the seconds to trace, lower and compile the value and the gradient (of the sum of every distance)."""
     print("| dtype | what | compile (s) |")
@@ -124,6 +156,7 @@ def main(argv=None) -> int:
     parser.add_argument("--dtype", choices=("float32", "float64", "both"), default="both")
     parser.add_argument("--compile", action="store_true", help="compile times of the value and the gradient only")
     parser.add_argument("--no-coal", action="store_true", help="diffkin only (no coal loop: a GPU machine)")
+    parser.add_argument("--no-pyroki", action="store_true", help="without PyRoki (not on PyPI: experiments/README.md)")
     args = parser.parse_args(argv)
     robot, urdf, srdf = panda()
     t = time.perf_counter()
@@ -140,17 +173,25 @@ def main(argv=None) -> int:
     if args.compile:
         return compile_times(robot, geom, world, rng.uniform(lo, hi, (1000, robot.dof)), dtypes)
     coal_s = np.nan if args.no_coal else coal_per_config(robot, geom, world, rng.uniform(lo, hi, (200, robot.dof)))
-    print("| dtype | batch | diffkin (s) | coal loop (s, per config x batch) | speed-up |")
-    print("| --- | --- | --- | --- | --- |")
+    peer = None if args.no_pyroki else pyroki_distances(urdf, srdf, world)
+    columns = "diffkin (s) | coal loop (s, per config x batch) | speed-up | PyRoki (s) | PyRoki / diffkin"
+    print(f"| dtype | batch | {columns} |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
     for dtype in dtypes:
         f = jax.jit(distances(robot, geom, world, dtype))
         for batch in (1, 1000) if args.quick else (1, 1000, 100_000):
             q = rng.uniform(lo, hi, (batch, robot.dof)).astype(dtype)
             s = median_seconds(f, q, repeats=5, warmup=1, min_time=0.0)
-            print(
-                f"| {np.dtype(dtype).name} | {batch:,} | {s:.3g} | {coal_s * batch:.3g} | {coal_s * batch / s:.0f}x |",
-                flush=True,
-            )
+            peer_cells = "n/a | n/a"
+            if peer is not None:
+                qp = jax.numpy.asarray(q)  # the same joints in the same order (its mimic finger follows, as ours)
+                start = time.perf_counter()
+                jax.block_until_ready(peer(qp))
+                first = time.perf_counter() - start
+                p = median_seconds(peer, qp, repeats=5, warmup=0, min_time=0.0)
+                peer_cells = f"{p:.3g} (compile {first:.1f}) | {p / s:.1f}x"
+            coal_cells = f"{coal_s * batch:.3g} | {coal_s * batch / s:.0f}x"
+            print(f"| {np.dtype(dtype).name} | {batch:,} | {s:.3g} | {coal_cells} | {peer_cells} |", flush=True)
     return 0
 
 
