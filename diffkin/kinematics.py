@@ -99,11 +99,11 @@ def link_poses(model: Model, q: ArrayLike, *, base=None) -> jax.Array:
     """
     kin, shape, dtype = _pass(model, q, base)
     if isinstance(kin, ScannedPass):
-        return _matrices(kin, list(range(len(kin.robot.frame_names))), shape, dtype)
+        return _matrices(kin, list(range(kin.frames)), shape, dtype)
     return rg.to_matrices(kin.poses(), shape, dtype)
 
 
-def _matrices(kin, frames: list[int], shape: tuple[int, ...], dtype) -> jax.Array:
+def _matrices(kin, frames: list, shape: tuple[int, ...], dtype) -> jax.Array:
     """``shape + (len(frames), 4, 4)``: the poses of ``frames``, a scanned pass's as one stacked pose."""
     if isinstance(kin, ScannedPass):
         return jnp.moveaxis(rg.to_matrix(kin.stacked_poses(frames), (len(frames), *shape), dtype), 0, -3)
@@ -114,7 +114,6 @@ def _analytic(model: Model, q, frame: str, f: int | None, base, include_base: bo
     kin, shape, dtype = _pass(model, q, base)
     T = kin.pose(f)
     if isinstance(kin, ScannedPass):  # one twist whose entries have a leading axis of columns
-        assert f is not None
         columns = [kin.stacked_columns(f)]
         if include_base:
             columns = [_stacked_twists(rg.root_screws(_base(model, base)), shape, dtype), *columns]

@@ -11,11 +11,14 @@ composes each body's pose from its parent's, ``T_world_body[j + 1] = T_world_bod
 too). Compile time is then independent of the number of joints and run time linear in it.
 
 The result is the same :class:`~diffkin.models.robot.RobotPass` (bodies and world screws as
-entries, sliced from the scan's outputs), so every consumer of a pass works unchanged.
+entries, sliced from the scan's outputs), so every consumer of a pass works unchanged. Chains of
+more than :data:`LONG` joints take it too (:func:`chain_forward`: a product of exponentials is a
+tree whose joint poses are the identity).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 import jax
@@ -60,13 +63,67 @@ def _flat(T: rg.Rigid, shape: tuple[int, ...], dtype) -> jax.Array:
     return rg.stack(rg.leaves(T), shape, dtype, axis=0)
 
 
-def forward(robot, q: Sequence[rg.Entry], base: rg.Rigid) -> ScannedPass:
+@dataclasses.dataclass(frozen=True)
+class _ChainTree:
+    """A :class:`~diffkin.PoEChain` as the tree the scan walks: body ``j + 1`` is body ``j`` moved by
+    ``exp([screws[j]] q_j)`` (the joint poses are the identity: PoE screws are in the base frame); its
+    frames are the base, each link (``link_homes``) and the end effector (``home``), on bodies 0 .. dof."""
+
+    screws: jax.Array
+    joint_poses: jax.Array
+    frame_poses: jax.Array
+    multipliers: jax.Array
+    offsets: jax.Array
+    dof: int
+
+    @property
+    def parents(self) -> tuple[int, ...]:
+        return tuple(range(self.dof))
+
+    sources = parents
+
+    @property
+    def frame_bodies(self) -> tuple[int, ...]:
+        return (*range(self.dof + 1), self.dof)
+
+    def ancestors(self, body: int) -> list[int]:
+        return list(range(body))
+
+
+def chain_forward(chain, q: Sequence[rg.Entry], base: rg.Rigid) -> ScannedPass:
+    """The forward pass of a serial chain (as its own ``forward``), by a scan; frame ``None`` is the end effector.
+
+    Args:
+        chain: a :class:`~diffkin.PoEChain`, or a :class:`~diffkin.DHChain` (converted exactly by
+            :func:`~diffkin.models.poe.to_poe`, on the host when its numbers are concrete).
+        q: its ``dof`` joint values.
+        base: the pose of its base frame in the world.
+    """
+    from diffkin.models.dh import DHChain
+    from diffkin.models.poe import to_poe
+
+    n = chain.dof
+    first = chain.base if isinstance(chain, DHChain) else None  # DH frame 0 (its PoE form folds it in)
+    if isinstance(chain, DHChain):
+        with jax.ensure_compile_time_eval():  # a concrete chain's PoE form is a constant
+            chain = to_poe(chain)
+    dtype = jnp.result_type(chain.screws)
+    eye = jnp.broadcast_to(jnp.eye(4, dtype=dtype), (n, 4, 4))
+    first = eye[0] if first is None else jnp.asarray(first, dtype)
+    homes = [first[None], jnp.asarray(chain.link_homes, dtype), jnp.asarray(chain.home, dtype)[None]]
+    frames = jnp.concatenate(homes)  # the base, each link, the end effector
+    tree = _ChainTree(chain.screws, eye, frames, jnp.ones(n, dtype), jnp.zeros(n, dtype), n)
+    return forward(tree, q, base, end=n + 1)
+
+
+def forward(robot, q: Sequence[rg.Entry], base: rg.Rigid, end: int | None = None) -> ScannedPass:
     """The robot's forward pass (as :meth:`diffkin.Robot.forward`), by a scan over its joints.
 
     Args:
-        robot: the :class:`~diffkin.Robot`.
+        robot: the :class:`~diffkin.Robot` (or a :class:`_ChainTree`).
         q: its ``dof`` joint values (arrays of broadcastable batch shapes, or Python floats).
         base: ``T_world_root``.
+        end: the frame that frame ``None`` means (a chain's end effector), or ``None`` (a robot).
     """
     nj = len(robot.parents)
     whole = q.array if isinstance(q, JointValues) else None  # the whole array: no slices to stack again
@@ -102,7 +159,7 @@ def forward(robot, q: Sequence[rg.Entry], base: rg.Rigid) -> ScannedPass:
     T = rg.compose(_entries(jnp.moveaxis(bodies[parents], 1, 0)), _per_row(joint_poses, len(shape)))
     w_world = rg.rotate(T.R, w)
     v_world = rg.vadd(rg.rotate(T.R, v), rg.cross(T.p, w_world))
-    return ScannedPass(robot, bodies, jnp.stack([*v_world, *w_world], axis=1), m)
+    return ScannedPass(robot, bodies, jnp.stack([*v_world, *w_world], axis=1), m, end)
 
 
 class ScannedPass(RobotPass):
@@ -111,12 +168,15 @@ class ScannedPass(RobotPass):
     Besides the entry-wise methods of every pass, it gives many frames or columns at once as one
     pose or twist whose entries have a leading axis (:meth:`stacked_poses`, :meth:`stacked_columns`):
     a program that slices a thousand frames into entries and stacks them again compiles in minutes.
+    A chain's pass (``end`` given) is a chain's :class:`~diffkin.models.forward.Pass`: frame ``None`` its
+    end effector, :meth:`poses` its base and links (:attr:`frames` of them).
     """
 
-    def __init__(self, robot, bodies: jax.Array, screws: jax.Array, multipliers: jax.Array):
+    def __init__(self, robot, bodies: jax.Array, screws: jax.Array, multipliers: jax.Array, end: int | None = None):
         """``bodies (nj + 1, 12) + batch``, ``screws (nj, 6) + batch`` (world ``[v; w]``), ``multipliers (nj,)``."""
-        self.robot, self._bodies, self._screws, self._m = robot, bodies, screws, multipliers
+        self.robot, self._bodies, self._screws, self._m, self.end = robot, bodies, screws, multipliers, end
         self._poses = {}
+        self.frames = len(robot.frame_bodies) if end is None else end  # the frames of poses()
 
     @property
     def bodies(self) -> list[rg.Rigid]:  # type: ignore[override]
@@ -130,33 +190,37 @@ class ScannedPass(RobotPass):
     def multipliers(self) -> list[rg.Entry]:  # type: ignore[override]
         return [self._m[j] for j in range(len(self._m))]
 
-    def pose(self, frame: int | None = None) -> rg.Rigid:
-        if frame is None:
+    def _frame(self, frame: int | None) -> int:
+        if frame is not None:
+            return frame
+        if self.end is None:
             raise TypeError("frame: a robot has no single end effector; give a frame index")
+        return self.end
+
+    def pose(self, frame: int | None = None) -> rg.Rigid:
         return _index(self.stacked_poses([frame]), 0)
 
     def columns(self, frame: int | None = None) -> list[tuple[rg.Vec3, rg.Vec3]]:
-        if frame is None:
-            raise TypeError("frame: a robot has no single end effector; give a frame index")
         stacked = self.stacked_columns(frame)
         return [(_index(stacked[0], i), _index(stacked[1], i)) for i in range(self.robot.dof)]
 
     def poses(self) -> list[rg.Rigid]:
-        stacked = self.stacked_poses(list(range(len(self.robot.frame_names))))
-        return [_index(stacked, f) for f in range(len(self.robot.frame_names))]
+        stacked = self.stacked_poses(list(range(self.frames)))
+        return [_index(stacked, f) for f in range(self.frames)]
 
-    def stacked_poses(self, frames: Sequence[int]) -> rg.Rigid:
+    def stacked_poses(self, frames: Sequence[int | None]) -> rg.Rigid:
         """The world poses of ``frames``: entries ``(len(frames),) + batch``."""
         robot = self.robot
-        bodies = _entries(jnp.moveaxis(self._bodies[np.asarray([robot.frame_bodies[f] for f in frames])], 1, 0))
-        F = _rows(jnp.asarray(robot.frame_poses, self._bodies.dtype)[np.asarray(frames)])
+        indices = [self._frame(f) for f in frames]
+        bodies = _entries(jnp.moveaxis(self._bodies[np.asarray([robot.frame_bodies[f] for f in indices])], 1, 0))
+        F = _rows(jnp.asarray(robot.frame_poses, self._bodies.dtype)[np.asarray(indices)])
         return rg.compose(bodies, _per_row(F, self._bodies.ndim - 2))
 
-    def stacked_columns(self, frame: int) -> tuple[rg.Vec3, rg.Vec3]:
+    def stacked_columns(self, frame: int | None) -> tuple[rg.Vec3, rg.Vec3]:
         """The space Jacobian of ``frame`` as one twist ``(v, w)`` with entries ``(dof,) + batch``: per entry of
         ``q``, the sum over the joints on the frame's path that it drives of ``multiplier * screw``."""
         robot = self.robot
-        path = np.asarray(robot.ancestors(robot.frame_bodies[frame]), np.int64)
+        path = np.asarray(robot.ancestors(robot.frame_bodies[self._frame(frame)]), np.int64)
         lead = (slice(None),) + (None,) * (self._screws.ndim - 1)
         moved = self._m[path][lead] * self._screws[path]  # (len(path), 6) + batch
         moved = jnp.concatenate([moved, jnp.zeros_like(moved[:1])])  # a zero row at index len(path)

@@ -11,7 +11,7 @@ import numpy as np
 from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
 from diffkin.models import _validate as check
-from diffkin.models.forward import ChainPass
+from diffkin.models.forward import ChainPass, Pass
 
 
 @pytree_dataclass
@@ -136,8 +136,17 @@ class DHChain:
         """``"R"``/``"P"`` of each entry of ``q`` (:attr:`joint_types`)."""
         return self.joint_types
 
-    def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> ChainPass:
-        """The forward pass (:mod:`diffkin.models.forward`): the DH product, frame ``i`` after joint ``i``."""
+    def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> Pass:
+        """The forward pass (:mod:`diffkin.models.forward`): the DH product, frame ``i`` after joint ``i`` (more than
+        :data:`~diffkin.models._scanned.LONG` joints: scanned, :func:`~diffkin.models._scanned.chain_forward`)."""
+        from diffkin.models import _scanned  # it builds on the Robot, which builds on the chains
+
+        if self.dof > _scanned.LONG:
+            return _scanned.chain_forward(self, q, base)
+        return self.product(q, base)
+
+    def product(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> ChainPass:
+        """The DH product, joint by joint, at any length (:meth:`forward` scans long chains)."""
         a, alpha, d, offset = (rg.per_joint(x) for x in (self.a, self.alpha, self.d, self.theta_offset))
         T = rg.compose(base, rg.from_matrix(self.base))
         links, screws = [T], []

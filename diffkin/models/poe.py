@@ -14,7 +14,7 @@ from diffkin._pytree import pytree_dataclass, static
 from diffkin._static import host
 from diffkin.models import _validate as check
 from diffkin.models.dh import DHChain
-from diffkin.models.forward import ChainPass
+from diffkin.models.forward import ChainPass, Pass
 
 
 @pytree_dataclass
@@ -144,8 +144,13 @@ class PoEChain:
         """``"R"``/``"P"`` of each entry of ``q`` (:attr:`joint_types`)."""
         return self.joint_types
 
-    def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> ChainPass:
-        """The forward pass (:mod:`diffkin.models.forward`): the product of exponentials."""
+    def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> Pass:
+        """The forward pass (:mod:`diffkin.models.forward`): the product of exponentials (more than
+        :data:`~diffkin.models._scanned.LONG` joints: scanned, :func:`~diffkin.models._scanned.chain_forward`)."""
+        from diffkin.models import _scanned  # it builds on the Robot, which builds on this module
+
+        if self.dof > _scanned.LONG:
+            return _scanned.chain_forward(self, q, base)
         S, L = host(self.screws), host(self.link_homes)
         T = base
         links, screws = [T], []
@@ -197,7 +202,7 @@ def to_poe(chain: DHChain) -> PoEChain:
     """
     instance(chain, DHChain, "chain", "a DHChain")
     dtype = jnp.result_type(chain.a)
-    at_zero = chain.forward([jnp.zeros((), dtype) for _ in range(chain.dof)])
+    at_zero = chain.product([jnp.zeros((), dtype) for _ in range(chain.dof)])
     screws = jnp.stack([rg.stack([*v, *w], (), dtype) for v, w in at_zero.columns()])
     return PoEChain(
         screws=screws,

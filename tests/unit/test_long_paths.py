@@ -1,18 +1,17 @@
 """Robots with long serial paths (snakes, cables, discretised continuum robots): the scanned forward pass
 (``diffkin/models/_scanned.py``) against a NumPy product of the joints' transforms and finite differences
-at 1,000 joints, and against the unrolled pass on trees with mimic joints and floating roots."""
+at 1,000 joints (against the unrolled pass on trees and chains, gradients included:
+``tests/validation/test_scanned_validation.py``)."""
 
 import time
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import PANDA, random_robot_q, robot_poses, snake_robot
+from _reference import robot_poses, snake_robot
 
 import diffkin as dk
 from diffkin import se3
-from diffkin.models import _scanned
 
 N = 1000
 
@@ -79,71 +78,3 @@ def test_the_run_time_grows_linearly():
             runs.append(time.perf_counter() - start)
         times.append(min(runs))
     assert times[1] < 8 * times[0]
-
-
-@pytest.fixture(scope="module")
-def scanned_and_unrolled():
-    """The Panda (a tree, one mimic joint) on a floating root, taken once by each pass."""
-    robot = dk.load_robot(PANDA, floating=True)
-    return robot, lambda fn, *args: _with_long(0, fn, *args), lambda fn, *args: _with_long(10**9, fn, *args)
-
-
-def _with_long(long: int, fn, *args):
-    """``fn(*args)``, jitted and traced afresh, with every robot deeper than ``long`` joints scanned."""
-    saved = _scanned.LONG
-    _scanned.LONG = long
-    try:
-        return jax.jit(lambda *a: fn(*a))(*args)
-    finally:
-        _scanned.LONG = saved
-
-
-def test_the_scanned_pass_equals_the_unrolled_pass_on_a_tree(scanned_and_unrolled):
-    """Every frame, two frames' Jacobians in each reference frame (base columns included), the centre of
-    mass and its Jacobian: the scanned pass equals the unrolled one (float64, 1e-12)."""
-    dtype = np.float64
-    robot, scanned, unrolled = scanned_and_unrolled
-    rng = np.random.default_rng(1)
-    q = random_robot_q(robot, 5, seed=1).astype(dtype)
-    base = np.stack([np.eye(4)] * 5)
-    base[:, :3, :3] = np.asarray(jax.vmap(lambda w: jax.scipy.linalg.expm(se3.skew(w)))(rng.normal(size=(5, 3))))
-    base[:, :3, 3] = rng.normal(size=(5, 3))
-    base = base.astype(dtype)
-    tol = 1e-12
-    frames = ("panda_rightfinger", "panda_link3")
-
-    def everything(q, base):
-        return {
-            "link_poses": dk.link_poses(robot, q, base=base),
-            "fk": dk.fk(robot, q, ["panda_hand_tcp", "panda_rightfinger"], base=base),
-            "com": dk.com(robot, q),
-            "com_jacobian": dk.com_jacobian(robot, q, include_base=True),
-            **{
-                f"jacobian {name} {ref}": dk.jacobian(robot, q, name, ref, base=base, include_base=True)
-                for name in frames
-                for ref in ("world", "space", "body")
-            },
-        }
-
-    a, b = scanned(everything, q, base), unrolled(everything, q, base)
-    for name in a:
-        assert a[name].dtype == b[name].dtype == dtype
-        np.testing.assert_allclose(a[name], b[name], atol=tol, err_msg=name)
-
-
-def test_scanned_gradients_with_respect_to_q_and_the_model(scanned_and_unrolled):
-    """Reverse mode through the scan (with respect to ``q`` and to the robot's own arrays, the robot traced
-    as a ``jit`` argument) equals the unrolled pass's gradients."""
-    robot, scanned, _ = scanned_and_unrolled
-    q = jnp.asarray(random_robot_q(robot, 4, seed=2))
-
-    def loss(robot, q):
-        T = dk.fk(robot, q, ["panda_hand_tcp", "panda_leftfinger"])
-        return jnp.sum(T[..., :3, :] ** 2 * jnp.arange(1.0, 13.0).reshape(3, 4)) + jnp.sum(dk.com(robot, q))
-
-    grad = jax.grad(loss, argnums=(0, 1))
-    # The unrolled reference op by op: jitted with the robot traced, XLA takes minutes to compile it.
-    (g_robot, g_q), (h_robot, h_q) = scanned(grad, robot, q), grad(robot, q)
-    np.testing.assert_allclose(g_q, h_q, atol=1e-11)
-    for name in ("joint_poses", "screws", "multipliers", "offsets", "frame_poses", "masses", "body_coms"):
-        np.testing.assert_allclose(getattr(g_robot, name), getattr(h_robot, name), atol=1e-11, err_msg=name)
