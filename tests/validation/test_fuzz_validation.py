@@ -1,7 +1,8 @@
 """Property-based fuzzing of the MJCF reader against MuJoCo (hypothesis): random kinematic trees (default
 classes, frames, every orientation form) give MuJoCo's frames, limits and poses; random include
 structures load as MuJoCo loads them or are rejected as MuJoCo rejects them. And whole-robot IK: random
-targets, weights and locked joints of a tree. Budgets and the time limit as in
+targets, weights and locked joints of a tree. And the Jacobian properties of ``tests/unit/test_fuzz.py``
+on the long chains (7 and 8 joints: compiling their Jacobians is slow). Budgets and the time limit as in
 ``tests/unit/test_fuzz.py`` (``DIFFKIN_FUZZ_EXAMPLES``)."""
 
 import _reference
@@ -10,6 +11,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _chain_fuzz import (
+    LONG_DH_STRUCTURES,
+    LONG_POE_STRUCTURES,
+    chains,
+    check_fk_and_jacobians_finite_for_any_finite_q,
+    check_jacobians_match_central_differences,
+)
 from _reference import EXAMPLES, FINGER, FUZZ, MJCF_FUZZ, MJCF_TIME_LIMIT, time_limit
 from _reference import finite_floats as _floats
 from _reference import number_text as _text
@@ -282,3 +290,20 @@ def test_robot_ik_success_means_the_weighted_target_is_reached(data):
         assert np.linalg.norm((reached - p[i])[axes]) <= 1e-5
     if lock is None and (weights is None or len(weights) == 2):  # 3 joints, 3 constraints: reachable ones solved
         assert np.all(success[:3])
+
+
+# ----- the Jacobian properties of tests/unit/test_fuzz.py on the long chains ---------------------------------
+
+LONG_CHAINS = chains(LONG_DH_STRUCTURES, LONG_POE_STRUCTURES)
+
+
+@FUZZ
+@given(st.data())
+def test_fk_and_jacobian_finite_for_any_finite_q_long_chains(data):
+    check_fk_and_jacobians_finite_for_any_finite_q(data, LONG_CHAINS)
+
+
+@FUZZ
+@given(st.data())
+def test_jacobian_matches_central_differences_long_chains(data):
+    check_jacobians_match_central_differences(data, LONG_CHAINS)
