@@ -270,6 +270,26 @@ def screw_exps(screws: Sequence[tuple[Vec3, Vec3]], thetas: Sequence[Entry]) -> 
     return out
 
 
+def rotation_exp(r: Vec3) -> tuple[Mat3, Mat3]:
+    """``exp([r])`` of a rotation vector ``r`` and its left Jacobian ``J``, with which a change ``dr``
+    turns the rotation by the angular velocity ``J dr`` (in the frame ``r`` is expressed in).
+
+    ``R = I + A [r] + B [r]^2`` and ``J = I + B [r] + C [r]^2``, the coefficients of :func:`screw_exp`
+    at ``theta = 1`` (NaN-free at ``r = 0``, where both are the identity).
+    """
+    n2 = jnp.asarray(dot(r, r))
+    one = jnp.ones_like(n2)
+    x = _safe_norm(n2)
+    s, c = sincos(x)
+    A, B, C = _exp_coefficients(n2, one, x, s, c)
+    W = skew(r)
+    W2 = matmul(W, W)
+    eye = lambda i, j: 1.0 if i == j else 0.0  # noqa: E731
+    R = tuple(tuple(add(eye(i, j), mul(A, W[i][j]), mul(B, W2[i][j])) for j in range(3)) for i in range(3))
+    J = tuple(tuple(add(eye(i, j), mul(B, W[i][j]), mul(C, W2[i][j])) for j in range(3)) for i in range(3))
+    return R, J
+
+
 def _exp_angle(n2: Entry, theta: Entry) -> Entry | None:
     """The angle ``|w| theta`` of :func:`screw_exp` (``None`` for a concrete zero ``w``; ``theta`` for a unit one)."""
     if isinstance(n2, float):

@@ -392,8 +392,36 @@ def robot_poses(robot, q) -> np.ndarray:
     bodies = [np.eye(4)]
     for j, parent in enumerate(robot.parents):
         theta = np.asarray(multipliers[j] * q[robot.sources[j]] + offsets[j])
-        bodies.append(bodies[parent] @ joint_poses[j] @ _screw_exp(screws[j], robot.joint_types[j], theta))
+        if robot.joint_types[j] != "B":
+            bodies.append(bodies[parent] @ joint_poses[j] @ _screw_exp(screws[j], robot.joint_types[j], theta))
+        elif robot.joint_types[: j + 1].count("B") % 3 == 1:  # the first of a ball joint's three: all three bodies
+            T = bodies[parent] @ joint_poses[j]
+            bodies += [T, T, T @ ball_motion(screws[j : j + 3], q[robot.sources[j] : robot.sources[j] + 3])]
     return np.stack([bodies[b] @ frame_poses[f] for f, b in enumerate(robot.frame_bodies)])
+
+
+def rodrigues(r) -> np.ndarray:
+    """``(3, 3)`` rotation of the rotation vector ``r``: ``cos t I + sin t [a] + (1 - cos t) a a^T``."""
+    r = np.asarray(r, np.float64)
+    t = np.linalg.norm(r)
+    if t == 0:
+        return np.eye(3)
+    a = r / t
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.cos(t) * np.eye(3) + np.sin(t) * K + (1 - np.cos(t)) * np.outer(a, a)
+
+
+def ball_motion(screws, r) -> np.ndarray:
+    """``(4, 4)`` motion of a ball joint with screws ``[c x e_k; e_k]`` ``(3, 6)`` at rotation vector ``r``
+    (in the axes ``e_k``): a rotation about the centre ``c``, read off the screws by least squares."""
+    screws = np.asarray(screws, np.float64)
+    E = screws[:, 3:]  # rows e_k
+    K = np.concatenate([-np.array([[0, -e[2], e[1]], [e[2], 0, -e[0]], [-e[1], e[0], 0]]) for e in E])
+    c = np.linalg.lstsq(K, screws[:, :3].reshape(-1), rcond=None)[0]  # c x e_k = -[e_k] c
+    T = np.eye(4)
+    T[:3, :3] = rodrigues(E.T @ np.asarray(r, np.float64))
+    T[:3, 3] = c - T[:3, :3] @ c
+    return T
 
 
 def fk(chain, q) -> np.ndarray:

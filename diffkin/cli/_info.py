@@ -24,13 +24,13 @@ def _tree_lines(robot, spec: str) -> list[str]:
     lower, upper = np.asarray(robot.lower), np.asarray(robot.upper)
     for j, name in enumerate(robot.tree_joints):
         link = f"{body_name.get(robot.parents[j], '?')} -> {body_name.get(j + 1, '(internal)')}"
-        kind = "revolute" if robot.joint_types[j] == "R" else "prismatic"
+        kind = {"R": "revolute", "P": "prismatic", "B": "ball"}[robot.joint_types[j]]
         if name in robot.mimic:
             source, m, o = robot.mimic[name]
             index, what = "", f"mimic: {m:g} * {source} + {o:g}"
         else:
             i = robot.sources[j]
-            index, what = str(i), f"[{lower[i]:.4g}, {upper[i]:.4g}] {'rad' if kind == 'revolute' else 'm'}"
+            index, what = str(i), f"[{lower[i]:.4g}, {upper[i]:.4g}] {'m' if kind == 'prismatic' else 'rad'}"
         lines.append(f"{index:>3}  {name:<28} {kind:<10} {link:<44} {what}")
     lines += [
         "",

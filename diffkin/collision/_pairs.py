@@ -19,7 +19,7 @@ import numpy as np
 from diffkin._checks import positive_int
 from diffkin.collision._geometry import Geometry
 from diffkin.collision._robot import check_geometry, self_distances
-from diffkin.models._ranges import sampling_ranges, uniform
+from diffkin.models._ranges import ball_starts, sampling_ranges, uniform
 from diffkin.models.robot import Robot
 
 
@@ -97,7 +97,7 @@ def sample_pairs(robot: Robot, geom: Geometry, n: int = 10_000, *, key, margin: 
     if isinstance(margin, bool) or not isinstance(margin, (int, float)) or not np.isfinite(margin):
         raise ValueError(f"margin: expected a finite distance in metres, got {margin!r}")
     lo, hi = sampling_ranges(robot)
-    q = uniform(key, lo, hi, n, jax.numpy.result_type(float)).T
+    q = uniform(key, lo, hi, n, jax.numpy.result_type(float), ball_starts(robot)).T
     d = np.asarray(jax.jit(lambda q: self_distances(robot, geom, q))(q))  # (n, P)
     groups: dict[tuple[str, str], list[int]] = {}
     for k, (i, j) in enumerate(geom.pair_list):

@@ -16,6 +16,7 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin._xla import materialize
+from diffkin.models._ranges import into_cones
 
 BASE_ROWS = 12  # state rows of a solved root pose: p (3), then R row by row (9)
 
@@ -127,9 +128,11 @@ class Problem(NamedTuple):
         return x[: self.dof] if self.solve_base else x
 
     def project(self, x: jax.Array) -> jax.Array:
-        """Unlimited revolute joints wrapped to ``[-pi, pi)``, joints clipped (``respect_limits``), locked
-        joints at their values; the root pose unchanged."""
-        q = project(self.joints(x), self.lower, self.upper, self.wrap, self.respect_limits)
+        """Unlimited revolute joints wrapped to ``[-pi, pi)``, joints clipped (``respect_limits``), ball
+        joints scaled into their cones (:func:`diffkin.models._ranges.into_cones`), locked joints at their
+        values; the root pose unchanged."""
+        q = into_cones(self.joints(x), self.model, self.respect_limits)  # (then within the box around the cone)
+        q = project(q, self.lower, self.upper, self.wrap, self.respect_limits)
         if any(self.locked):
             q = jnp.where(jnp.asarray(self.locked)[:, None], self.locked_q, q)
         return jnp.concatenate([q, x[self.dof :]]) if self.solve_base else q

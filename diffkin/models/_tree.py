@@ -21,7 +21,8 @@ class JointSpec:
 
     Attributes:
         name: joint name (unique).
-        kind: ``"R"`` (revolute), ``"P"`` (prismatic) or ``"F"`` (fixed).
+        kind: ``"R"`` (revolute), ``"P"`` (prismatic), ``"F"`` (fixed) or ``"B"`` (one of the three
+            consecutive joints of a ball joint: :mod:`diffkin.models._ball`).
         parent, child: link names.
         origin: ``(4, 4)`` pose of the joint frame in the parent link frame; the child link frame
             is the joint frame moved by ``exp([screw] theta)``.

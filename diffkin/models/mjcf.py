@@ -21,7 +21,11 @@ top-level body makes that body the floating root: its pose is ``fk``'s ``base`` 
 ``qpos`` position and ``w x y z`` quaternion), and static world bodies and world sites, which are
 not part of the robot, are left out.
 
-Rejected with a ValueError naming the element: ball joints, free joints below the top level or
+A ball joint is three entries of ``q``, its rotation vector ``name:rx, name:ry, name:rz`` in the body's
+axes (MuJoCo's ``qpos`` quaternion is ``(cos(|r|/2), sin(|r|/2) r/|r|)``), its ``range`` a cone
+``|r| <= range[1]`` (:mod:`diffkin.models._ball`).
+
+Rejected with a ValueError naming the element: free joints below the top level or
 with other joints, several free bodies, moving top-level bodies beside a free one, equality
 constraints other than linear ``<joint>`` ones (``connect``, ``weld``, ``tendon``, ``flex``:
 they close loops or couple tendons), ``<attach>``, ``<replicate>``, ``<composite>``,
@@ -42,7 +46,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from diffkin.models import _mjcf_mass, _xml
+from diffkin.models import _ball, _mjcf_mass, _xml
 from diffkin.models._tree import JointSpec, build
 from diffkin.models.robot import Robot
 
@@ -265,27 +269,37 @@ class _Reader:
                 out.append((child, T, cls))
         return out
 
-    def _joint(self, el: ET.Element, T: np.ndarray, cls: str, body: str) -> tuple[JointSpec | None, bool]:
-        """A hinge or slide joint as a spec from the body's parent side (``origin`` set later), or
-        ``(None, True)`` for a free joint."""
+    def _joint(self, el: ET.Element, T: np.ndarray, cls: str, body: str) -> tuple[list[JointSpec], bool]:
+        """A hinge or slide joint as a spec from the body's parent side (``origin`` set later), a ball
+        joint as three (:mod:`diffkin.models._ball`), or ``([], True)`` for a free joint."""
         jid, self.n_joints = self.n_joints, self.n_joints + 1
         cls = self._class(el, cls)
         kind = "free" if el.tag == "freejoint" else self._get(el, "type", cls, "hinge")
         if kind == "free":
-            return None, True
+            return [], True
         where = _describe(el)
-        if kind not in ("hinge", "slide"):
-            raise ValueError(f"{where}: joint type {kind!r} is not supported (hinge, slide, free on a top-level body)")
+        if kind not in ("hinge", "slide", "ball"):
+            raise ValueError(
+                f"{where}: joint type {kind!r} is not supported (hinge, slide, ball, free on a top-level body)"
+            )
+        anchor = T[:3, :3] @ _xml.numbers(None, "pos", 3, self._get(el, "pos", cls, "0 0 0"), where) + T[:3, 3]
+        name = el.get("name") or f"joint{jid}"
+        if kind == "ball":  # about the anchor, in the body's axes (MuJoCo ignores a ball joint's axis and ref)
+            _, upper = self._limits(el, cls, True)
+            return [
+                JointSpec(
+                    f"{name}:{k}", "B", "", body, np.eye(4), np.concatenate([np.cross(anchor, e), e]), -upper, upper
+                )
+                for k, e in zip(_ball.AXES, np.eye(3), strict=True)
+            ], False
         axis = T[:3, :3] @ _unit(
             _xml.numbers(None, "axis", 3, self._get(el, "axis", cls, "0 0 1"), where), f"{where} axis"
         )
-        anchor = T[:3, :3] @ _xml.numbers(None, "pos", 3, self._get(el, "pos", cls, "0 0 0"), where) + T[:3, 3]
         hinge = kind == "hinge"
         screw = np.concatenate([np.cross(anchor, axis), axis] if hinge else [axis, np.zeros(3)])
         ref = float(_xml.numbers(None, "ref", 1, self._get(el, "ref", cls, "0"), where)[0])
         lower, upper = self._limits(el, cls, hinge)
-        name = el.get("name") or f"joint{jid}"
-        return JointSpec(
+        spec = JointSpec(
             name,
             "R" if hinge else "P",
             "",
@@ -295,7 +309,8 @@ class _Reader:
             lower,
             upper,
             offset=-(self._angle(ref) if hinge else ref),
-        ), False
+        )
+        return [spec], False
 
     def _limits(self, el: ET.Element, cls: str, hinge: bool) -> tuple[float, float]:
         """``(lower, upper)`` in radians or metres; ``+-inf`` if unlimited (MuJoCo's ``limited`` rules)."""
@@ -344,13 +359,12 @@ class _Reader:
             part.inertials[name] = inertial
         for child, T, c in contents:
             if child.tag in ("joint", "freejoint"):
-                spec, free = self._joint(child, T, c, name)
+                specs, free = self._joint(child, T, c, name)
                 if free and (parent != "world" or part.free is not None):
                     raise ValueError(f"{_describe(child)}: a free joint must be the only joint of a top-level body")
                 if free:
                     part.free = child
-                elif spec is not None:  # (a hinge or slide joint: always)
-                    moving.append(spec)
+                moving += specs
         if part.free is not None and parent == "world" and moving:
             raise ValueError(f"{_describe(part.free)}: a free joint must be the only joint of a top-level body")
         if part.free is None or parent != "world":

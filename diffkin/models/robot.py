@@ -28,6 +28,7 @@ from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._static import host, is_concrete
 from diffkin._xla import materialize
+from diffkin.models import _ball
 from diffkin.models import _validate as check
 from diffkin.models.poe import PoEChain, _screw_types
 
@@ -48,7 +49,8 @@ class Robot:
         masses: ``(nj + 1,)`` mass of each body in kg (its links merged).
         body_coms: ``(nj + 1, 3)`` centre of mass of each body in the body's frame (metres).
         parents: static, per joint, the index of its parent body (``< j + 1``).
-        joint_types: static, per joint, ``"R"`` (revolute) or ``"P"`` (prismatic).
+        joint_types: static, per joint, ``"R"`` (revolute), ``"P"`` (prismatic) or ``"B"`` (one of a
+            ball joint's three: :mod:`diffkin.models._ball`).
         sources: static, per joint, the index in ``q`` of the actuated joint that drives it.
         tree_joints: static, per joint, its name (mimic joints included).
         frame_bodies: static, per frame, the index of its body.
@@ -94,13 +96,14 @@ class Robot:
         ):
             if not isinstance(value, tuple) or len(value) != size or not all(isinstance(i, int) for i in value):
                 raise TypeError(f"{name}: expected a tuple of {size} ints, got {value!r}")
-        if not isinstance(self.joint_types, str) or len(self.joint_types) != nj or set(self.joint_types) - set("RP"):
-            raise ValueError(f"joint_types: expected {nj} letters 'R'/'P', got {self.joint_types!r}")
+        if not isinstance(self.joint_types, str) or len(self.joint_types) != nj or set(self.joint_types) - set("RPB"):
+            raise ValueError(f"joint_types: expected {nj} letters 'R'/'P'/'B', got {self.joint_types!r}")
         for j, parent in enumerate(self.parents):
             if not 0 <= parent <= j:
                 raise ValueError(f"parents[{j}]: expected a body in [0, {j}] (parents come first), got {parent}")
         if any(not 0 <= i < dof for i in self.sources) or any(not 0 <= b <= nj for b in self.frame_bodies):
             raise ValueError(f"sources/frame_bodies: expected indices of q (< {dof}) and of bodies (<= {nj})")
+        _ball.check_structure(self.joint_types, self.parents, self.sources)
         for name, names in (
             ("frame_names", self.frame_names),
             ("joint_names", self.joint_names),
@@ -126,9 +129,12 @@ class Robot:
         if np.any(m < 0):
             raise ValueError(f"masses: expected non-negative masses (kg), got {m.min()} at index {int(m.argmin())}")
         assert S is not None and P is not None and F is not None  # concrete: check.leaf returned the values
-        for j, kind in enumerate(_screw_types(S, check.tolerance(self.screws))):
-            if kind != self.joint_types[j]:
+        tol = check.tolerance(self.screws)
+        for j, kind in enumerate(_screw_types(S, tol)):
+            if kind != self.joint_types[j].replace("B", "R"):
                 raise ValueError(f"joint_types[{j}]: {self.joint_types[j]!r} contradicts screws[{j}] ({kind!r})")
+        for j in _ball.starts(self.joint_types):
+            _ball.check_values(j, P, S, np.asarray(self.multipliers), np.asarray(self.offsets), tol)
         for name, poses, leaf in (("joint_poses", P, self.joint_poses), ("frame_poses", F, self.frame_poses)):
             for i, T in enumerate(poses):
                 check.rigid_transform(T, f"{name}[{i}]", tol=check.tolerance(leaf))
@@ -136,7 +142,8 @@ class Robot:
 
     @property
     def actuated_types(self) -> str:
-        """``"R"``/``"P"`` of each entry of ``q`` (:attr:`joint_types` is per tree joint)."""
+        """``"R"``/``"P"``/``"B"`` (ball: :mod:`diffkin.models._ball`) of each entry of ``q``
+        (:attr:`joint_types` is per tree joint)."""
         kinds = {name: kind for name, kind in zip(self.tree_joints, self.joint_types, strict=True)}
         return "".join(kinds[name] for name in self.joint_names)
 
@@ -188,20 +195,33 @@ class Robot:
         from diffkin.models import _scanned  # it builds on this module's RobotPass
 
         if _scanned.longest_path(self.parents) > _scanned.LONG:
+            if "B" in self.joint_types:
+                raise ValueError(
+                    f"robot {self.name!r}: a path of more than {_scanned.LONG} joints with ball joints is not "
+                    "supported (the scanned forward pass takes one-axis joints)"
+                )
             return _scanned.forward(self, q, base)
         P, S, m, o = (host(x) for x in (self.joint_poses, self.screws, self.multipliers, self.offsets))
         m, o = rg.per_joint(m), rg.per_joint(o)
         axes = [(rg.vector(S[j, :3]), rg.vector(S[j, 3:])) for j in range(len(self.parents))]
         thetas = [rg.add(rg.mul(m[j], q[self.sources[j]]), o[j]) for j in range(len(self.parents))]
-        exps = rg.screw_exps(axes, thetas)
+        balls = {j + k: j for j in _ball.starts(self.joint_types) for k in range(3)}  # tree joint -> its ball's first
+        single = [j for j in range(len(self.parents)) if j not in balls]
+        exps = dict(zip(single, rg.screw_exps([axes[j] for j in single], [thetas[j] for j in single]), strict=True))
         bodies, screws = [base], []
         depth, inner = [0], {parent for parent in self.parents}  # joints from the root; bodies with children
         for j, parent in enumerate(self.parents):
             T = rg.compose(bodies[parent], rg.from_matrix(P[j]))
-            v, w = axes[j]
-            w_world = rg.rotate(T.R, w)
-            screws.append((rg.vadd(rg.rotate(T.R, v), rg.cross(T.p, w_world)), w_world))
-            T = rg.compose(T, exps[j])
+            if j in balls:  # a ball joint moves its third body by one rotation; the two between stay at T
+                if balls[j] == j:
+                    T_child, ball_screws = _ball.motion(axes[j : j + 3], thetas[j : j + 3], T)
+                screws.append(ball_screws[j - balls[j]])
+                T = T_child if j == balls[j] + 2 else T
+            else:
+                v, w = axes[j]
+                w_world = rg.rotate(T.R, w)
+                screws.append((rg.vadd(rg.rotate(T.R, v), rg.cross(T.p, w_world)), w_world))
+                T = rg.compose(T, exps[j])
             depth.append(depth[parent] + 1)
             if depth[-1] % rg.SEGMENT == 0 and j + 1 in inner:  # a long serial path: see rg.segment_end
                 T = rg.checkpoint(T)
@@ -232,6 +252,12 @@ class Robot:
         path = path[len(below) :]
         if not path:
             raise ValueError(f"chain: no moving joint between {self.frame_names[f_base]!r} and {end!r}")
+        balls = [self.tree_joints[j] for j in path if self.joint_types[j] == "B"]
+        if balls:
+            raise ValueError(
+                f"chain: the path to {end!r} has a ball joint ({balls[0]!r}), which a chain of one-axis joints "
+                "cannot hold; use the robot itself (dk.fk, dk.jacobian and dk.ik.solve take it)"
+            )
         sources = [self.sources[j] for j in path]
         m_host = np.asarray(self.multipliers, np.float64) if is_concrete(self.multipliers) else None
         for j in path:

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin._checks import instance, positive_int
-from diffkin.models._ranges import sampling_ranges, uniform
+from diffkin.models._ranges import ball_starts, sampling_ranges, uniform
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain, to_poe
 from diffkin.models.robot import Robot
@@ -43,7 +43,7 @@ def sample_configs(chain, n: int, key, *, dtype=None) -> jax.Array:
     """
     lo, hi = sampling_ranges(chain)
     n = positive_int(n, "n")
-    return uniform(key, lo, hi, n, jnp.dtype(dtype or jnp.result_type(float))).T
+    return uniform(key, lo, hi, n, jnp.dtype(dtype or jnp.result_type(float)), ball_starts(chain)).T
 
 
 def _reach(chain) -> float:

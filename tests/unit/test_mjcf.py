@@ -104,8 +104,8 @@ BODY = '<body name="a"><joint name="j"/><body name="b"><joint name="k"/></body><
     ("xml", "message"),
     [
         (
-            mjcf('<body><joint name="ball" type="ball"/></body>'),
-            r"MJCF <joint name='ball' type='ball'>: joint type 'ball' is not supported",
+            mjcf('<body><joint name="sphere" type="spherical"/></body>'),
+            r"MJCF <joint name='sphere' type='spherical'>: joint type 'spherical' is not supported",
         ),
         (
             mjcf(BODY, tail='<equality><joint joint1="k" joint2="j" polycoef="0 1 .5 0 0"/></equality>'),
@@ -169,7 +169,7 @@ BODY = '<body name="a"><joint name="j"/><body name="b"><joint name="k"/></body><
         ("<sdf/>", r"expected a <robot> \(URDF\) or <mujoco> \(MJCF\) root element, got <sdf>"),
     ],
     ids=[
-        "ball",
+        "unknown_type",
         "nonlinear",
         "weld",
         "connect",
