@@ -12,7 +12,7 @@ from jax.typing import ArrayLike
 
 from diffkin import _rigid as rg
 from diffkin._static import is_concrete
-from diffkin._xla import configurations_in_steps
+from diffkin._xla import configurations_in_steps, materialize
 from diffkin.models import forward
 from diffkin.models._scanned import ScannedPass
 from diffkin.models.forward import Model
@@ -358,13 +358,25 @@ def _checked(robot: Robot, q, base) -> tuple:
 
 
 def _centre(robot: Robot, q, base, jacobian: bool, include_base: bool = False) -> jax.Array:
-    """The centre of mass ``(N, 3)``, or its Jacobian ``(N, 3, columns)``, of flat configurations."""
-    kin, shape, dtype = _pass(robot, q, base)
-    c, columns = kin.com(velocities=jacobian)
+    """The centre of mass ``(N, 3)``, or its Jacobian ``(N, 3, columns)``, of flat configurations.
+
+    The pass runs in the root's frame and its results are moved by the root pose ``base`` once at the
+    end (a root pose threaded through the pass costs more than rotating its few results)."""
+    B = _base(robot, base)
+    kin, shape, dtype = _pass(robot, q, None)
+    traced = [e for e in rg.leaves(B) if not isinstance(e, float)]
+    shape, dtype = jnp.broadcast_shapes(shape, *(jnp.shape(e) for e in traced)), jnp.result_type(dtype, *traced)
+    c_root, columns = kin.com(velocities=jacobian)
+    if traced:  # the pass's results and the root pose computed once, then moved
+        flat = list(materialize([*c_root, *(e for col in columns for e in col), *rg.leaves(B)]))
+        B = rg.Rigid(tuple(tuple(flat[-12 + 3 * i + j] for j in range(3)) for i in range(3)), tuple(flat[-3:]))
+        c_root, columns = tuple(flat[:3]), [tuple(flat[3 + 3 * k : 6 + 3 * k]) for k in range(len(columns))]
+    c = rg.vadd(rg.rotate(B.R, c_root), B.p)
     if not jacobian:
         return rg.stack(list(c), shape, dtype)
+    columns = [rg.rotate(B.R, v) for v in columns]
     if include_base:
-        columns = [v for v, _ in rg.world_from_space(rg.root_screws(_base(robot, base)), c)] + columns
+        columns = [v for v, _ in rg.world_from_space(rg.root_screws(B), c)] + columns
     rows = [column[i] for i in range(3) for column in columns]
     if not rows:  # a robot without joints
         return jnp.zeros(shape + (3, 0), dtype)
