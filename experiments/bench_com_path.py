@@ -139,17 +139,21 @@ def bench_paths(n: int, T: int) -> list[str]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small batches (a smoke run)")
+    parser.add_argument("--only", choices=("com", "paths"), help="one of the two tables")
     args = parser.parse_args()
     batch, (n, T) = (1_000, (50, 20)) if args.quick else (100_000, (1_000, 100))
     print(machine_line())
     print(busy_note())
     print(f"jax {jax.__version__}, {' '.join(sys.argv)}\n")
-    print("| robot | batch | diffkin com + com_jacobian (ms) | Pinocchio loop (ms) | speed-up | compile (s) |")
-    print("| --- | --- | --- | --- | --- | --- |")
-    for b in sorted({1_000, batch}):
-        for row in bench_com(b):
-            print(row, flush=True)
-    print()
+    if args.only != "paths":
+        print("| robot | batch | diffkin com + com_jacobian (ms) | Pinocchio loop (ms) | speed-up | compile (s) |")
+        print("| --- | --- | --- | --- | --- | --- |")
+        for b in sorted({1_000, batch}):
+            for row in bench_com(b):
+                print(row, flush=True)
+        print()
+    if args.only == "com":
+        return
     print(
         "| Panda paths, float32 | waypoints | warm (s) | compile (s) | waypoint success | paths all solved | "
         "jumps | largest step (rad) |"
