@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from diffkin import collision, ik, robots, se3, srs, workspace
-    from diffkin.kinematics import com, com_jacobian, fk, jacobian, link_poses, manipulability
+    from diffkin.kinematics import com, com_jacobian, fk, jacobian, link_poses, loop_closure, manipulability
     from diffkin.models import DHChain, PoEChain, Robot, load_robot, load_urdf, to_poe
 
 _HOMES = {
@@ -26,6 +26,7 @@ _HOMES = {
     "viewer": None,  # optional: needs viser and trimesh (pip install "diffkin[viewer]")
     "com": "diffkin.kinematics",
     "com_jacobian": "diffkin.kinematics",
+    "loop_closure": "diffkin.kinematics",
     "fk": "diffkin.kinematics",
     "jacobian": "diffkin.kinematics",
     "link_poses": "diffkin.kinematics",
@@ -44,6 +45,7 @@ __all__ = [
     "Robot",
     "com",
     "com_jacobian",
+    "loop_closure",
     "fk",
     "jacobian",
     "link_poses",

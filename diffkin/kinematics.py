@@ -381,3 +381,24 @@ def _centre(robot: Robot, q, base, jacobian: bool, include_base: bool = False) -
     if not rows:  # a robot without joints
         return jnp.zeros(shape + (3, 0), dtype)
     return rg.outputs(rows, shape, dtype).reshape(shape + (3, len(columns)))
+
+
+def loop_closure(robot: Robot, q: ArrayLike) -> tuple[jax.Array, jax.Array]:
+    """The dependent joints of a robot with closed loops, solved at ``q``, and how far the loops stay open.
+
+    Args:
+        robot: a :class:`Robot` (with loops: MJCF ``<equality><connect>``; :mod:`diffkin.models._loops`).
+        q: ``(..., dof)`` joint values.
+
+    Returns:
+        ``(q_dependent (..., nd), gap (...))``: the values of ``robot.dependent_names`` (radians or metres;
+        each ball joint's three components among them) and the largest distance between a loop's two
+        points after the solve (metres; zero to rounding where every loop closes). Differentiable
+        (implicit-function derivatives).
+    """
+    if not isinstance(robot, Robot):
+        raise TypeError(f"robot: expected a Robot, got {type(robot).__name__}")
+    kin, shape, dtype = _pass(robot, q)
+    nd = len(robot.dependent_names)
+    dependent = rg.stack(kin.dependent, shape, dtype) if nd else jnp.zeros(shape + (0,), dtype)
+    return dependent, jnp.broadcast_to(jnp.asarray(kin.loop_gap, dtype), shape)

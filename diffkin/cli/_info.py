@@ -25,7 +25,9 @@ def _tree_lines(robot, spec: str) -> list[str]:
     for j, name in enumerate(robot.tree_joints):
         link = f"{body_name.get(robot.parents[j], '?')} -> {body_name.get(j + 1, '(internal)')}"
         kind = {"R": "revolute", "P": "prismatic", "B": "ball"}[robot.joint_types[j]]
-        if name in robot.mimic:
+        if robot.sources[j] >= robot.dof:
+            index, what = "", "solved from q (closed loop)"
+        elif name in robot.mimic:
             source, m, o = robot.mimic[name]
             index, what = "", f"mimic: {m:g} * {source} + {o:g}"
         else:

@@ -167,6 +167,9 @@ class Problem(NamedTuple):
             rot_err.append(rows.rot_err)
             if rows.block is not None:
                 blocks.append(rows.block)
+        gap = getattr(kin.kin, "loop_gap", 0.0)  # a robot's loops that do not close: no target is met
+        if not isinstance(gap, float):
+            pos_err = [jnp.maximum(e, gap) for e in pos_err]
         cost = rg.add(*(rg.mul(e, e) for e in r), *(jnp.sum(b**2, axis=0) for b, _ in blocks))
         stacked = (jnp.concatenate([b for b, _ in blocks]), jnp.concatenate([j for _, j in blocks])) if blocks else None
         return Entries(r, J, cost, pos_err, rot_err, stacked)

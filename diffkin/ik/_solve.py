@@ -361,7 +361,10 @@ def _moves(model, terms: tuple) -> np.ndarray:
                 out[:, k] = True
                 continue
             for j in model.ancestors(model.frame_bodies[f]):
-                out[model.sources[j], k] = True
+                if model.sources[j] < model.dof:
+                    out[model.sources[j], k] = True
+                else:  # a joint solved from q by a closed loop: any entry may move it
+                    out[:, k] = True
     return out
 
 

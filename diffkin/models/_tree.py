@@ -188,4 +188,6 @@ def build(
         floating=bool(floating),
         name=name,
         unknown_masses=tuple(unknown_masses),
+        loop_points=f(np.zeros((0, 2, 3))),
+        dependent_home=f(np.zeros(0)),
     )

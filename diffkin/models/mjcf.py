@@ -47,6 +47,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from diffkin.models import _ball, _mjcf_mass, _xml
+from diffkin.models._loops import Connect, close
 from diffkin.models._tree import JointSpec, build
 from diffkin.models.robot import Robot
 
@@ -136,6 +137,7 @@ class _Reader:
             name = el.get("class", "main")
             self._defaults(el, name, None if name == "main" else "main")
         self.n_bodies, self.n_joints = 1, 0
+        self.stiff: set[str] = set()  # joints with stiffness (springs): the last chosen to close a loop
         self.parts: dict[str, _Part] = {"world": _Part(links=["world"])}
         self.mass_rules = _mjcf_mass.Compiler(root, self)
 
@@ -284,6 +286,8 @@ class _Reader:
             )
         anchor = T[:3, :3] @ _xml.numbers(None, "pos", 3, self._get(el, "pos", cls, "0 0 0"), where) + T[:3, 3]
         name = el.get("name") or f"joint{jid}"
+        if float(_xml.numbers(None, "stiffness", 1, self._get(el, "stiffness", cls, "0"), where)[0]) != 0:
+            self.stiff |= {name} if kind != "ball" else {f"{name}:{k}" for k in _ball.AXES}
         if kind == "ball":  # about the anchor, in the body's axes (MuJoCo ignores a ball joint's axis and ref)
             _, upper = self._limits(el, cls, True)
             return [
@@ -411,22 +415,30 @@ def _screw_exp(screw: np.ndarray, theta: float) -> np.ndarray:
     return T
 
 
-def _equalities(reader: _Reader, root: ET.Element, joints: list[JointSpec]) -> list[JointSpec]:
-    """Apply the ``<equality><joint>`` couplings: ``q1 - ref1 = c0 + c1 (q2 - ref2)`` (MuJoCo's, linear).
+def _equalities(reader: _Reader, root: ET.Element, joints: list[JointSpec]) -> tuple[list[JointSpec], list[Connect]]:
+    """Apply the ``<equality><joint>`` couplings: ``q1 - ref1 = c0 + c1 (q2 - ref2)`` (MuJoCo's, linear),
+    and read the ``<connect>`` ones (closed loops: :mod:`diffkin.models._loops`).
 
     A joint with ``joint2`` omitted is locked at ``q1 - ref1 = c0`` (a fixed joint).
     """
     index = {j.name: k for k, j in enumerate(joints)}
+    connects = []
     for group in root.findall("equality"):
         for el in group:
             cls = reader._class(el, "main")
             if not reader._bool(el, "active", reader._get(el, "active", cls, "true", "equality")):
                 continue
             where = _describe(el).replace("MJCF <", "MJCF <equality><", 1)
+            if el.tag == "connect" and el.get("body1"):
+                anchor = _xml.numbers(None, "anchor", 3, reader._get(el, "anchor", cls, "0 0 0", "equality"), where)
+                connects.append(Connect(el.get("body1", ""), el.get("body2") or "world", anchor, where))
+                continue
+            if el.tag == "connect":
+                raise ValueError(f"{where}: a connect between sites is not supported; give body1, body2 and anchor")
             if el.tag != "joint":
                 raise ValueError(
-                    f"{where}: <equality><{el.tag}> constraints are not supported (they close "
-                    "kinematic loops or couple tendons); only linear <joint> equalities are"
+                    f"{where}: <equality><{el.tag}> constraints are not supported (they weld bodies or "
+                    "couple tendons); linear <joint> equalities and <connect> loops are"
                 )
             c = _xml.numbers(None, "polycoef", 5, reader._get(el, "polycoef", cls, "0 1 0 0 0", "equality"), where)
             if np.any(c[2:] != 0):
@@ -446,7 +458,22 @@ def _equalities(reader: _Reader, root: ET.Element, joints: list[JointSpec]) -> l
             else:
                 ref1, ref2 = -j1.offset, -joints[index[names[1]]].offset
                 joints[index[j1.name]] = dataclasses.replace(j1, mimic=(names[1], c[1], c[0] + ref1 - c[1] * ref2))
-    return joints
+    return joints, connects
+
+
+def _actuated(root: ET.Element) -> set[str]:
+    """The joints an ``<actuator>`` drives, directly (``joint``, ``jointinparent``) or through a fixed tendon."""
+    tendons = {
+        t.get("name"): {j.get("joint") for j in t.findall("joint")}
+        for g in root.findall("tendon")
+        for t in g.findall("fixed")
+    }
+    driven: set[str] = set()
+    for group in root.findall("actuator"):
+        for el in group:
+            driven |= {el.get(k) for k in ("joint", "jointinparent") if el.get(k)}
+            driven |= tendons.get(el.get("tendon"), set())
+    return {n for n in driven if n}
 
 
 # --------------------------------------------------------------------------------------------- front door
@@ -529,7 +556,7 @@ def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
                     f"floating root {name!r}; one tree is supported"
                 )
         parts = [part]
-    joints = _equalities(reader, root, [j for p in parts for j in p.joints])
+    joints, connects = _equalities(reader, root, [j for p in parts for j in p.joints])
     links = [n for p in parts for n in p.links]
     bodies = set(links)
     sites = [(f"site:{n}" if n in bodies else n, body, T) for p in parts for n, body, T in p.sites]
@@ -539,7 +566,7 @@ def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
         given = sum(m for p in reader.parts.values() for m, _ in p.inertials.values())
         scale = total / given if given > 0 else 1.0
     inertials = {n: (scale * m, c) for p in parts for n, (m, c) in p.inertials.items()}
-    return build(
+    robot = build(
         joints,
         links,
         frames=sites,
@@ -549,3 +576,9 @@ def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
         name=root.get("model", ""),
         where="MJCF",
     )
+    if not connects:
+        return robot
+    actuated = _actuated(root)
+    balls = {n.rsplit(":", 1)[0] for n in robot.joint_names if robot.actuated_types[robot.joint_names.index(n)] == "B"}
+    passive = {n for n in robot.joint_names if n not in actuated and n.rsplit(":", 1)[0] not in (actuated & balls)}
+    return close(robot, connects, passive, reader.stiff)

@@ -60,6 +60,10 @@ class Robot:
         name: static name of the robot.
         unknown_masses: static, the links whose mass the file does not determine (an MJCF mesh
             geom without ``<inertial>``), each with the reason; :func:`diffkin.com` refuses them.
+        loop_points: ``(nl, 2, 3)`` per closed loop, a point in each of its two bodies that must
+            coincide (:mod:`diffkin.models._loops`); ``loop_bodies``: static, the two bodies.
+        dependent_home: ``(nd,)`` reference values of the dependent joints (solved from ``q``, not in
+            it: ``sources`` index ``dof + d``); ``dependent_names``: static, their names.
     """
 
     joint_poses: jax.Array
@@ -71,6 +75,8 @@ class Robot:
     upper: jax.Array
     masses: jax.Array
     body_coms: jax.Array
+    loop_points: jax.Array
+    dependent_home: jax.Array
     parents: tuple[int, ...] = static()
     joint_types: str = static()
     sources: tuple[int, ...] = static()
@@ -81,6 +87,8 @@ class Robot:
     floating: bool = static(default=False)
     name: str = static(default="")
     unknown_masses: tuple[str, ...] = static(default=())
+    loop_bodies: tuple[tuple[int, int], ...] = static(default=())
+    dependent_names: tuple[str, ...] = static(default=())
 
     @property
     def dof(self) -> int:
@@ -101,13 +109,23 @@ class Robot:
         for j, parent in enumerate(self.parents):
             if not 0 <= parent <= j:
                 raise ValueError(f"parents[{j}]: expected a body in [0, {j}] (parents come first), got {parent}")
-        if any(not 0 <= i < dof for i in self.sources) or any(not 0 <= b <= nj for b in self.frame_bodies):
-            raise ValueError(f"sources/frame_bodies: expected indices of q (< {dof}) and of bodies (<= {nj})")
+        nd, nl = len(self.dependent_names), len(self.loop_bodies)
+        if any(not 0 <= i < dof + nd for i in self.sources) or any(not 0 <= b <= nj for b in self.frame_bodies):
+            raise ValueError(
+                f"sources/frame_bodies: expected indices of q and its dependents (< {dof + nd}) and of bodies (<= {nj})"
+            )
+        if any(
+            len(pair) != 2 or not all(isinstance(b, int) and 0 <= b <= nj for b in pair) for pair in self.loop_bodies
+        ):
+            raise ValueError(f"loop_bodies: expected pairs of body indices (<= {nj}), got {self.loop_bodies!r}")
+        check.leaf(self.loop_points, "loop_points", (nl, 2, 3), concrete)
+        check.leaf(self.dependent_home, "dependent_home", (nd,), concrete)
         _ball.check_structure(self.joint_types, self.parents, self.sources)
         for name, names in (
             ("frame_names", self.frame_names),
             ("joint_names", self.joint_names),
             ("tree_joints", self.tree_joints),
+            ("dependent_names", self.dependent_names),
         ):
             if len(set(names)) != len(names) or not all(isinstance(n, str) for n in names):
                 raise ValueError(f"{name}: expected distinct strings, got {names!r}")
@@ -154,7 +172,7 @@ class Robot:
         return {
             name: (self.joint_names[s], float(m[j]), float(o[j]))
             for j, (name, s) in enumerate(zip(self.tree_joints, self.sources, strict=True))
-            if name != self.joint_names[s]
+            if s < self.dof and name != self.joint_names[s]
         }
 
     def frame_index(self, name: str) -> int:
@@ -192,9 +210,25 @@ class Robot:
             q: ``dof`` joint values (arrays of any batch shape, or Python floats).
             base: ``T_world_root``.
         """
+        if not self.loop_bodies:
+            return self.tree_pass(q, base)
+        from diffkin.models import _loops
+
+        dependent, (fold, gap) = _loops.solve(self, list(q))
+        kin = self.tree_pass(list(q) + dependent, base)
+        kin.dependent, kin.fold, kin.loop_gap = dependent, fold, gap
+        return kin
+
+    def tree_pass(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> RobotPass:
+        """The pass of the tree at the values ``q`` of ``q``'s entries and then of the dependent joints
+        (:attr:`dependent_names`, solved by :meth:`forward`)."""
         from diffkin.models import _scanned  # it builds on this module's RobotPass
 
         if _scanned.longest_path(self.parents) > _scanned.LONG:
+            if self.loop_bodies:
+                raise ValueError(
+                    f"robot {self.name!r}: closed loops on a path of more than {_scanned.LONG} joints are not supported"
+                )
             if "B" in self.joint_types:
                 raise ValueError(
                     f"robot {self.name!r}: a path of more than {_scanned.LONG} joints with ball joints is not "
@@ -258,6 +292,9 @@ class Robot:
                 f"chain: the path to {end!r} has a ball joint ({balls[0]!r}), which a chain of one-axis joints "
                 "cannot hold; use the robot itself (dk.fk, dk.jacobian and dk.ik.solve take it)"
             )
+        solved = [self.tree_joints[j] for j in path if self.sources[j] >= self.dof]
+        if solved:
+            raise ValueError(f"chain: joint {solved[0]!r} on the path to {end!r} closes a loop; use the robot itself")
         sources = [self.sources[j] for j in path]
         m_host = np.asarray(self.multipliers, np.float64) if is_concrete(self.multipliers) else None
         for j in path:
@@ -302,6 +339,9 @@ class RobotPass:
     def __init__(self, robot: Robot, bodies: list[rg.Rigid], screws: list, multipliers: list):
         self.robot, self.bodies, self.screws, self.multipliers = robot, bodies, screws, multipliers
         self._poses: dict[int, rg.Rigid] = {}
+        self.dependent: list[rg.Entry] = []  # the dependent joints' values of a robot with loops (Robot.forward)
+        self.fold: list[list[rg.Entry]] = []  # their d q_dep / d q
+        self.loop_gap: rg.Entry = 0.0  # the largest gap of its loops (metres)
 
     def pose(self, frame: int | None = None) -> rg.Rigid:
         """World pose of frame ``frame`` (an index into ``robot.frame_names``)."""
@@ -318,12 +358,20 @@ class RobotPass:
         if frame is None:
             raise TypeError("frame: a robot has no single end effector; give a frame index")
         robot, zero = self.robot, (0.0, 0.0, 0.0)
-        columns: list = [(zero, zero)] * robot.dof
+        columns: list = [(zero, zero)] * (robot.dof + len(robot.dependent_names))
         for j in robot.ancestors(robot.frame_bodies[frame]):
             v, w = self.screws[j]
             i, m = robot.sources[j], self.multipliers[j]
             columns[i] = (rg.vadd(columns[i][0], rg.scale(m, v)), rg.vadd(columns[i][1], rg.scale(m, w)))
-        return columns
+        vs, ws = [v for v, _ in columns], [w for _, w in columns]
+        return [(self._folded(vs, i), self._folded(ws, i)) for i in range(robot.dof)]
+
+    def _folded(self, columns: list[rg.Vec3], i: int) -> rg.Vec3:
+        """Column ``i`` of ``q`` plus the dependent joints' columns times ``d q_dep / d q_i`` (loops)."""
+        out = columns[i]
+        for d, row in enumerate(self.fold):
+            out = rg.vadd(out, rg.scale(row[i], columns[self.robot.dof + d]))
+        return out
 
     def poses(self) -> list[rg.Rigid]:
         """Every frame, in ``robot.frame_names`` order."""
@@ -351,11 +399,12 @@ class RobotPass:
             moments[parent] = rg.vadd(moments[parent], moments[j + 1])
         inverse = _reciprocal(masses[0])
         zero = (0.0, 0.0, 0.0)
-        columns: list[rg.Vec3] = [zero] * robot.dof if velocities else []
+        columns: list[rg.Vec3] = [zero] * (robot.dof + len(robot.dependent_names)) if velocities else []
         for j, (v, w) in enumerate(screws if velocities else []):
             i, k = robot.sources[j], rg.mul(self.multipliers[j], inverse)
             moved = rg.vadd(rg.scale(masses[j + 1], v), rg.cross(w, moments[j + 1]))
             columns[i] = rg.vadd(columns[i], rg.scale(k, moved))
+        columns = [self._folded(columns, i) for i in range(robot.dof)] if velocities else []
         return rg.scale(inverse, moments[0]), columns
 
 

@@ -116,8 +116,8 @@ BODY = '<body name="a"><joint name="j"/><body name="b"><joint name="k"/></body><
             r"MJCF <equality><weld body1='a'>: <equality><weld> constraints are not supported",
         ),
         (
-            mjcf(BODY, tail='<equality><connect body1="b" anchor="0 0 0"/></equality>'),
-            r"MJCF <equality><connect body1='b'>: <equality><connect> constraints are not supported",
+            mjcf(BODY, tail='<equality><connect site1="s" site2="t"/></equality>'),
+            r"MJCF <equality><connect>: a connect between sites is not supported",
         ),
         (
             mjcf(BODY, tail='<equality><joint joint1="k" joint2="nope"/></equality>'),

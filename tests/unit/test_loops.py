@@ -1,0 +1,113 @@
+"""Closed kinematic loops (MJCF ``<equality><connect>``) on a planar four-bar: the dependent joints against the
+four-bar's closed-form position analysis, closure, implicit-function derivatives against central differences,
+the gap reported where the loop cannot close, and loading errors (the Robotiq 2F-85 and Cassie against
+MuJoCo: ``tests/validation/test_loops_validation.py``)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from _reference import mjcf
+
+import diffkin as dk
+
+# A crank-rocker: ground pivots at (0, 0) and (0.25, 0); crank 0.1; the coupler's point (0.1, 0.2) (in the
+# coupler, from the crank's tip) pinned to the rocker, whose length is that point's distance from its pivot at
+# the reference configuration. Grashof (0.1 + 0.25 < 0.2236 + 0.2062): the crank turns fully.
+FOUR_BAR = mjcf(
+    '<body name="crank"><joint name="crank" axis="0 0 1"/><geom size=".01" mass=".1"/>'
+    '<body name="coupler" pos=".1 0 0"><joint name="coupler" axis="0 0 1"/><geom size=".01" mass=".1"/>'
+    '<site name="tip" pos=".3 .1 0"/></body></body>'
+    '<body name="rocker" pos=".25 0 0"><joint name="rocker" axis="0 0 1"/><geom size=".01" mass=".1"/></body>',
+    tail='<equality><connect body1="coupler" body2="rocker" anchor=".1 .2 0"/></equality>'
+    '<actuator><motor joint="crank"/></actuator>',
+)
+GROUND, CRANK = np.array([0.25, 0.0]), 0.1
+COUPLER, ROCKER = np.hypot(0.1, 0.2), np.hypot(-0.05, 0.2)
+
+
+@pytest.fixture(scope="module")
+def four_bar():
+    return dk.load_robot(FOUR_BAR)
+
+
+@pytest.fixture(scope="module")
+def closure(four_bar):
+    return jax.jit(lambda q: dk.loop_closure(four_bar, q))
+
+
+def _closed_form(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The coupler's and the rocker's joint angles of the four-bar at crank angles ``theta``: the pin is where the
+    circle about the crank's tip (radius: the coupler's) meets the circle about the rocker's pivot, on the side
+    of the reference configuration (left of the line from the crank's tip to the pivot)."""
+    tip = CRANK * np.stack([np.cos(theta), np.sin(theta)], -1)
+    d = GROUND - tip
+    dist = np.linalg.norm(d, axis=-1)
+    a = (COUPLER**2 - ROCKER**2 + dist**2) / (2 * dist)
+    h = np.sqrt(COUPLER**2 - a**2)
+    u = d / dist[:, None]
+    pin = tip + a[:, None] * u + h[:, None] * np.stack([-u[:, 1], u[:, 0]], -1)
+    coupler_dir = np.arctan2(*(pin - tip)[:, ::-1].T) - np.arctan2(0.2, 0.1)  # the coupler's angle in the world
+    rocker_dir = np.arctan2(*(pin - GROUND)[:, ::-1].T) - np.arctan2(0.2, -0.05)
+    wrap = lambda x: (x + np.pi) % (2 * np.pi) - np.pi  # noqa: E731
+    return wrap(coupler_dir - theta), wrap(rocker_dir)
+
+
+def test_the_coupler_and_rocker_are_solved_from_the_crank(four_bar, closure):
+    assert four_bar.joint_names == ("crank",) and four_bar.dependent_names == ("coupler", "rocker")
+    theta = np.linspace(-np.pi, np.pi, 41)
+    dependent, gap = (np.asarray(x) for x in closure(jnp.asarray(theta[:, None])))
+    assert gap.max() < 1e-12
+    coupler, rocker = _closed_form(theta)
+    turns = lambda a, b: np.angle(np.exp(1j * (a - b)))  # noqa: E731  (the same angle, up to whole turns)
+    np.testing.assert_allclose(turns(dependent[:, 0], coupler), 0.0, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(turns(dependent[:, 1], rocker), 0.0, rtol=0, atol=1e-10)
+    # the pin of each body, from their poses: the same point
+    poses = np.asarray(dk.fk(four_bar, theta[:, None], ["coupler", "rocker"]))
+    pin_coupler = poses[:, 0] @ np.array([0.1, 0.2, 0, 1])
+    pin_rocker = poses[:, 1] @ np.array([-0.05, 0.2, 0, 1])
+    np.testing.assert_allclose(pin_coupler, pin_rocker, rtol=0, atol=1e-12)
+
+
+def test_derivatives_are_the_implicit_functions(four_bar, closure):
+    theta = np.linspace(-3.0, 3.0, 13)[:, None]
+    d_dep = np.asarray(jax.jit(jax.vmap(jax.jacfwd(lambda q: dk.loop_closure(four_bar, q)[0])))(jnp.asarray(theta)))
+    step = 1e-6
+    plus, minus = (np.asarray(closure(jnp.asarray(theta + s))[0]) for s in (step, -step))
+    np.testing.assert_allclose(d_dep[..., 0], (plus - minus) / (2 * step), rtol=0, atol=1e-8)
+    J = jax.jit(lambda q: (dk.jacobian(four_bar, q, "tip"), dk.jacobian(four_bar, q, "tip", method="autodiff")))
+    analytic, autodiff = (np.asarray(x) for x in J(jnp.asarray(theta)))
+    np.testing.assert_allclose(analytic, autodiff, rtol=0, atol=1e-12)
+    tip = jax.jit(lambda q: dk.fk(four_bar, q, "tip"))
+    dp = (np.asarray(tip(jnp.asarray(theta + step))) - np.asarray(tip(jnp.asarray(theta - step)))) / (2 * step)
+    np.testing.assert_allclose(analytic[:, :3, 0], dp[:, :3, 3], rtol=0, atol=1e-8)
+    com = jax.jit(lambda q: (dk.com(four_bar, q), dk.com_jacobian(four_bar, q)))
+    (c_plus, _), (c_minus, _), (_, J_com) = (com(jnp.asarray(theta + s)) for s in (step, -step, 0.0))
+    np.testing.assert_allclose(
+        np.asarray(J_com)[..., 0], (np.asarray(c_plus) - np.asarray(c_minus)) / (2 * step), atol=1e-9
+    )
+
+
+def test_a_loop_that_cannot_close_says_so():
+    """A crank longer than the rest allows: the loop opens for some crank angles; finite values, a gap, and IK
+    that cannot close it reports no success."""
+    xml = FOUR_BAR.replace('pos=".1 0 0"', 'pos=".3 0 0"', 1)  # crank 0.3: out of reach half a turn away
+    robot = dk.load_robot(xml)
+    theta = jnp.asarray(np.concatenate([np.linspace(-np.pi, np.pi, 25), [1e3, -1e6]])[:, None])
+    dependent, gap = (np.asarray(x) for x in dk.loop_closure(robot, theta))
+    assert np.all(np.isfinite(dependent)) and np.all(np.isfinite(gap))
+    assert gap[0] > 0.05 and gap[12] < 1e-12  # open at a half turn, closed at the reference
+    T = np.asarray(dk.fk(robot, theta[:1], "tip"))  # where the open mechanism puts the tip
+    result = dk.ik.solve(robot, {"tip": T[:, :3, 3]}, key=jax.random.PRNGKey(0), num_seeds=4)
+    _, gap_solved = dk.loop_closure(robot, result.q)
+    assert not np.any(np.asarray(result.success) & (np.asarray(gap_solved) > 1e-5))
+
+
+def test_bad_loops_are_refused():
+    with pytest.raises(ValueError, match="MJCF <equality><connect body1='coupler'>: unknown body 'nowhere'"):
+        dk.load_robot(FOUR_BAR.replace('body2="rocker"', 'body2="nowhere"'))
+    every = FOUR_BAR.replace("</actuator>", '<motor joint="coupler"/><motor joint="rocker"/></actuator>')
+    with pytest.raises(ValueError, match="no joint left to solve"):
+        dk.load_robot(every)
+    with pytest.raises(ValueError, match="closes a loop"):
+        dk.load_robot(FOUR_BAR).chain("rocker")
