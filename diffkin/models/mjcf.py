@@ -32,7 +32,8 @@ they close loops or couple tendons), ``<attach>``, ``<replicate>``, ``<composite
 ``<flexcomp>``, unknown default classes, missing include files, a file included more than once
 (MuJoCo's rule). Inactive equalities
 (``active="false"``) are ignored. ``<include>`` paths are relative to the main file's folder
-(as MuJoCo resolves them; the working directory for XML text). Bodies, ``<frame>``s and
+(the working directory for XML text), a nested one not found there to the including file's
+(as MuJoCo). Bodies, ``<frame>``s and
 ``<default>`` classes may nest to any depth (walked with explicit stacks; MuJoCo's XML parser
 stops at 500 nested elements).
 """
@@ -484,7 +485,8 @@ def _included(el: ET.Element, folder: str, inside: tuple[str, ...], seen: set[st
 
     Args:
         el: the ``<include>`` element.
-        folder: the folder include paths are relative to.
+        folder: the folder include paths are relative to (the main file's); a nested include not
+            found there is looked for next to the file that includes it (as MuJoCo does).
         inside: the paths of the includes that led to ``el`` (a cycle repeats one).
         seen: the real paths of every file included so far (updated).
     """
@@ -492,6 +494,9 @@ def _included(el: ET.Element, folder: str, inside: tuple[str, ...], seen: set[st
         raise ValueError("MJCF <include>: missing 'file' attribute")
     where = _describe(el)
     path = os.path.normpath(os.path.join(folder, el.get("file", "")))
+    if not os.path.isfile(path) and inside:  # a nested include: also next to the file that includes it
+        beside = os.path.normpath(os.path.join(os.path.dirname(inside[-1]), el.get("file", "")))
+        path = beside if os.path.isfile(beside) else path
     if not os.path.isfile(path):
         raise ValueError(f"{where}: file not found: {path!r}")
     if path in inside:

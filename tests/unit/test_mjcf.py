@@ -95,6 +95,21 @@ def test_includes_nested_1500_deep(tmp_path):
     assert dk.load_robot(str(tmp_path / "main.xml")).joint_names == ("j",)
 
 
+def test_a_nested_include_is_found_next_to_the_file_that_includes_it(tmp_path):
+    """MuJoCo's rule (MS-Human-700 of Menagerie relies on it): the main file's folder first, then the including
+    file's."""
+    (tmp_path / "parts").mkdir()
+    (tmp_path / "parts" / "arm.xml").write_text('<mujoco><body name="arm"><include file="hand.xml"/></body></mujoco>')
+    (tmp_path / "parts" / "hand.xml").write_text(
+        '<mujoco><body name="hand" pos="1 0 0"><joint name="j"/></body></mujoco>'
+    )
+    (tmp_path / "main.xml").write_text('<mujoco><worldbody><include file="parts/arm.xml"/></worldbody></mujoco>')
+    assert dk.load_robot(str(tmp_path / "main.xml")).joint_names == ("j",)
+    (tmp_path / "parts" / "hand.xml").unlink()
+    with pytest.raises(ValueError, match="MJCF <include file='hand.xml'>: file not found"):
+        dk.load_robot(str(tmp_path / "main.xml"))
+
+
 # --------------------------------------------------------------------------------------------- bad input
 
 BODY = '<body name="a"><joint name="j"/><body name="b"><joint name="k"/></body></body>'
