@@ -1,5 +1,5 @@
-"""Closed loops against MuJoCo on published robots: the Robotiq 2F-85 (two four-bar fingers) and Agility's Cassie
-(a floating biped whose legs close two loops each, one through a ball joint). At the joints diffkin solves,
+"""Closed loops against MuJoCo on published robots: the Robotiq 2F-85 (two four-bar fingers), the xArm7 with its
+gripper and Agility's Cassie (a floating biped whose legs close two loops each, one through a ball joint). At the joints diffkin solves,
 every ``<connect>`` pair coincides by MuJoCo's own anchors (``eq_data``) and every body's pose equals MuJoCo's
 ``mj_kinematics`` at the same full ``qpos``; Jacobians against central differences; IK on the gripper's pads."""
 
@@ -14,7 +14,7 @@ from _reference import DATA, success_rate
 
 import diffkin as dk
 
-GRIPPER, CASSIE = os.path.join(DATA, "robotiq_2f85.xml"), os.path.join(DATA, "cassie.xml")
+GRIPPER, CASSIE, XARM = (os.path.join(DATA, f) for f in ("robotiq_2f85.xml", "cassie.xml", "ufactory_xarm7.xml"))
 
 
 def _qpos(model, robot, q: np.ndarray, dependent: np.ndarray) -> np.ndarray:
@@ -61,8 +61,13 @@ def _closed_configurations(robot, model, n: int, spread: float, seed: int) -> np
             ("right_follower_joint", "right_coupler_joint", "left_follower_joint", "left_coupler_joint"),
         ),
         (CASSIE, None, None),
+        (
+            XARM,
+            ("joint1", "joint2", "joint3", "joint4", "joint5", "joint6", "joint7", "right_driver_joint"),
+            ("right_finger_joint", "left_finger_joint", "right_inner_knuckle_joint", "left_inner_knuckle_joint"),
+        ),
     ],
-    ids=["robotiq_2f85", "cassie"],
+    ids=["robotiq_2f85", "cassie", "xarm7"],
 )
 def test_loops_close_and_match_mujoco(path, q_names, dependent_names):
     robot, model = dk.load_robot(path), mujoco.MjModel.from_xml_path(path)
@@ -72,7 +77,7 @@ def test_loops_close_and_match_mujoco(path, q_names, dependent_names):
         springs = {f"{side}-{joint}" for side in ("left", "right") for joint in ("shin", "heel-spring")}
         assert robot.floating and robot.dof == 14 and springs <= set(robot.joint_names)
         assert {f"{side}-tarsus" for side in ("left", "right")} <= set(robot.dependent_names)
-    q = _closed_configurations(robot, model, 6, 0.3 if path == GRIPPER else 0.1, seed=0)
+    q = _closed_configurations(robot, model, 6, 0.1 if path == CASSIE else 0.3, seed=0)
     dependent, gap = (np.asarray(x) for x in dk.loop_closure(robot, q))
     bodies = {model.body(b).name for b in range(1, model.nbody)}
     names = [n for n in robot.frame_names if n in bodies]
