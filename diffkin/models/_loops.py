@@ -43,13 +43,16 @@ DAMPING = 1e-10  # relative to the trace of J^T J: keeps a step finite where the
 
 @dataclasses.dataclass(frozen=True)
 class Connect:
-    """One ``<equality><connect>`` as the loader reads it: ``anchor`` (in ``body1``'s frame) coincides with
-    the point of ``body2`` that is there at the reference configuration; ``where`` names the element."""
+    """One ``<equality><connect>`` as the loader reads it: ``anchor`` (in frame ``body1``) coincides with the
+    point of frame ``body2`` that is there at the reference configuration (``point2 is None``: MuJoCo's
+    ``body1``/``body2`` form) or with ``point2`` (in frame ``body2``: the ``site1``/``site2`` form, two sites'
+    origins); ``where`` names the element."""
 
     body1: str
     body2: str
     anchor: np.ndarray
     where: str
+    point2: np.ndarray | None = None
 
 
 def _points(robot, bodies, points, entries: list, base=rg.IDENTITY):
@@ -156,15 +159,17 @@ def close(robot, connects: list[Connect], passive: set[str], stiff: set[str], wh
         ends = []
         for name in (c.body1, c.body2):
             if name not in robot.frame_names:
-                raise ValueError(f"{c.where}: unknown body {name!r}")
+                raise ValueError(f"{c.where}: unknown body or site {name!r}")
             f = robot.frame_index(name)
             ends.append((robot.frame_bodies[f], np.asarray(robot.frame_poses[f], np.float64)))
         (a, Ta_f), (b, Tb_f) = ends
         if a == b:
             raise ValueError(f"{c.where}: bodies {c.body1!r} and {c.body2!r} move as one (no loop to close)")
         pa = Ta_f[:3, :3] @ c.anchor + Ta_f[:3, 3]
-        world = poses[a] @ np.append(pa, 1.0)
-        pb = np.linalg.solve(poses[b], world)[:3]
+        if c.point2 is None:
+            pb = np.linalg.solve(poses[b], poses[a] @ np.append(pa, 1.0))[:3]
+        else:
+            pb = Tb_f[:3, :3] @ c.point2 + Tb_f[:3, 3]
         bodies.append((a, b))
         points.append((pa, pb))
     loop_joints: list[list[int]] = []  # per loop, the q entries on its path, nearest the closure first, alternating

@@ -435,7 +435,11 @@ def _equalities(reader: _Reader, root: ET.Element, joints: list[JointSpec]) -> t
                 connects.append(Connect(el.get("body1", ""), el.get("body2") or "world", anchor, where))
                 continue
             if el.tag == "connect":
-                raise ValueError(f"{where}: a connect between sites is not supported; give body1, body2 and anchor")
+                if not (el.get("site1") and el.get("site2")):
+                    raise ValueError(f"{where}: expected body1 (and body2, anchor) or site1 and site2")
+                zero = np.zeros(3)  # the two sites' origins coincide (frames named as sites; see robot_from_mjcf)
+                connects.append(Connect(f"\0site:{el.get('site1')}", f"\0site:{el.get('site2')}", zero, where, zero))
+                continue
             if el.tag != "joint":
                 raise ValueError(
                     f"{where}: <equality><{el.tag}> constraints are not supported (they weld bodies or "
@@ -583,6 +587,13 @@ def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
     )
     if not connects:
         return robot
+    site_frame = {
+        f"\0site:{n}": name for p in parts for n, _, _ in p.sites for name in [f"site:{n}" if n in bodies else n]
+    }
+    connects = [
+        dataclasses.replace(c, body1=site_frame.get(c.body1, c.body1), body2=site_frame.get(c.body2, c.body2))
+        for c in connects
+    ]
     actuated = _actuated(root)
     balls = {n.rsplit(":", 1)[0] for n in robot.joint_names if robot.actuated_types[robot.joint_names.index(n)] == "B"}
     passive = {n for n in robot.joint_names if n not in actuated and n.rsplit(":", 1)[0] not in (actuated & balls)}

@@ -69,6 +69,18 @@ def test_the_coupler_and_rocker_are_solved_from_the_crank(four_bar, closure):
     np.testing.assert_allclose(pin_coupler, pin_rocker, rtol=0, atol=1e-12)
 
 
+def test_a_connect_between_sites_is_the_same_loop(closure):
+    """MuJoCo's site form: the two sites' origins coincide (here where the body form puts the pin)."""
+    sites = FOUR_BAR.replace('<site name="tip"', '<site name="pin_c" pos=".1 .2 0"/><site name="tip"').replace(
+        '<geom size=".01" mass=".1"/></body>', '<geom size=".01" mass=".1"/><site name="pin_r" pos="-.05 .2 0"/></body>'
+    )
+    robot = dk.load_robot(
+        sites.replace('body1="coupler" body2="rocker" anchor=".1 .2 0"', 'site1="pin_c" site2="pin_r"')
+    )
+    theta = jnp.asarray(np.linspace(-3.0, 3.0, 7)[:, None])
+    np.testing.assert_allclose(np.asarray(dk.loop_closure(robot, theta)[0]), np.asarray(closure(theta)[0]), atol=1e-12)
+
+
 def test_derivatives_are_the_implicit_functions(four_bar, closure):
     theta = np.linspace(-3.0, 3.0, 13)[:, None]
     d_dep = np.asarray(jax.jit(jax.vmap(jax.jacfwd(lambda q: dk.loop_closure(four_bar, q)[0])))(jnp.asarray(theta)))
@@ -104,7 +116,7 @@ def test_a_loop_that_cannot_close_says_so():
 
 
 def test_bad_loops_are_refused():
-    with pytest.raises(ValueError, match="MJCF <equality><connect body1='coupler'>: unknown body 'nowhere'"):
+    with pytest.raises(ValueError, match="MJCF <equality><connect body1='coupler'>: unknown body or site 'nowhere'"):
         dk.load_robot(FOUR_BAR.replace('body2="rocker"', 'body2="nowhere"'))
     every = FOUR_BAR.replace("</actuator>", '<motor joint="coupler"/><motor joint="rocker"/></actuator>')
     with pytest.raises(ValueError, match="no joint left to solve"):

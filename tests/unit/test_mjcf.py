@@ -131,8 +131,8 @@ BODY = '<body name="a"><joint name="j"/><body name="b"><joint name="k"/></body><
             r"MJCF <equality><weld body1='a'>: <equality><weld> constraints are not supported",
         ),
         (
-            mjcf(BODY, tail='<equality><connect site1="s" site2="t"/></equality>'),
-            r"MJCF <equality><connect>: a connect between sites is not supported",
+            mjcf(BODY, tail='<equality><connect site1="s"/></equality>'),
+            r"MJCF <equality><connect>: expected body1 \(and body2, anchor\) or site1 and site2",
         ),
         (
             mjcf(BODY, tail='<equality><joint joint1="k" joint2="nope"/></equality>'),

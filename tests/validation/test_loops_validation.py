@@ -1,7 +1,8 @@
 """Closed loops against MuJoCo on published robots: the Robotiq 2F-85 (two four-bar fingers), the xArm7 with its
-gripper and Agility's Cassie (a floating biped whose legs close two loops each, one through a ball joint). At the joints diffkin solves,
-every ``<connect>`` pair coincides by MuJoCo's own anchors (``eq_data``) and every body's pose equals MuJoCo's
-``mj_kinematics`` at the same full ``qpos``; Jacobians against central differences; IK on the gripper's pads."""
+gripper and Agility's Cassie (a floating biped whose legs close two loops each, one through a ball joint). At the
+joints diffkin solves, every ``<connect>`` pair coincides by MuJoCo's own anchors (``eq_data``) and every body's
+pose equals MuJoCo's ``mj_kinematics`` at the same full ``qpos``; Jacobians against central differences; IK on the
+gripper's pads."""
 
 import os
 
