@@ -101,18 +101,14 @@ def test_derivatives_are_the_implicit_functions(four_bar, closure):
 
 
 def test_a_loop_that_cannot_close_says_so():
-    """A crank longer than the rest allows: the loop opens for some crank angles; finite values, a gap, and IK
-    that cannot close it reports no success."""
+    """A crank longer than the rest allows: the loop opens for some crank angles; finite values and a gap."""
     xml = FOUR_BAR.replace('pos=".1 0 0"', 'pos=".3 0 0"', 1)  # crank 0.3: out of reach half a turn away
     robot = dk.load_robot(xml)
     theta = jnp.asarray(np.concatenate([np.linspace(-np.pi, np.pi, 25), [1e3, -1e6]])[:, None])
     dependent, gap = (np.asarray(x) for x in dk.loop_closure(robot, theta))
     assert np.all(np.isfinite(dependent)) and np.all(np.isfinite(gap))
     assert gap[0] > 0.05 and gap[12] < 1e-12  # open at a half turn, closed at the reference
-    T = np.asarray(dk.fk(robot, theta[:1], "tip"))  # where the open mechanism puts the tip
-    result = dk.ik.solve(robot, {"tip": T[:, :3, 3]}, key=jax.random.PRNGKey(0), num_seeds=4)
-    _, gap_solved = dk.loop_closure(robot, result.q)
-    assert not np.any(np.asarray(result.success) & (np.asarray(gap_solved) > 1e-5))
+    # (IK counts an open loop as no success: tests/validation/test_loops_validation.py, on the 2F-85)
 
 
 def test_bad_loops_are_refused():

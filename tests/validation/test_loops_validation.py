@@ -125,6 +125,16 @@ def test_ik_on_the_gripper_pads_keeps_the_loops_closed():
     targets = {f: dk.fk(robot, q, f)[..., :3, 3] for f in ("right_pad", "left_pad")}
     result = dk.ik.solve(robot, targets, key=jax.random.PRNGKey(0))
     assert success_rate(result.success) >= 0.9
+    # targets no closed configuration reaches (pads from random drivers and springs, loops left open): no success
+    # with a loop open
+    q_open = np.random.default_rng(3).uniform(robot.lower, robot.upper, (16, robot.dof))
+    _, gap_open = dk.loop_closure(robot, q_open)
+    assert np.asarray(gap_open).max() > 1e-3
+    unreachable = dk.ik.solve(
+        robot, {f: dk.fk(robot, q_open, f)[..., :3, 3] for f in targets}, key=jax.random.PRNGKey(1)
+    )
+    _, gap_unreachable = dk.loop_closure(robot, unreachable.q)
+    assert not np.any(np.asarray(unreachable.success) & (np.asarray(gap_unreachable) > 1e-9))
     _, gap = dk.loop_closure(robot, result.q)
     solved = np.asarray(result.success)
     assert np.asarray(gap)[solved].max() < 1e-9
