@@ -167,6 +167,30 @@ def success_rate(success) -> float:
     return np.count_nonzero(success) / success.size
 
 
+def jacobian_parameter_gradients(chain, field: str, seed: int) -> dict[str, np.ndarray]:
+    """The gradient of a random linear function of the space Jacobian at 5 random configurations with
+    respect to ``field`` of ``chain``, by each method (``"analytic"``, ``"autodiff"``).
+
+    ``field="base"`` moves the base rigidly and differentiates in the twist ``xi`` at 0: off the rigid
+    transforms the two Jacobian formulas extend differently, and only rigid bases are valid models. The
+    motion is ``[R(xi_w) xi_v; 0 1]``, ``R`` the rotation of the quaternion ``(1, xi_w / 2)``: rigid
+    everywhere and with ``expm([xi])``'s derivative at 0 (so the same gradient), without the second
+    derivatives of ``jax.scipy.linalg.expm`` to compile."""
+    import jax.numpy as jnp
+
+    q = random_q(chain, 5, seed=seed)
+    W = np.random.default_rng(seed + 1).normal(size=(5, 6, chain.dof))
+    x0 = jnp.zeros(6) if field == "base" else jnp.asarray(getattr(chain, field))
+
+    def loss(x, method):
+        if field == "base":
+            R = se3.rotation_from_quaternion(jnp.concatenate([jnp.ones(1), x[3:] / 2]))
+            x = chain.base @ jnp.eye(4).at[:3, :3].set(R).at[:3, 3].set(x[:3])
+        return jnp.sum(W * dk.jacobian(chain.replace(**{field: x}), q, "space", method=method))
+
+    return {m: np.asarray(jax.jit(jax.grad(loss), static_argnums=1)(x0, m)) for m in ("analytic", "autodiff")}
+
+
 # -------------------------------------------------------------------------- random collision shapes
 
 

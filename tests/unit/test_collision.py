@@ -218,29 +218,41 @@ def _moved(s, twist: jax.Array, eps: jax.Array):
     return s
 
 
+@jax.jit
+def _motion_checks(a, b, twists):
+    """``motion(a, b)``, ``distance(a, b)`` and the derivatives of ``distance`` when ``a``, then ``b``,
+    moves by ``twists[0]``, ``twists[1]`` (one compilation per pair of kinds: eager, the box-box
+    derivatives took 10 s)."""
+    from diffkin.collision._distance import motion
+
+    def derivative(which):
+        def moved_distance(eps):
+            pair = [a, b]
+            pair[which] = _moved(pair[which], twists[which], eps)
+            return distance(*pair)
+
+        n = twists.shape[1]
+        return jax.jvp(moved_distance, (jnp.zeros(n),), (jnp.ones(n),))[1]
+
+    return motion(a, b), distance(a, b), (derivative(0), derivative(1))
+
+
 @pytest.mark.parametrize("kinds", SHAPE_PAIRS[:-1], ids=["-".join(p) for p in SHAPE_PAIRS[:-1]])
 def test_motion_is_the_derivative_under_rigid_motions(kinds):
     """``motion``'s wrenches (from the contact normal and witness points) against forward-mode
     derivatives of ``distance`` when either shape moves by a random twist, 1,000 random pairs of each
     kind (about a third overlapping: every separating axis and closest feature), float64."""
-    from diffkin.collision._distance import motion
-
     rng = np.random.default_rng(4)
     n = 1000
     a = shape(kinds[0], random_fields(kinds[0], rng, n, points=0.0))
     b = shape(kinds[1], random_fields(kinds[1], rng, n, points=0.0))
-    d, Wa, Wb = jax.jit(motion)(a, b)
-    np.testing.assert_allclose(np.asarray(d), np.asarray(distance(a, b)), rtol=0, atol=1e-14)
+    twists = jnp.asarray(np.stack([rng.normal(size=(n, 6)) for _ in range(2)]))
+    (d, Wa, Wb), d_ref, derivatives = _motion_checks(a, b, twists)
+    np.testing.assert_allclose(np.asarray(d), np.asarray(d_ref), rtol=0, atol=1e-14)
     for which, W in ((0, Wa), (1, Wb)):
-        twist = jnp.asarray(rng.normal(size=(n, 6)))
-
-        def moved_distance(eps, which=which, twist=twist):
-            pair = [a, b]
-            pair[which] = _moved(pair[which], twist, eps)
-            return distance(*pair)
-
-        _, derivative = jax.jvp(moved_distance, (jnp.zeros(n),), (jnp.ones(n),))
         if kinds[1] == "plane" and which == 1:
             assert np.all(np.asarray(W) == 0)  # a half-space is an obstacle: it does not move
             continue
-        np.testing.assert_allclose(np.sum(np.asarray(W) * np.asarray(twist), -1), derivative, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(
+            np.sum(np.asarray(W) * np.asarray(twists[which]), -1), derivatives[which], rtol=0, atol=1e-9
+        )

@@ -25,7 +25,14 @@ _ik_jacobians = jax.jit(
         T, psi, gc
     )
 )
-sample = jax.jit(srs.sample_self_motion, static_argnums=2)
+_sample = jax.jit(srs.sample_self_motion, static_argnums=2)
+SAMPLES = 2000
+
+
+def sample(arm, T, *, key=None, gc=None):
+    """``SAMPLES`` samples, every keyword given (jit's cache keys on the keywords given): one compilation
+    per dtype and per ``key``, ``gc`` or neither (~7 s each)."""
+    return _sample(arm, T, SAMPLES, key=key, gc=gc)
 
 
 def batched(fn, arm, *args, core):
@@ -440,10 +447,10 @@ def test_feasible_arm_angles_out_of_reach_and_elbow_limit():
 @pytest.mark.parametrize("jitter", [False, True])
 def test_sample_self_motion_is_exact_and_covers_the_feasible_set(jitter):
     arm = ARMS["iiwa14"]
-    n = 2000
+    n = SAMPLES
     T = np.asarray(fk(arm, np.array([0.4, 0.7, -0.3, -1.1, 0.6, 0.9, -0.2])))
     key = jax.random.PRNGKey(0) if jitter else None
-    q, valid = sample(arm, T, n, key=key)
+    q, valid = sample(arm, T, key=key)
     q, valid = np.asarray(q), np.asarray(valid)
     assert q.shape == (n, 7) and np.all(valid) and np.all(in_limits(arm, q))
     assert pose_error(fk(arm, q), T).max() < 1e-9
@@ -468,10 +475,10 @@ def test_sample_self_motion_is_exact_and_covers_the_feasible_set(jitter):
 def test_sample_self_motion_one_configuration_and_unreachable():
     arm = ARMS["iiwa7"]
     T = np.asarray(fk(arm, np.full(7, 0.5)))
-    q, valid = sample(arm, T, 100, gc=np.array([1.0, 1.0, 1.0]))
+    q, valid = sample(arm, T, gc=np.array([1.0, 1.0, 1.0]))
     assert np.all(valid)
-    np.testing.assert_array_equal(np.asarray(arm_angle(arm, q)[1]), np.ones((100, 3)))
-    q, valid = sample(arm, pose(np.eye(3), [2.0, 0.0, 0.0]), 2000)
+    np.testing.assert_array_equal(np.asarray(arm_angle(arm, q)[1]), np.ones((SAMPLES, 3)))
+    q, valid = sample(arm, pose(np.eye(3), [2.0, 0.0, 0.0]))
     assert np.all(np.isfinite(np.asarray(q))) and not np.asarray(valid).any()
 
 
@@ -539,7 +546,8 @@ def test_valid_means_valid(dtype):
     targets = np.stack([c[0] for c in cases]).astype(dtype)
     psis = np.array([c[1] for c in cases], dtype)
     gcs = np.stack([np.broadcast_to(c[2], (3,)) for c in cases]).astype(dtype)
-    q, valid = _ik(arm, targets, psis, gcs)  # jitted: gc, target and psi are traced
+    # jitted: gc, target and psi are traced (float64: in the module's padded chunk, compiled once)
+    q, valid = ik(arm, targets, psis, gcs) if dtype == np.float64 else _ik(arm, targets, psis, gcs)
     q, valid = np.asarray(q), np.asarray(valid)
     assert np.all(np.isfinite(q))
     for i, (_, _, _, expected) in enumerate(cases):
@@ -553,10 +561,10 @@ def test_valid_means_valid(dtype):
         srs.ik(arm, T, psi, [1.0, 0.5, 1.0])
     # The self-motion of a non-rigid, or non-finite, pose: nothing valid, everything finite.
     for bad in (scaled, nan_T):
-        qs, ok = sample(arm, bad.astype(dtype), 16)
+        qs, ok = sample(arm, bad.astype(dtype))
         assert not np.any(np.asarray(ok)) and np.all(np.isfinite(np.asarray(qs)))
-    sample_gc = jax.jit(lambda T, g: srs.sample_self_motion(arm, T, 16, gc=g))
-    qs, ok = sample_gc(T.astype(dtype), (gc * [1, 0.5, 1]).astype(dtype))
+    # jitted: gc is traced
+    qs, ok = sample(arm, T.astype(dtype), gc=(gc * [1, 0.5, 1]).astype(dtype))
     assert not np.any(np.asarray(ok)) and np.all(np.isfinite(np.asarray(qs)))
-    qs, ok = sample_gc(T.astype(dtype), gc.astype(dtype))
+    qs, ok = sample(arm, T.astype(dtype), gc=gc.astype(dtype))
     assert np.all(np.asarray(ok))

@@ -1,11 +1,12 @@
-"""Jacobians of the URDF robots in three frames against Pinocchio and pytorch-kinematics (float64)."""
+"""Jacobians of the URDF robots in three frames against Pinocchio and pytorch-kinematics (float64), and the
+parameter gradients of the iiwa14's Jacobian (long to compile) by both methods."""
 
 import numpy as np
 import pinocchio as pin
 import pytest
 import pytorch_kinematics as pk
 import torch
-from _reference import URDF_ROBOTS, random_q
+from _reference import URDF_ROBOTS, jacobian_parameter_gradients, random_q
 
 import diffkin as dk
 
@@ -45,3 +46,11 @@ def test_world_jacobian_matches_pytorch_kinematics(name, urdf_chains):
     q = random_q(urdf_chains[name], N, seed=21)
     ref = ref_chain.jacobian(torch.tensor(q)).numpy()
     np.testing.assert_allclose(dk.jacobian(urdf_chains[name], q), ref, atol=1e-6)
+
+
+def test_jacobian_parameter_gradients_agree_between_methods_iiwa14_base():
+    """The unit tier's check (``test_jacobian_parameter_gradients_agree_between_methods``) on the iiwa14's
+    rigidly moved base: compiling the autodiff method's second derivatives takes ~15 s."""
+    g = jacobian_parameter_gradients(dk.robots.iiwa14(), "base", seed=32)
+    assert np.all(np.isfinite(g["analytic"])) and np.abs(g["analytic"]).max() > 1e-3
+    np.testing.assert_allclose(g["analytic"], g["autodiff"], atol=1e-12)
