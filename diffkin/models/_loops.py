@@ -15,7 +15,7 @@ reference configuration, MuJoCo's ``qpos0``). The robot keeps every joint in its
 
 The pass's Jacobian columns then fold each dependent column into the columns of ``q`` through that
 ``dq_dep/dq``. Where a loop cannot close (a ``q`` out of the mechanism's range) the solve returns the
-least-squares nearest, and :func:`residual` (``dk.loop_residual``) says by how much it stays open.
+least-squares nearest, and the pass's ``loop_gap`` (``dk.loop_closure``) says by how much it stays open.
 
 Which joints are dependent (:func:`close`): per robot, among the joints on the loops' paths (from
 each body up to their common ancestor) that no actuator drives (directly or through a fixed tendon)
@@ -68,7 +68,7 @@ def _points(robot, bodies, points, entries: list, base=rg.IDENTITY):
 def _jacobian(robot, kin, world, columns: range) -> list[list]:
     """Rows ``3 * loops`` of entries: ``d (p_a - p_b) / d x_k`` for the extended entries ``columns``."""
     ancestors = {b: set(robot.ancestors(b)) for pair in robot.loop_bodies for b in pair}
-    rows = [[0.0] * len(columns) for _ in range(3 * len(world))]
+    rows: list[list[rg.Entry]] = [[0.0] * len(columns) for _ in range(3 * len(world))]
     index = {k: c for c, k in enumerate(columns)}
     for j, (v, w) in enumerate(kin.screws):
         c = index.get(robot.sources[j])
@@ -107,7 +107,7 @@ def _loop_points(robot) -> list[tuple[rg.Vec3, rg.Vec3]]:
     return [(rg.vector(P[k, 0]), rg.vector(P[k, 1])) for k in range(len(robot.loop_bodies))]
 
 
-def solve(robot, q: list) -> tuple[list, object]:
+def solve(robot, q: list) -> tuple[list, tuple[list[list[rg.Entry]], jax.Array]]:
     """The dependent joints' values at ``q`` (``dof`` entries), with the implicit function's derivatives,
     and ``(G, residual)``: ``G[d][i] = d q_dep_d / d q_i`` (entries) and the largest anchor gap (metres)."""
     dof, nd = robot.dof, len(robot.dependent_names)
@@ -232,8 +232,3 @@ def _generic_jacobian(robot, q_ref: np.ndarray, free: list[int]) -> np.ndarray:
             break
         q[free] -= np.linalg.lstsq(C[:, free], r, rcond=None)[0]
     return C
-
-
-def residual(robot, q: list) -> object:
-    """The largest gap between a loop's two points at ``q`` after the solve (metres)."""
-    return solve(robot, q)[1][1]

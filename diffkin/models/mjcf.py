@@ -469,14 +469,14 @@ def _equalities(reader: _Reader, root: ET.Element, joints: list[JointSpec]) -> t
 def _actuated(root: ET.Element) -> set[str]:
     """The joints an ``<actuator>`` drives, directly (``joint``, ``jointinparent``) or through a fixed tendon."""
     tendons = {
-        t.get("name"): {j.get("joint") for j in t.findall("joint")}
+        t.get("name"): {j.get("joint", "") for j in t.findall("joint")}
         for g in root.findall("tendon")
         for t in g.findall("fixed")
     }
     driven: set[str] = set()
     for group in root.findall("actuator"):
         for el in group:
-            driven |= {el.get(k) for k in ("joint", "jointinparent") if el.get(k)}
+            driven |= {el.get(k, "") for k in ("joint", "jointinparent")}
             driven |= tendons.get(el.get("tendon"), set())
     return {n for n in driven if n}
 
