@@ -273,6 +273,19 @@ def mjcf(body: str, head: str = "", tail: str = "") -> str:
     return f"<mujoco model='m'>{HEAD}{head}<worldbody>{body}</worldbody>{tail}</mujoco>"
 
 
+# Two planar arms from the ground, welded at their tips: 3 + 2 hinges, 3 planar equations; a1 and b1 driven.
+WELDED_ARMS = mjcf(
+    '<body name="a1"><joint name="a1" axis="0 0 1"/><geom size=".01" mass=".1"/>'
+    '<body name="a2" pos=".3 0 0"><joint name="a2" axis="0 0 1"/><geom size=".01" mass=".1"/>'
+    '<body name="a3" pos=".3 0 0"><joint name="a3" axis="0 0 1"/><geom size=".01" mass=".1"/></body></body></body>'
+    '<body name="b1" pos=".8 0 0"><joint name="b1" axis="0 0 1"/><geom size=".01" mass=".1"/>'
+    '<body name="b2" pos="-.2 .1 0" euler="0 0 30"><joint name="b2" axis="0 0 1"/><geom size=".01" mass=".1"/>'
+    "</body></body>",
+    tail='<equality><weld body1="a3" body2="b2"{relpose}/></equality>'
+    '<actuator><motor joint="a1"/><motor joint="b1"/></actuator>',
+)
+
+
 ARM = (
     '<geom size=".01"/><joint name="a" axis="1 2 3" pos=".1 0 .2" range="-90 45"/>'
     '<body name="b" pos="0 .3 0" {o}><joint name="b" axis="0 1 0" range="-1 1"/><site name="s" pos=".1 .2 .3" {o}/>'

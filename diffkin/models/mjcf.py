@@ -434,6 +434,9 @@ def _equalities(reader: _Reader, root: ET.Element, joints: list[JointSpec]) -> t
                 anchor = _xml.numbers(None, "anchor", 3, reader._get(el, "anchor", cls, "0 0 0", "equality"), where)
                 connects.append(Connect(el.get("body1", ""), el.get("body2") or "world", anchor, where))
                 continue
+            if el.tag == "weld" and el.get("body1"):
+                connects += _weld(reader, el, cls, where)
+                continue
             if el.tag == "connect":
                 if not (el.get("site1") and el.get("site2")):
                     raise ValueError(f"{where}: expected body1 (and body2, anchor) or site1 and site2")
@@ -442,8 +445,8 @@ def _equalities(reader: _Reader, root: ET.Element, joints: list[JointSpec]) -> t
                 continue
             if el.tag != "joint":
                 raise ValueError(
-                    f"{where}: <equality><{el.tag}> constraints are not supported (they weld bodies or "
-                    "couple tendons); linear <joint> equalities and <connect> loops are"
+                    f"{where}: <equality><{el.tag}> constraints are not supported (they couple tendons or "
+                    "weld sites); linear <joint> equalities, <connect> and <weld body1> loops are"
                 )
             c = _xml.numbers(None, "polycoef", 5, reader._get(el, "polycoef", cls, "0 1 0 0 0", "equality"), where)
             if np.any(c[2:] != 0):
@@ -464,6 +467,22 @@ def _equalities(reader: _Reader, root: ET.Element, joints: list[JointSpec]) -> t
                 ref1, ref2 = -j1.offset, -joints[index[names[1]]].offset
                 joints[index[j1.name]] = dataclasses.replace(j1, mimic=(names[1], c[1], c[0] + ref1 - c[1] * ref2))
     return joints, connects
+
+
+WELD_ARM = 0.1  # metres: a weld holds three points of body1, at its origin and this far along its x and y axes
+
+
+def _weld(reader: _Reader, el: ET.Element, cls: str, where: str) -> list[Connect]:
+    """A ``<weld body1 body2 relpose>`` as three connects (:data:`WELD_ARM`): body2's pose in body1 fixed,
+    either ``relpose`` (position, quaternion) or, with its quaternion all zero (the default), the relative
+    pose at the reference configuration. (Its ``anchor`` and ``torquescale`` shape MuJoCo's forces only.)"""
+    relpose = _xml.numbers(None, "relpose", 7, reader._get(el, "relpose", cls, "0 1 0 0 0 0 0", "equality"), where)
+    points = [np.zeros(3), WELD_ARM * np.eye(3)[0], WELD_ARM * np.eye(3)[1]]
+    body2 = el.get("body2") or "world"
+    if not np.any(relpose[3:]):
+        return [Connect(el.get("body1", ""), body2, x, where) for x in points]
+    R = _quat(relpose[3:], f"{where} relpose")  # T_body1_body2 = (R, p): x in body1 is R^T (x - p) in body2
+    return [Connect(el.get("body1", ""), body2, x, where, R.T @ (x - relpose[:3])) for x in points]
 
 
 def _actuated(root: ET.Element) -> set[str]:

@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import mjcf
+from _reference import WELDED_ARMS, mjcf
 
 import diffkin as dk
 
@@ -79,6 +79,30 @@ def test_a_connect_between_sites_is_the_same_loop(closure):
     )
     theta = jnp.asarray(np.linspace(-3.0, 3.0, 7)[:, None])
     np.testing.assert_allclose(np.asarray(dk.loop_closure(robot, theta)[0]), np.asarray(closure(theta)[0]), atol=1e-12)
+
+
+@pytest.mark.parametrize("relpose", ["", ' relpose=".1 .2 0 0.9659258 0 0 0.2588190"'], ids=["reference", "relpose"])
+def test_a_weld_holds_the_relative_pose(relpose):
+    """The weld keeps body2's pose in body1: the one at the reference configuration, or ``relpose`` (position,
+    then the quaternion of a 30 degree turn about z)."""
+    robot = dk.load_robot(WELDED_ARMS.format(relpose=relpose))
+    assert robot.joint_names == ("a1", "b1") and set(robot.dependent_names) == {"a2", "a3", "b2"}
+    if relpose:
+        angle = 2 * np.arctan2(0.2588190, 0.9659258)  # the quaternion's turn about z (~30 degrees)
+        T_rel = np.eye(4)
+        T_rel[:3, :3] = [[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]]
+        T_rel[:3, 3] = [0.1, 0.2, 0.0]
+    else:
+        T0 = np.asarray(dk.fk(robot, np.zeros(2), ["a3", "b2"]))  # (the loops close at the reference: q = 0)
+        T_rel = np.linalg.solve(T0[0], T0[1])
+    q = np.random.default_rng(0).uniform(-0.2, 0.2, (16, 2))
+    _, gap = dk.loop_closure(robot, q)
+    T = np.asarray(dk.fk(robot, q, ["a3", "b2"]))
+    closed = np.asarray(gap) < 1e-12
+    assert closed.sum() >= 8
+    np.testing.assert_allclose(
+        np.linalg.solve(T[closed, 0], T[closed, 1]), np.broadcast_to(T_rel, (closed.sum(), 4, 4)), atol=1e-12
+    )
 
 
 def test_derivatives_are_the_implicit_functions(four_bar, closure):

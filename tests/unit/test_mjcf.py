@@ -127,8 +127,8 @@ BODY = '<body name="a"><joint name="j"/><body name="b"><joint name="k"/></body><
             r"MJCF <equality><joint joint1='k' joint2='j'>: polycoef \[0.0, 1.0, 0.5, 0.0, 0.0\] is not linear",
         ),
         (
-            mjcf(BODY, tail='<equality><weld body1="a" body2="b"/></equality>'),
-            r"MJCF <equality><weld body1='a'>: <equality><weld> constraints are not supported",
+            mjcf(BODY, tail='<equality><weld site1="s" site2="t"/></equality>'),
+            r"MJCF <equality><weld>: <equality><weld> constraints are not supported",
         ),
         (
             mjcf(BODY, tail='<equality><connect site1="s"/></equality>'),

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
-from _reference import DATA, success_rate
+from _reference import DATA, WELDED_ARMS, success_rate
 
 import diffkin as dk
 
@@ -141,3 +141,28 @@ def test_ik_on_the_gripper_pads_keeps_the_loops_closed():
     for f, target in targets.items():
         reached = np.asarray(dk.fk(robot, result.q, f))[solved, :3, 3]
         assert np.abs(reached - np.asarray(target)[solved]).max() <= 1e-5
+
+
+@pytest.mark.parametrize("relpose", ["", ' relpose=".1 .2 0 0.9659258 0 0 0.2588190"'], ids=["reference", "relpose"])
+def test_a_weld_matches_mujoco(relpose):
+    """Two planar arms welded at their tips: MuJoCo's bodies at the solved joints, and body2's pose in body1 equal
+    to the relative pose MuJoCo compiles into the weld (``eq_data[3:10]``: position, quaternion)."""
+    xml = WELDED_ARMS.format(relpose=relpose)
+    robot, model = dk.load_robot(xml), mujoco.MjModel.from_xml_string(xml)
+    q = np.random.default_rng(4).uniform(-0.2, 0.2, (8, robot.dof))
+    dependent, gap = (np.asarray(x) for x in dk.loop_closure(robot, q))
+    poses = np.asarray(dk.fk(robot, q, ["a1", "a2", "a3", "b1", "b2"]))
+    data = mujoco.MjData(model)
+    R = np.zeros(9)
+    mujoco.mju_quat2Mat(R, model.eq_data[0, 6:10])
+    T_rel = np.eye(4)
+    T_rel[:3, :3], T_rel[:3, 3] = R.reshape(3, 3), model.eq_data[0, 3:6]
+    for k in np.flatnonzero(gap < 1e-12):
+        data.qpos[:] = _qpos(model, robot, q[k], dependent[k])
+        mujoco.mj_kinematics(model, data)
+        for f, name in enumerate(["a1", "a2", "a3", "b1", "b2"]):
+            b = model.body(name).id
+            np.testing.assert_allclose(poses[k, f, :3, 3], data.xpos[b], atol=1e-12)
+            np.testing.assert_allclose(poses[k, f, :3, :3], data.xmat[b].reshape(3, 3), atol=1e-12)
+        np.testing.assert_allclose(np.linalg.solve(poses[k, 2], poses[k, 4]), T_rel, atol=1e-12)
+    assert np.count_nonzero(gap < 1e-12) >= 4
