@@ -175,7 +175,7 @@ class ScannedPass(RobotPass):
     def __init__(self, robot, bodies: jax.Array, screws: jax.Array, multipliers: jax.Array, end: int | None = None):
         """``bodies (nj + 1, 12) + batch``, ``screws (nj, 6) + batch`` (world ``[v; w]``), ``multipliers (nj,)``."""
         self.robot, self._bodies, self._screws, self._m, self.end = robot, bodies, screws, multipliers, end
-        self._poses = {}
+        self.dependent, self.fold, self.loop_gap = [], [], 0.0  # (no closed loops: Robot.tree_pass refuses them)
         self.frames = len(robot.frame_bodies) if end is None else end  # the frames of poses()
 
     @property
