@@ -131,7 +131,9 @@ def solve(robot, q: list) -> tuple[list, tuple[list[list[rg.Entry]], jax.Array]]
     C_q = _array(_jacobian(robot, kin, world, range(dof)), shape, dtype)
     G = -jnp.linalg.solve(A, jnp.einsum("...ki,...kj->...ij", J_dep, C_q))  # (..., nd, dof)
     gaps = [rg.vadd(pa, rg.scale(-1.0, pb)) for pa, pb in world]
-    gap = jnp.max(jnp.stack([jnp.sqrt(jnp.asarray(rg.dot(g, g), dtype) + 0.0) for g in gaps]), axis=0)
+    gap = jnp.max(
+        jnp.stack([jnp.broadcast_to(rg._norm(g), shape).astype(dtype) for g in gaps]), axis=0
+    )  # (NaN-free at 0)
     return [dep[..., d] for d in range(nd)], ([[G[..., d, i] for i in range(dof)] for d in range(nd)], gap)
 
 

@@ -132,6 +132,8 @@ def test_a_loop_that_cannot_close_says_so():
     dependent, gap = (np.asarray(x) for x in dk.loop_closure(robot, theta))
     assert np.all(np.isfinite(dependent)) and np.all(np.isfinite(gap))
     assert gap[0] > 0.05 and gap[12] < 1e-12  # open at a half turn, closed at the reference
+    d_gap = jax.grad(lambda q: dk.loop_closure(robot, q)[1].sum())(theta[10:14])  # a closed one among them
+    assert np.all(np.isfinite(np.asarray(d_gap)))
     # (IK counts an open loop as no success: tests/validation/test_loops_validation.py, on the 2F-85)
 
 
