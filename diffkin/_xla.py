@@ -9,9 +9,10 @@ The measurements that justify them are in docs/performance.md, "XLA CPU tricks".
   optimization barrier, instead of being recomputed inside each consumer.
 - :func:`opaque_index`: an index that feeds several scatters is computed once.
 - :func:`in_steps`: a large batch goes through a function in fixed-size steps, so that each
-  step's intermediates stay in cache and the temporary buffer stays small.
-- :func:`blocks_in_place`: blocks of a result written into their places, not concatenated, so
-  that each block is a loop of its own, vectorised along its innermost axis.
+  step's intermediates stay in cache and the temporary buffer stays small; optionally each step
+  as two independent halves (:func:`_in_halves`), so that both CPU threads have work.
+- :func:`blocks_joined`: blocks of a result computed apart, behind a barrier, then copied into
+  place, so that each block is a loop of its own, vectorised along its innermost axis.
 - :data:`SOLVER_COMPILE` and :func:`solver_jit`: the IK solvers are compiled by XLA's classic CPU
   kernel emitter, which compiles in two thirds of the time of the newer MLIR emitters (see there).
 
@@ -103,32 +104,30 @@ def opaque_index(index: jax.Array, bound: jax.Array) -> jax.Array:
     return jax.lax.rem(index, bound)
 
 
-def blocks_in_place(blocks: list[list[jax.Array]], n: int) -> jax.Array:
+def blocks_joined(blocks: list[list[jax.Array]], n: int) -> jax.Array:
     """The blocks ``(rows_i, cols_j, n or 1)`` side by side: ``(sum rows, sum cols, n)``.
 
-    Each block is written into its place (``dynamic_update_slice``), not concatenated: XLA's CPU
-    backend fuses a concatenation with everything that computes its operands into one loop over
-    the whole output that branches per entry, where a block written in place is its own loop,
-    vectorised along ``n``.
+    Each block is computed on its own (behind an optimization barrier), then copied into place:
+    XLA's CPU backend fuses a concatenation with everything that computes its operands into one
+    loop over the whole output that branches per entry, where a block computed on its own is a
+    loop of its own, vectorised along ``n``, which the runtime can run beside the others.
     """
-    rows = [row[0].shape[0] for row in blocks]
-    cols = [block.shape[1] for block in blocks[0]]
+    blocks = jax.lax.optimization_barrier(blocks)
     dtype = jnp.result_type(*(block for row in blocks for block in row))
-    out = jnp.zeros((sum(rows), sum(cols), n), dtype)
-    for i, row in enumerate(blocks):
-        for j, block in enumerate(row):
-            if block.size:
-                block = jnp.broadcast_to(block, (*block.shape[:2], n)).astype(dtype)
-                out = jax.lax.dynamic_update_slice(out, block, (sum(rows[:i]), sum(cols[:j]), 0))
-    return out
+    rows = [
+        jnp.concatenate([jnp.broadcast_to(block, (*block.shape[:2], n)).astype(dtype) for block in row], axis=1)
+        for row in blocks
+    ]
+    return jnp.concatenate(rows, axis=0)
 
 
-def configurations_in_steps(fn: Callable, q, base, step: int, last: bool = False) -> jax.Array:
+def configurations_in_steps(fn: Callable, q, base, step: int, last: bool = False, halves: bool = False) -> jax.Array:
     """``fn(q, base)`` for a batch of configurations, ``step`` at a time when the batch is large (:func:`in_steps`).
 
     The batch axes of ``q (..., dof)`` and ``base (..., 4, 4)`` (or ``None``) are broadcast and
     flattened to ``(N,)``; ``fn`` takes them so and returns one array with the configurations first,
-    ``(N, ...)``, or last, ``(..., N)``, with ``last``. Batches of at most ``2 step`` go in one call.
+    ``(N, ...)``, or last, ``(..., N)``, with ``last``. Batches of at most ``2 step`` go in one call;
+    ``halves``: as :func:`in_steps`.
     The memory then stays bounded whatever the batch, and a step's intermediates stay in cache (a
     whole robot's pass over 100,000 configurations is memory-bound). Values and derivatives are
     those of ``fn``.
@@ -146,13 +145,19 @@ def configurations_in_steps(fn: Callable, q, base, step: int, last: bool = False
     if n <= 2 * step:
         out = call(*inputs)
     else:
-        (out,) = in_steps(lambda *x: (call(*x),), tuple(inputs), step, axis=-1 if last else 0)
+        (out,) = in_steps(lambda *x: (call(*x),), tuple(inputs), step, axis=-1 if last else 0, halves=halves)
     if last:
         out = jnp.moveaxis(out, -1, 0)
     return out.reshape(*batch, *out.shape[1:])
 
 
-def in_steps(fn: Callable[..., tuple[jax.Array, ...]], inputs: tuple[jax.Array, ...], step: int, axis: int = 0):
+def in_steps(
+    fn: Callable[..., tuple[jax.Array, ...]],
+    inputs: tuple[jax.Array, ...],
+    step: int,
+    axis: int = 0,
+    halves: bool = False,
+):
     """``fn(*inputs)`` over the leading axis of ``inputs`` (``n >= step`` problems), ``step`` problems at a time.
 
     ``fn`` maps inputs with a leading axis of ``step`` to a tuple of outputs with that axis at
@@ -161,12 +166,15 @@ def in_steps(fn: Callable[..., tuple[jax.Array, ...]], inputs: tuple[jax.Array, 
     the same shape), so some problems are solved twice, with the same result. A step's
     intermediates then stay in cache, and XLA's temporary buffer stays small (a buffer above
     glibc's mmap threshold takes fresh, page-faulted memory on every call): ``dk.srs.ik`` in float64
-    about 2x faster; in float32 the steps did not pay, and are kept for the memory bound.
+    about 2x faster; in float32 the steps did not pay, and are kept for the memory bound. With
+    ``halves`` (on the CPU), each step is two independent halves (:func:`_in_halves`).
 
     Returns:
         The outputs of ``fn``, each with an axis of ``n`` at ``axis``.
     """
     n = inputs[0].shape[0]
+    if halves and step % 2 == 0 and jax.default_backend() == "cpu":
+        fn = _in_halves(fn, axis)
     shapes = jax.eval_shape(fn, *(jax.ShapeDtypeStruct((step,) + x.shape[1:], x.dtype) for x in inputs))
 
     def body(i, out):
@@ -181,3 +189,22 @@ def in_steps(fn: Callable[..., tuple[jax.Array, ...]], inputs: tuple[jax.Array, 
 
     init = tuple(jnp.zeros(full(s.shape), s.dtype) for s in shapes)
     return jax.lax.fori_loop(0, -(-n // step), body, init)
+
+
+def _in_halves(fn: Callable[..., tuple[jax.Array, ...]], axis: int) -> Callable[..., tuple[jax.Array, ...]]:
+    """``fn`` over the two halves of its inputs' leading axis, computed independently and joined along ``axis``.
+
+    XLA's CPU runtime runs independent kernels on separate threads, but the kernels of one step of
+    a batched computation mostly wait for each other: two independent halves give every thread
+    work (the halves are joined behind an optimization barrier, or XLA fuses the join back into
+    one loop over both).
+    """
+
+    def halves(*inputs):
+        h = inputs[0].shape[0] // 2
+        first = fn(*(x[:h] for x in inputs))
+        second = fn(*(x[h:] for x in inputs))
+        first, second = jax.lax.optimization_barrier((first, second))
+        return tuple(jnp.concatenate([a, b], axis=axis) for a, b in zip(first, second, strict=True))
+
+    return halves

@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffkin._xla import blocks_in_place, configurations_in_steps
+from diffkin._xla import blocks_joined, configurations_in_steps
 from diffkin.collision._distance import distance
 from diffkin.collision._geometry import KINDS, Geometry, placed
 from diffkin.collision._shapes import SHAPES, Box, Capsule, Plane, Sphere, unchecked
@@ -19,6 +19,7 @@ _ORDER = (Sphere, Capsule, Box, Plane)
 #: Batches larger than this go through :func:`diffkin._xla.in_steps`, ``STEP`` configurations at a
 #: time: the memory then stays bounded whatever the batch (at 100,000 Panda configurations the
 #: unstepped world distances asked for a 52 GB buffer), and each step's intermediates stay in cache.
+#: Each step is two independent halves, one per CPU thread (docs/performance.md).
 STEP = 1024
 
 
@@ -139,7 +140,7 @@ def check_geometry(robot, geom) -> None:
 def _in_steps(fn, q, base) -> jax.Array:
     """``fn(q, base)`` of flat configurations (distances with the configurations last), :data:`STEP` at
     a time when the batch is large; ``(*batch, ...)``."""
-    return configurations_in_steps(fn, q, base, STEP, last=True)
+    return configurations_in_steps(fn, q, base, STEP, last=True, halves=True)
 
 
 def self_distances(robot: Robot, geom: Geometry, q, base=None) -> jax.Array:
@@ -209,7 +210,9 @@ def self_of_placed(geom: Geometry, shapes, n: int) -> jax.Array:
     blocks = pair_blocks(geom)
     if not blocks:
         return jnp.zeros((0, n), jnp.result_type(float))
-    pieces = [distance(take(shapes[ka], ia), take(shapes[kb], ib)) for _, ka, kb, ia, ib in blocks]
+    pieces = jax.lax.optimization_barrier(  # each kind pair a loop of its own (as blocks_joined)
+        [distance(take(shapes[ka], ia), take(shapes[kb], ib)) for _, ka, kb, ia, ib in blocks]
+    )
     out = jnp.concatenate([jnp.broadcast_to(p, (p.shape[0], n)) for p in pieces], axis=0)
     inverse = np.argsort(np.concatenate([rows for rows, *_ in blocks]))
     return out[inverse] if not np.array_equal(inverse, np.arange(len(inverse))) else out
@@ -243,7 +246,7 @@ def world_of_placed(shapes, world: World, n: int) -> jax.Array:
     blocks = []
     for shape in shapes:
         blocks.append([distance(expanded(shape), o) for o in obstacles])  # (n_kind, n_obstacles, N) each
-    return blocks_in_place(blocks, n)
+    return blocks_joined(blocks, n)
 
 
 def clearance(robot: Robot, geom: Geometry, q, world: World | None = None, base=None) -> jax.Array:

@@ -107,18 +107,22 @@ def test_materialize_keeps_values_and_a_single_value_stays_an_array_of_one():
     np.testing.assert_array_equal(np.asarray(two), np.stack([x, np.full(5, 1.5)]))
 
 
-def test_blocks_in_place_and_steps_along_the_last_axis_keep_values():
-    from diffkin._xla import blocks_in_place, in_steps
+def test_blocks_joined_and_steps_along_the_last_axis_keep_values():
+    from diffkin._xla import blocks_joined, in_steps
 
     rng = np.random.default_rng(4)
     blocks = [[rng.normal(size=(2, 3, 7)), rng.normal(size=(2, 0, 7)), rng.normal(size=(2, 1, 1))]]
     blocks.append([rng.normal(size=(1, 3, 7)), rng.normal(size=(1, 0, 7)), rng.normal(size=(1, 1, 7))])
-    out = jax.jit(lambda b: blocks_in_place(b, 7))(blocks)
+    out = jax.jit(lambda b: blocks_joined(b, 7))(blocks)
     whole = np.concatenate([np.concatenate([np.broadcast_to(b, (*b.shape[:2], 7)) for b in row], 1) for row in blocks])
     np.testing.assert_array_equal(np.asarray(out), whole)
     x = rng.normal(size=(10, 2))
-    (stepped,) = jax.jit(lambda x: in_steps(lambda x: (x.T * 2.0,), (x,), 4, axis=-1))(x)
-    np.testing.assert_array_equal(np.asarray(stepped), x.T * 2.0)
+    for halves in (False, True):  # each step in two independent halves: the same values
+        (stepped,) = jax.jit(lambda x, h=halves: in_steps(lambda x: (x.T * 2.0,), (x,), 4, axis=-1, halves=h))(x)
+        np.testing.assert_array_equal(np.asarray(stepped), x.T * 2.0)
+        first, second = jax.jit(lambda x, h=halves: in_steps(lambda x: (x * 3.0, x[:, 0]), (x,), 4, halves=h))(x)
+        np.testing.assert_array_equal(np.asarray(first), x * 3.0)
+        np.testing.assert_array_equal(np.asarray(second), x[:, 0])
 
 
 @pytest.mark.parametrize("public", [False, True], ids=["jax-internal", "public-api"])

@@ -25,7 +25,7 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
-from diffkin._xla import blocks_in_place
+from diffkin._xla import blocks_joined
 from diffkin.collision._distance import distance, lower_bound, motion
 from diffkin.collision._geometry import Geometry, moved
 from diffkin.collision._robot import (
@@ -203,7 +203,7 @@ class AvoidTerm:
                     row_w.append(W)
                 d_blocks.append(row_d)
                 w_world.append(row_w)
-            d_world = blocks_in_place(d_blocks, n)
+            d_world = blocks_joined(d_blocks, n)
         elif world is not None:
             d_world = world_of_placed(shapes, world, n)
         return blocks, d_self, d_world, w_self, w_world
