@@ -7,16 +7,18 @@ the box axes and the cross products of the generators.
   separation, which is negative). Its derivative is that of the winning axis' expression.
 - Apart: the distance between two convex sets is attained vertex-to-solid or edge-to-edge, and an
   edge pair can only be closest along its common normal ``e_i x b_m``: the candidates are the
-  corners of each shape against the other, and per axis pair the support edges of each shape
-  along that normal. Every candidate is a distance between a point of each shape, so the smallest
-  is the distance. Its derivative comes from the closest points (:func:`_gap`), not from
-  differentiating the candidates.
+  corners of each shape against the other, and per axis pair the support edge of each shape along
+  that normal (one each: :func:`_support_edge` settles ties), and for boxes the face separation
+  where two parallel faces overlap (:func:`_faces_apart`). Every candidate is a distance between a
+  point of each shape (or, for parallel faces, equal to one), so the smallest is the distance. Its
+  derivative comes from the closest points (:func:`_gap`), not from differentiating the candidates.
 
 Vectors in structure of arrays (:mod:`diffkin.collision._closest`).
 """
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Callable
 from typing import Any
@@ -101,24 +103,43 @@ def _segment_edge(r: Vec, u: Vec, inv_uu: jax.Array, i: int, h: jax.Array) -> ja
     return w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
 
 
-def _support_edges(n: Vec, i: int, h: Vec) -> list[Vec]:
-    """Midpoints of the edges along axis ``i`` of a box of half extents ``h`` that may be closest in direction ``n``.
+#: A component of a common normal at most this many machine epsilons of its larger partner is a
+#: tie (a face parallel to the other shape's edge): rounding decides its sign, so the other rule of
+#: :func:`_support_edge` does.
+TIE = 8
 
-    The edge whose normal cone holds ``n`` (``n_i = 0``): the signs of ``n_j`` and ``n_k``. The sign of
-    the larger of the two is sure; the smaller one may be a tie (``n`` along a face normal, a face
-    parallel to the other shape), so both edges on that side are returned.
+
+def _support_edge(n: Vec, i: int, h: Vec, other: Vec | None = None) -> Vec:
+    """The midpoint of the edge along axis ``i`` of a box of half extents ``h`` closest along ``n`` (``n_i = 0``).
+
+    The edge whose normal cone holds ``n``: the signs of ``n_j`` and ``n_k``. Where the smaller of the two
+    is a tie (:data:`TIE`: ``n`` along a face normal), the face holds two such edges, and the one on
+    the side of ``other`` (the other shape's edge's midpoint, this box's frame) is taken.
+
+    Why that edge is enough: the closest points of two convex shapes apart are vertex-to-solid (the
+    corner candidates) or lie on two edges along their common normal (this candidate). At a tie the
+    face of this box is parallel to the other shape's edge (or face), and the closest pairs are where
+    that edge crosses the face's border in projection. If it crosses two opposite sides, either edge
+    serves. If it cuts a corner, crossing the side along ``e_i`` at ``k = s`` and the side along ``e_k``
+    at ``i = s'``, then the edge's midpoint ``M`` has ``sign M_k = s`` or ``sign M_i = s'`` (a point of
+    the cut between the crossings is a mean of them, whose two coordinates cannot both fall short;
+    beyond them one coordinate is past the face), so the candidate of axis ``i`` or that of axis ``k``
+    is a closest pair. Two parallel faces crossing without a corner inside each other cross as a
+    plus sign, where every choice is a closest pair. Near a tie the candidate differs from the
+    distance by at most ``2 h_k |n_k| / |n|``.
     """
     j, k = (i + 1) % 3, (i + 2) % 3
     big_j = jnp.abs(n[j]) >= jnp.abs(n[k])
-    sj, sk = _sign(n[j]) * h[j], _sign(n[k]) * h[k]
-    zero = jnp.zeros_like(sj)
-    out = []
-    for side in (1, -1):
-        mid = [zero, zero, zero]
-        mid[j] = jnp.where(big_j, sj, side * h[j])
-        mid[k] = jnp.where(big_j, side * h[k], sk)
-        out.append(tuple(mid))
-    return out
+    mid = [jnp.zeros_like(n[j])] * 3
+    if other is None:
+        mid[j], mid[k] = _sign(n[j]) * h[j], _sign(n[k]) * h[k]
+        return tuple(mid)
+    tie = jnp.minimum(jnp.abs(n[j]), jnp.abs(n[k])) <= TIE * jnp.finfo(n[j].dtype).eps * jnp.maximum(
+        jnp.abs(n[j]), jnp.abs(n[k])
+    )
+    mid[j] = jnp.where(tie & ~big_j, _sign(other[j]), _sign(n[j])) * h[j]
+    mid[k] = jnp.where(tie & big_j, _sign(other[k]), _sign(n[k])) * h[k]
+    return tuple(mid)
 
 
 def _best(candidates: list, better: Callable) -> Any:
@@ -279,7 +300,7 @@ def _segment_box_closest(a: Capsule, b: Box) -> tuple[jax.Array, jax.Array]:
 
     Candidates: an end point and the box (codes 0, 1), a box corner and the segment (2 + the
     corner's), or the segment and a box edge along a common normal ``e_i x u`` (the box's support
-    edges in that direction; 10 + the edge's).
+    edge in that direction, :func:`_support_edge`; 10 + the edge's).
     """
     p, q, u, h = _segment_in_box(a, b)
     mid = tuple(0.5 * (p[i] + q[i]) for i in range(3))
@@ -292,8 +313,8 @@ def _segment_box_closest(a: Capsule, b: Box) -> tuple[jax.Array, jax.Array]:
     for i in range(3):
         n = _cross_axis(i, u)  # (only its direction matters: no need to normalise)
         towards = _sign(dot(n, mid))
-        for edge in _support_edges(tuple(towards * n[m] for m in range(3)), i, h):
-            candidates.append((_segment_edge(sub(p, edge), u, inv_uu, i, h[i]), 10 + _edge_code(edge, i)))
+        edge = _support_edge(tuple(towards * n[m] for m in range(3)), i, h, mid)
+        candidates.append((_segment_edge(sub(p, edge), u, inv_uu, i, h[i]), 10 + _edge_code(edge, i)))
     sq, code = _best(candidates, jnp.less)
     return sqrt0(sq), code
 
@@ -382,50 +403,117 @@ def _box_box_closest(a: Box, b: Box) -> tuple[jax.Array, jax.Array]:
     """The distance of two boxes when apart, and the code of the nearest candidate.
 
     Candidates: a corner of ``b`` and box ``a`` (twice the corner's code), a corner of ``a`` and box
-    ``b`` (one more), or an edge of each along a common normal ``e_i x b_m``: the support edges of
-    ``a`` towards ``b`` and of ``b`` towards ``a`` (16 + 12 ``a``'s edge's + ``b``'s).
+    ``b`` (one more), an edge of each along a common normal ``e_i x b_m``: the support edge of ``a``
+    towards ``b`` and of ``b`` towards ``a`` (16 + 12 ``a``'s edge's + ``b``'s), or two parallel faces
+    that overlap (:func:`_faces_apart`).
     """
     ha, hb, cols, c = _relative(a, b)
-    cb = to_frame(cols, c)
     g = [tuple(hb[m] * cols[m][k] for k in range(3)) for m in range(3)]  # b's half axes in a's frame
-    candidates: list[tuple[Any, Any]] = []
-    for s in itertools.product((-1, 1), repeat=3):
-        corner_b = tuple(c[k] + s[0] * g[0][k] + s[1] * g[1][k] + s[2] * g[2][k] for k in range(3))
-        candidates.append((_clamp(corner_b, ha)[0], 2 * _corner_code(s)))
-        corner_a = tuple(sum(s[i] * ha[i] * cols[m][i] for i in range(3)) - cb[m] for m in range(3))  # in b's frame
-        candidates.append((_clamp(corner_a, hb)[0], 2 * _corner_code(s) + 1))
+    candidates = _corners(ha, hb, cols, c)
     for i, m in itertools.product(range(3), repeat=2):
         n = _cross_axis(i, cols[m])  # (only its direction matters: no need to normalise)
         n = tuple(_sign(dot(n, c)) * n[k] for k in range(3))  # from a towards b
         n_b = tuple(-dot(cols[k], n) for k in range(3))  # from b towards a, in b's frame (n_b[m] = 0)
         u = tuple(2 * g[m][k] for k in range(3))
         inv_uu = _inverse(4 * hb[m] * hb[m])
-        for edge_a in _support_edges(n, i, ha):
-            for edge_b in _support_edges(n_b, m, hb):
-                # b's edge from its start point (in a's frame), relative to a's edge midpoint
-                start = tuple(
-                    c[k] + sum(edge_b[l] * cols[l][k] for l in range(3) if l != m) - g[m][k] - edge_a[k]
-                    for k in range(3)
-                )
-                code = 16 + 12 * _edge_code(edge_a, i) + _edge_code(edge_b, m)
-                candidates.append((_segment_edge(start, u, inv_uu, i, ha[i]), code))
+
+        def in_a(edge_b, m=m):  # b's edge midpoint (b's frame, its axis m zero) in a's frame
+            return tuple(c[k] + sum(edge_b[l] * cols[l][k] for l in range(3) if l != m) for k in range(3))
+
+        mid_a, mid_b = _support_edge(n, i, ha), _support_edge(n_b, m, hb)  # by the signs alone, for ties
+        edge_a = _support_edge(n, i, ha, in_a(mid_b))
+        edge_b = _support_edge(n_b, m, hb, to_frame(cols, sub(mid_a, c)))
+        start = tuple(in_a(edge_b)[k] - g[m][k] - edge_a[k] for k in range(3))  # b's edge start, from a's edge midpoint
+        code = 16 + 12 * _edge_code(edge_a, i) + _edge_code(edge_b, m)
+        candidates.append((_segment_edge(start, u, inv_uu, i, ha[i]), code))
+    candidates += _faces_apart(cols, _box_face_separations(ha, hb, cols, c))
     sq, code = _best(candidates, jnp.less)
     return sqrt0(sq), code
+
+
+def _corners(ha: Vec, hb: Vec, cols: tuple[Vec, Vec, Vec], c: Vec) -> list[tuple[jax.Array, jax.Array | int]]:
+    """The corner candidates of :func:`_box_box_closest` (boxes as :func:`_relative`): squared distances and codes."""
+    cb = to_frame(cols, c)
+    out: list[tuple[jax.Array, jax.Array | int]] = []
+    for s in itertools.product((-1, 1), repeat=3):
+        corner_b = tuple(c[k] + sum(s[m] * hb[m] * cols[m][k] for m in range(3)) for k in range(3))
+        out.append((_clamp(corner_b, ha)[0], 2 * _corner_code(s)))
+        corner_a = tuple(sum(s[i] * ha[i] * cols[m][i] for i in range(3)) - cb[m] for m in range(3))  # in b's frame
+        out.append((_clamp(corner_a, hb)[0], 2 * _corner_code(s) + 1))
+    return out
+
+
+#: The first code of the face-face candidates of :func:`_box_box_closest` (after the 16 corners and 144 edge pairs).
+_FACES = 16 + 144
+
+
+def _faces_apart(cols: tuple[Vec, Vec, Vec], seps: list[jax.Array]) -> list[tuple[jax.Array, jax.Array]]:
+    """The face-face candidates of two boxes: code ``_FACES + 3 j + l`` (``cols``: ``b``'s axes in ``a``'s
+    frame; ``seps``: :func:`_box_face_separations`).
+
+    Where ``a``'s face ``j`` is parallel to ``b``'s face ``l`` (within :data:`TIE`) and the two faces
+    overlap seen along their normal (the separations along the other four face axes, the faces'
+    edge normals, are not positive: the separating-axis test in their plane), the distance is the
+    separation along ``e_j``. This is the case that :func:`_support_edge` leaves: both edges of a
+    pair on parallel faces, where the closest pairs are crossings of the faces' borders. The
+    squares are raised by a few roundings, so that a corner or edge candidate of the same value
+    (whose closest points are unique) wins the tie.
+    """
+    eps = jnp.finfo(seps[0].dtype).eps
+    out = []
+    for j, l in itertools.product(range(3), repeat=2):
+        off = [jnp.abs(cols[l][i]) for i in range(3) if i != j]  # b_l's tilt out of e_j
+        parallel = jnp.maximum(off[0], off[1]) <= 4 * TIE * eps
+        others = [seps[i] for i in range(3) if i != j] + [seps[3 + m] for m in range(3) if m != l]
+        overlap = functools.reduce(jnp.maximum, others) <= 0
+        sq = jnp.square(seps[j]) * (1 + TIE * eps)
+        out.append((jnp.where(parallel & overlap, sq, jnp.inf), _FACES + 3 * j + l))
+    return out
+
+
+def _faces_closest(ha: Vec, hb: Vec, cols: tuple[Vec, Vec, Vec], c: Vec, code: jax.Array) -> jax.Array:
+    """The corner or edge-pair code (:func:`_box_box_closest`) of a closest pair of the face-face candidate
+    ``code``: the nearest of the corners and of the 16 pairs of an edge of each face (a corner of one
+    face over the other, or two crossing borders)."""
+    j, l = (code - _FACES) // 3, (code - _FACES) % 3
+    dtype = c[0].dtype
+    side_a = _sign(jnp.where(j == 0, c[0], jnp.where(j == 1, c[1], c[2])))  # a's face towards b
+    cb = to_frame(cols, c)
+    side_b = -_sign(jnp.where(l == 0, cb[0], jnp.where(l == 1, cb[1], cb[2])))  # b's face towards a
+
+    def code_of(i, face, face_side, other_side):  # the edge along i of a face with normal axis ``face``
+        positive = lambda axis: jnp.where(axis == face, face_side, other_side) > 0  # noqa: E731
+        return 4 * i + 2 * positive((i + 1) % 3) + positive((i + 2) % 3)
+
+    pairs = _corners(ha, hb, cols, c)
+    for p, q, sa, sb in itertools.product((1, 2), (1, 2), (-1, 1), (-1, 1)):
+        code_a, code_b = code_of((j + p) % 3, j, side_a, sa), code_of((l + q) % 3, l, side_b, sb)
+        pairs.append((_edge_pair(ha, hb, cols, c, code_a, code_b, dtype)[0], 16 + 12 * code_a + code_b))
+    return _best(pairs, jnp.less)[1]
+
+
+def _edge_pair(ha: Vec, hb: Vec, cols, c: Vec, code_a: jax.Array, code_b: jax.Array, dtype):
+    """The squared distance of ``a``'s edge ``code_a`` and ``b``'s ``code_b`` (:func:`_edge_code`), and the
+    closest points, each in units of its box."""
+    edge_a, edge_b = _edge(code_a, dtype), _edge(code_b, dtype)
+    ends_b = [tuple(c[k] + sum(e[m] * hb[m] * cols[m][k] for m in range(3)) for k in range(3)) for e in edge_b]
+    ends_a = [_scale(e, ha) for e in edge_a]
+    s, t = segment_params(*ends_a, *ends_b)
+    gap = sub(lerp(*ends_b, t), lerp(*ends_a, s))
+    return dot(gap, gap), (lerp(*edge_a, s), lerp(*edge_b, t))
 
 
 def _box_box_witness(a: Box, b: Box, code: jax.Array) -> tuple[Vec, Vec]:
     """The closest points of candidate ``code`` (:func:`_box_box_closest`), each in units of its box."""
     ha, hb, cols, c = _relative(a, b)
     dtype = c[0].dtype
+    code = jnp.where(code >= _FACES, _faces_closest(ha, hb, cols, c, code), code)
     corner = _corner(code // 2, dtype)
     in_a = tuple(c[k] + sum(corner[m] * hb[m] * cols[m][k] for m in range(3)) for k in range(3))  # b's corner
     in_b = to_frame(cols, sub(_scale(corner, ha), c))  # a's corner
     corner_b = (_in_units(_clamp(in_a, ha)[1], ha), corner)
     corner_a = (corner, _in_units(_clamp(in_b, hb)[1], hb))
-    edge_a, edge_b = _edge((code - 16) // 12, dtype), _edge((code - 16) % 12, dtype)
-    ends_b = [tuple(c[k] + sum(e[m] * hb[m] * cols[m][k] for m in range(3)) for k in range(3)) for e in edge_b]
-    s, t = segment_params(_scale(edge_a[0], ha), _scale(edge_a[1], ha), *ends_b)
-    edges = (lerp(*edge_a, s), lerp(*edge_b, t))
+    edges = _edge_pair(ha, hb, cols, c, (code - 16) // 12, (code - 16) % 12, dtype)[1]
     return _where(code < 16, _where(code % 2 == 0, corner_b, corner_a), edges)
 
 

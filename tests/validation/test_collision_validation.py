@@ -14,7 +14,7 @@ from _reference import SHAPE_PAIRS as PAIRS
 from _reference import random_fields, shape
 
 import diffkin as dk
-from diffkin.collision import Box, Capsule, Plane, Sphere, distance
+from diffkin.collision import Box, Capsule, Plane, Sphere, _boxes, distance
 from diffkin.collision import _closest as cl
 
 N = 10_000
@@ -159,6 +159,19 @@ def tricky_fields(kind: str, mode: str, rng: np.random.Generator, n: int) -> dic
     turned about z only: parallel top and bottom faces), or ``random``."""
     if mode == "random":
         return random_fields(kind, rng, n)
+    if mode == "crossing faces":  # boxes turned about z, stacked: parallel faces crossing
+        angle = rng.uniform(0, 2 * np.pi, n)
+        if kind == "capsule":  # level segments above or below the boxes
+            mid = np.column_stack([rng.uniform(-0.05, 0.05, (n, 2)), rng.uniform(0, 0.4, n)])
+            half = rng.uniform(0.1, 0.3, (n, 1)) * np.column_stack([np.cos(angle), np.sin(angle), np.zeros(n)])
+            return {"a": mid - half, "b": mid + half, "radius": rng.uniform(0, 0.05, n)}
+        T = np.tile(np.eye(4), (n, 1, 1))
+        T[:, 0, 0], T[:, 0, 1], T[:, 1, 0], T[:, 1, 1] = np.cos(angle), -np.sin(angle), np.sin(angle), np.cos(angle)
+        # squarish, centred near each other: octagons and hexagons of crossings, no corner inside the other
+        h = np.column_stack([rng.uniform(0.1, 0.2, (n, 2)), rng.uniform(0.02, 0.1, n)])
+        T[:, :2, 3] = rng.uniform(-0.05, 0.05, (n, 2))
+        T[:, 2, 3] = rng.uniform(0, 0.4, n)
+        return {"pose": T, "half_extents": h}
     grid = lambda shape: rng.integers(-6, 7, shape) * 0.05  # noqa: E731
     if kind == "capsule":
         a = grid((n, 3)) if mode == "quarter turns" else rng.uniform(-0.5, 0.5, (n, 3))
@@ -178,7 +191,7 @@ def tricky_fields(kind: str, mode: str, rng: np.random.Generator, n: int) -> dic
     return {"pose": T, "half_extents": h}
 
 
-@pytest.mark.parametrize("mode", ["random", "quarter turns", "about z"])
+@pytest.mark.parametrize("mode", ["random", "quarter turns", "about z", "crossing faces"])
 @pytest.mark.parametrize("kind_a", ["capsule", "box"])
 def test_apart_against_every_feature_pair(kind_a, mode):
     """Apart, the closest-feature candidates give the distance of every feature pair to 1e-12 (10,000 pairs),
@@ -189,6 +202,22 @@ def test_apart_against_every_feature_pair(kind_a, mode):
     apart = d + fa.get("radius", 0.0) > 0
     assert 0.2 < np.mean(apart) < 0.99, np.mean(apart)
     np.testing.assert_allclose(d[apart], brute_apart(kind_a, fa, fb)[apart], rtol=0, atol=1e-12)
+
+
+def test_crossing_faces_are_apart_along_their_normal():
+    """Parallel faces crossing without a corner inside each other (the pairs no corner or edge candidate
+    reaches): the distance is the gap between the faces, and the contact normal is theirs (its closest
+    points are a crossing of the two borders)."""
+    rng = np.random.default_rng(6)
+    fa, fb = tricky_fields("box", "crossing faces", rng, 2_000), tricky_fields("box", "crossing faces", rng, 2_000)
+    d, n, p = jax.jit(_boxes.box_box_contact)(shape("box", fa, jnp.float64), shape("box", fb, jnp.float64))
+    gap = np.abs(fb["pose"][:, 2, 3] - fa["pose"][:, 2, 3]) - fa["half_extents"][:, 2] - fb["half_extents"][:, 2]
+    brute = brute_apart("box", fa, fb)
+    faces = np.abs(brute - gap) < 1e-12  # the faces overlap seen along z
+    assert np.sum(faces & (gap > 0)) > 500
+    np.testing.assert_allclose(np.asarray(d)[faces & (gap > 0)], gap[faces & (gap > 0)], rtol=0, atol=1e-12)
+    normal_z = np.abs(np.asarray(n[2]))[faces & (gap > 0)]
+    np.testing.assert_allclose(normal_z, 1.0, rtol=0, atol=1e-9)
 
 
 # ------------------------------------------------------------------------------------ gradients
