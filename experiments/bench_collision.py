@@ -8,9 +8,10 @@ capsule per link fitted to the meshes, the SRDF's pairs ignored as diffkin's: ``
 PyRoki has no box, so each box is its six face half-spaces, as the IK benchmark does: the same
 number of obstacles to check, a cheaper kind). Batch 1, 1,000 and 100,000, float32 and float64; the
 coal loop is timed on 200 configurations and reported per configuration times the batch. Medians
-of 5 warm calls; PyRoki's compile apart (first call). ``--compile``: instead, the seconds to trace, lower and
-compile (at batch 1,000) the value of ``self_distances`` + ``world_distances`` and the gradient of
-their sum with respect to ``q`` (what IK and the tests differentiate).
+of 5 warm calls (batches 1 and 1,000: as many as fill 0.3 s); PyRoki's compile apart (first call).
+``--compile``: instead, the seconds to trace, lower and compile (at batch 1,000) the value of
+``self_distances`` + ``world_distances`` and the gradient of their sum with respect to ``q`` (what
+IK and the tests differentiate).
 
     python experiments/bench_collision.py [--quick] [--compile] [--dtype float32|float64|both]
 """
@@ -181,14 +182,15 @@ def main(argv=None) -> int:
         f = jax.jit(distances(robot, geom, world, dtype))
         for batch in (1, 1000) if args.quick else (1, 1000, 100_000):
             q = rng.uniform(lo, hi, (batch, robot.dof)).astype(dtype)
-            s = median_seconds(f, q, repeats=5, warmup=1, min_time=0.0)
+            min_time = 0.3 if batch < 100_000 else 0.0  # thousands of samples of a fast call: a stable median
+            s = median_seconds(f, q, repeats=5, warmup=1, min_time=min_time)
             peer_cells = "n/a | n/a"
             if peer is not None:
                 qp = jax.numpy.asarray(q)  # the same joints in the same order (its mimic finger follows, as ours)
                 start = time.perf_counter()
                 jax.block_until_ready(peer(qp))
                 first = time.perf_counter() - start
-                p = median_seconds(peer, qp, repeats=5, warmup=0, min_time=0.0)
+                p = median_seconds(peer, qp, repeats=5, warmup=0, min_time=min_time)
                 peer_cells = f"{p:.3g} (compile {first:.1f}) | {p / s:.1f}x"
             coal_cells = f"{coal_s * batch:.3g} | {coal_s * batch / s:.0f}x"
             print(f"| {np.dtype(dtype).name} | {batch:,} | {s:.3g} | {coal_cells} | {peer_cells} |", flush=True)
