@@ -181,7 +181,7 @@ def main(argv=None) -> int:
     for dtype in dtypes:
         f = jax.jit(distances(robot, geom, world, dtype))
         for batch in (1, 1000) if args.quick else (1, 1000, 100_000):
-            q = rng.uniform(lo, hi, (batch, robot.dof)).astype(dtype)
+            q = jax.numpy.asarray(rng.uniform(lo, hi, (batch, robot.dof)).astype(dtype))  # on the device, as PyRoki's
             min_time = 0.3 if batch < 100_000 else 0.0  # thousands of samples of a fast call: a stable median
             s = median_seconds(f, q, repeats=5, warmup=1, min_time=min_time)
             peer_cells = "n/a | n/a"

@@ -507,7 +507,10 @@ def _box_box_witness(a: Box, b: Box, code: jax.Array) -> tuple[Vec, Vec]:
     """The closest points of candidate ``code`` (:func:`_box_box_closest`), each in units of its box."""
     ha, hb, cols, c = _relative(a, b)
     dtype = c[0].dtype
-    code = jnp.where(code >= _FACES, _faces_closest(ha, hb, cols, c, code), code)
+    faces = code >= _FACES  # rare (exactly parallel faces): the search for their closest pair only when needed
+    code = jax.lax.cond(
+        jnp.any(faces), lambda: jnp.where(faces, _faces_closest(ha, hb, cols, c, code), code), lambda: code
+    )
     corner = _corner(code // 2, dtype)
     in_a = tuple(c[k] + sum(corner[m] * hb[m] * cols[m][k] for m in range(3)) for k in range(3))  # b's corner
     in_b = to_frame(cols, sub(_scale(corner, ha), c))  # a's corner
