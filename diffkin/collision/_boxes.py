@@ -447,7 +447,7 @@ def _corners(ha: Vec, hb: Vec, cols: tuple[Vec, Vec, Vec], c: Vec) -> list[tuple
 _FACES = 16 + 144
 
 
-def _faces_apart(cols: tuple[Vec, Vec, Vec], seps: list[jax.Array]) -> list[tuple[jax.Array, jax.Array]]:
+def _faces_apart(cols: tuple[Vec, Vec, Vec], seps: list[jax.Array]) -> list[tuple[jax.Array, jax.Array | int]]:
     """The face-face candidates of two boxes: code ``_FACES + 3 j + l`` (``cols``: ``b``'s axes in ``a``'s
     frame; ``seps``: :func:`_box_face_separations`).
 
@@ -460,7 +460,7 @@ def _faces_apart(cols: tuple[Vec, Vec, Vec], seps: list[jax.Array]) -> list[tupl
     (whose closest points are unique) wins the tie.
     """
     eps = jnp.finfo(seps[0].dtype).eps
-    out = []
+    out: list[tuple[jax.Array, jax.Array | int]] = []
     for j, l in itertools.product(range(3), repeat=2):
         off = [jnp.abs(cols[l][i]) for i in range(3) if i != j]  # b_l's tilt out of e_j
         parallel = jnp.maximum(off[0], off[1]) <= 4 * TIE * eps
@@ -499,8 +499,8 @@ def _edge_pair(ha: Vec, hb: Vec, cols, c: Vec, code_a: jax.Array, code_b: jax.Ar
     ends_b = [tuple(c[k] + sum(e[m] * hb[m] * cols[m][k] for m in range(3)) for k in range(3)) for e in edge_b]
     ends_a = [_scale(e, ha) for e in edge_a]
     s, t = segment_params(*ends_a, *ends_b)
-    gap = sub(lerp(*ends_b, t), lerp(*ends_a, s))
-    return dot(gap, gap), (lerp(*edge_a, s), lerp(*edge_b, t))
+    gap = sub(lerp(ends_b[0], ends_b[1], t), lerp(ends_a[0], ends_a[1], s))
+    return dot(gap, gap), (lerp(edge_a[0], edge_a[1], s), lerp(edge_b[0], edge_b[1], t))
 
 
 def _box_box_witness(a: Box, b: Box, code: jax.Array) -> tuple[Vec, Vec]:
