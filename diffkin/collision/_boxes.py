@@ -124,9 +124,9 @@ def _support_edge(n: Vec, i: int, h: Vec, other: Vec | None = None) -> Vec:
     at ``i = s'``, then the edge's midpoint ``M`` has ``sign M_k = s`` or ``sign M_i = s'`` (a point of
     the cut between the crossings is a mean of them, whose two coordinates cannot both fall short;
     beyond them one coordinate is past the face), so the candidate of axis ``i`` or that of axis ``k``
-    is a closest pair. Two parallel faces crossing without a corner inside each other cross as a
-    plus sign, where every choice is a closest pair. Near a tie the candidate differs from the
-    distance by at most ``2 h_k |n_k| / |n|``.
+    is a closest pair. A tie on both sides (two parallel faces) has no sure choice of edges (two
+    squares crossing as an octagon): the face-face candidate covers it (:func:`_faces_apart`). Near a
+    tie the candidate differs from the distance by at most ``2 h_k |n_k| / |n|``.
     """
     j, k = (i + 1) % 3, (i + 2) % 3
     big_j = jnp.abs(n[j]) >= jnp.abs(n[k])
