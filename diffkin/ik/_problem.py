@@ -178,6 +178,46 @@ class Problem(NamedTuple):
         """Residual, Jacobian and per-term errors ``(k, P)`` at ``x``, from one forward pass."""
         return settle(self.residual(x, jacobian))
 
+    @property
+    def defers(self) -> bool:
+        """Whether a term is deferred: its rows cost more than every other term's together (the
+        clearance), so a search may first iterate without it (:meth:`undeferred`) and check it after
+        (:meth:`deferred_met`)."""
+        return any(getattr(t, "deferred", False) for t in self.terms)
+
+    def undeferred(self) -> Problem:
+        """The problem without its deferred terms."""
+        keep = [i for i, t in enumerate(self.terms) if not getattr(t, "deferred", False)]
+        return self._replace(terms=tuple(self.terms[i] for i in keep), bound=tuple(self.bound[i] for i in keep))
+
+    def deferred_met(self, x: jax.Array) -> jax.Array:
+        """``(P,)`` bool: every deferred term holds at ``x`` (``met(kin, bound)``, exactly)."""
+        kin = Kinematics(self, x)
+        met = [t.met(kin, b) for t, b in zip(self.terms, self.bound, strict=True) if getattr(t, "deferred", False)]
+        return jnp.all(jnp.stack(met), axis=0)
+
+    def padded(self, x: jax.Array, ev: Eval, met: jax.Array) -> Eval:
+        """The evaluation ``ev`` of :meth:`undeferred` at ``x`` as one of this problem, without computing
+        the deferred terms' rows: those rows zero, their errors 0 where ``met`` ``(P,)`` and the largest
+        float elsewhere, and the cost ``inf`` where not ``met`` (such a state ranks below any evaluated
+        one). The deferred terms come last (their rows and errors trail the others')."""
+        deferred = [getattr(t, "deferred", False) for t in self.terms]
+        if sorted(deferred) != deferred:
+            raise ValueError("deferred terms must come after the others")
+        shape = jax.eval_shape(self.evaluate, x)
+        m, k = ev.r.shape[0], ev.pos_err.shape[0]
+        zeros = lambda a, n: jnp.zeros((a.shape[0] - n,) + a.shape[1:], a.dtype)  # noqa: E731
+        err = jnp.broadcast_to(
+            jnp.where(met, 0.0, jnp.finfo(ev.cost.dtype).max), (shape.pos_err.shape[0] - k,) + met.shape
+        )
+        return Eval(
+            jnp.concatenate([ev.r, zeros(shape.r, m)]),
+            jnp.concatenate([ev.J, zeros(shape.J, m)]),
+            jnp.where(met, ev.cost, jnp.inf),
+            jnp.concatenate([ev.pos_err, err.astype(ev.pos_err.dtype)]),
+            jnp.concatenate([ev.rot_err, err.astype(ev.rot_err.dtype)]),
+        )
+
     def screen_cost(self, x: jax.Array) -> jax.Array:
         """``(P,)`` the terms' cheap costs for choosing seeds (one forward pass without Jacobian)."""
         kin = Kinematics(self, x)

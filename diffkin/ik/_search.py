@@ -6,14 +6,16 @@ a floating base is solved) the 12 entries of the root pose ``[p; R row by row]``
 as ``(copies, targets, dof)`` and enter the flat layout in :func:`_run_from` only.
 
 A *problem* (:class:`diffkin.ik._problem.Problem`) provides ``project(x)``, ``retract(x, dx)``,
-``evaluate(x) -> Eval``, ``residual(x) -> Entries`` (the same, not yet computed into arrays) and
-``screen_cost(x)``. The search builds one with
+``evaluate(x) -> Eval``, ``residual(x) -> Entries`` (the same, not yet computed into arrays),
+``screen_cost(x)`` and, for terms it may defer (``defers``), ``undeferred()``, ``deferred_met(x)``
+and ``padded(x, ev, met)``. The search builds one with
 ``build(idx, copies)`` for the targets ``idx``, each repeated ``copies`` times.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partial
 from typing import NamedTuple
 
 import jax
@@ -29,6 +31,7 @@ GROUP = 4  # seeds per target in a round
 # max(n / 32, 8) targets (one compiled loop serves every later round, and small chunks keep its
 # iterations cheap).
 _CHUNK_DIV, _MIN_CHUNK = 32, 8
+_WHOLE_DIV = 4  # rounds with the deferred terms take a quarter of those targets (their iterations cost ~30x)
 _SCREEN = 8  # each random seed is the best (least screening cost) of this many uniform draws
 _JITTER = 0.05  # a polishing round's perturbations: each a step of this fraction towards a random seed
 
@@ -206,10 +209,12 @@ def search(
     """
     dtype, dof = lower.dtype, lower.shape[0]
 
-    def run_from(idx, x, live=None, x_first=None) -> Best:
+    def run_from(idx, x, live=None, x_first=None, defer: bool = False) -> Best:
         """Iterate the states ``x`` ``(copies, m, n_state)`` of the targets ``idx``; the best of each.
 
         ``live`` marks the targets that are not padding of a chunk; ``x_first`` is a warm start.
+        With ``defer``, the seeds iterate without the problem's deferred terms, which are then checked
+        at the best seed of each target only (:meth:`~diffkin.ik._problem.Problem.padded`).
         """
         if x_first is not None:
             x = jnp.concatenate([x_first[None], x], axis=0)
@@ -217,14 +222,21 @@ def search(
         problem = build(idx, copies)
         x = problem.project(x.reshape(copies * m, -1).T)
         live = None if live is None else jnp.tile(live, copies)
-        seeds = _iterate(problem, x, live, method, m, x_first is not None, settings)
+        iterated = problem.undeferred() if defer else problem
+        seeds = _iterate(iterated, x, live, method, m, x_first is not None, settings)
         per_target = seeds.x.reshape(seeds.x.shape[0], copies, m)
-        return _best(seeds, m, rank(idx, per_target))
+        best = _best(seeds, m, rank(idx, per_target))
+        if not defer:
+            return best
+        whole = build(idx, 1)
+        met = whole.deferred_met(best.x)
+        return best._replace(ev=whole.padded(best.x, best.ev, met), success=best.success & met)
 
-    def seeds(idx, round_index, group: int, best=None):
+    def seeds(idx, round_index, group: int, best=None, defer: bool = False):
         """``group`` random seeds per target, ``(group, len(idx), n_state)``, each the best of ``_SCREEN`` draws.
 
         With ``best`` (and ``moves``), joints that move only reached targets keep their best values.
+        With ``defer``, the draws are screened without the deferred terms.
         """
         q = _seed_configs(key, idx, round_index, lower, upper, _SCREEN * group, dtype)
         x = lift(idx, q)
@@ -241,29 +253,34 @@ def search(
             )
             x = jnp.where(keep, near, x)
         problem = build(idx, _SCREEN * group)
+        problem = problem.undeferred() if defer else problem
         cost = problem.screen_cost(problem.project(x.reshape(-1, x.shape[-1]).T)).reshape(_SCREEN, group, -1)
         best = jnp.argmin(cost, axis=0)
         return jnp.take_along_axis(x.reshape((_SCREEN, group) + x.shape[1:]), best[None, ..., None], axis=0)[0]
 
     first_group = min(settings.num_seeds, GROUP)
-    best = run_from(jnp.arange(n), seeds(jnp.arange(n), jnp.zeros(n, jnp.int32), first_group), x_first=first)
     random_rounds = -(-(settings.num_seeds - first_group) // GROUP)
     rounds = 1 + random_rounds + settings.polish
+    # Deferred terms (the clearance) are left out of the first round, which then costs what the
+    # problem without them costs, and of a target's later rounds until its state breaks them.
+    defer = rounds > 1 and build(jnp.arange(1), 1).defers
+    first_seeds = seeds(jnp.arange(n), jnp.zeros(n, jnp.int32), first_group, defer=defer)
+    best = run_from(jnp.arange(n), first_seeds, x_first=first, defer=defer)
     if rounds > 1:
         chunk = min(n, max(_MIN_CHUNK, -(-n // _CHUNK_DIV)))
 
-        def attempt(idx, round_index, live, best):
+        def attempt(idx, round_index, live, best, defer: bool = False):
             """Round ``round_index`` (per target) for the targets ``idx``: random or polishing seeds."""
-            fresh = seeds(idx, round_index, GROUP, best)
+            fresh = seeds(idx, round_index, GROUP, best, defer)
             near = best.x[:, idx].T  # (m, n_state)
             joints = near[:, :dof] + _JITTER * (fresh[1:, :, :dof] - near[:, :dof])
             nearby = jnp.concatenate([joints, jnp.broadcast_to(near[:, dof:], fresh[1:, :, dof:].shape)], axis=-1)
             nearby = jnp.concatenate([near[None], nearby])
             polishing = round_index > random_rounds
-            found = run_from(idx, jnp.where(polishing[:, None], nearby, fresh), live)
+            found = run_from(idx, jnp.where(polishing[:, None], nearby, fresh), live, defer=defer)
             return found._replace(iters=found.iters + jnp.where(polishing, best.iters[idx], 0))
 
-        best = _retry_unsolved(attempt, best, rounds, chunk)
+        best = _retry_unsolved(attempt, best, rounds, chunk, defer)
     return best
 
 
@@ -273,29 +290,42 @@ def follow(problem, x: jax.Array, method, settings: Settings) -> Best:
     return Best(s.x, s.ev, s.success, s.iters)
 
 
-def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int) -> Best:
+def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int, defer: bool = False) -> Best:
     """Rounds ``1 .. rounds - 1`` for every unsolved target, ``chunk`` targets at a time.
 
     Each pass takes the first unsolved targets with rounds left, runs
     ``attempt(idx, round_index, live, best)`` on them (each at its own next round) and keeps
     whatever is better per target. A target's result does not depend on the others: its rounds
     are tried in order, from its own keys and its own best so far.
+
+    With ``defer``, a target's rounds leave the deferred terms out (``attempt(..., defer=True)``: a
+    result that breaks them costs ``inf``) until its best state or a round's result breaks them;
+    its later rounds include them. The passes without them go first; the others take
+    ``chunk / _WHOLE_DIV`` targets at a time (their iterations cost many times more).
     """
     n = best.success.shape[0]
 
     def pending(best, done):
         return ~best.success & (done < rounds)
 
-    def body(state):
-        best, done = state
-        idx = jnp.nonzero(pending(best, done), size=chunk, fill_value=n)[0]
-        live = idx < n
-        safe_idx = jnp.where(live, idx, 0)
-        new = attempt(safe_idx, done[safe_idx], live, best)
-        better = live & (new.success | (new.ev.cost < best.ev.cost[safe_idx]))
-        best = jax.tree.map(
-            lambda old, x: old.at[..., idx].set(jnp.where(better, x, old[..., safe_idx]), mode="drop"), best, new
-        )
-        return best, done.at[idx].add(1, mode="drop")
+    def passes(state, due, size: int, attempt):
+        def body(state):
+            best, done, whole = state
+            idx = jnp.nonzero(due(*state), size=size, fill_value=n)[0]
+            live = idx < n
+            safe_idx = jnp.where(live, idx, 0)
+            new = attempt(safe_idx, done[safe_idx], live, best)
+            better = live & (new.success | (new.ev.cost < best.ev.cost[safe_idx]))
+            best = jax.tree.map(
+                lambda old, x: old.at[..., idx].set(jnp.where(better, x, old[..., safe_idx]), mode="drop"), best, new
+            )
+            whole = whole.at[idx].set(whole[safe_idx] | jnp.isinf(new.ev.cost), mode="drop")
+            return best, done.at[idx].add(1, mode="drop"), whole
 
-    return jax.lax.while_loop(lambda state: jnp.any(pending(*state)), body, (best, jnp.ones(n, jnp.int32)))[0]
+        return jax.lax.while_loop(lambda state: jnp.any(due(*state)), body, state)
+
+    state = (best, jnp.ones(n, jnp.int32), jnp.isinf(best.ev.cost))
+    if defer:
+        state = passes(state, lambda b, d, whole: pending(b, d) & ~whole, chunk, partial(attempt, defer=True))
+        chunk = min(chunk, max(_MIN_CHUNK, chunk // _WHOLE_DIV))
+    return passes(state, lambda b, d, _: pending(b, d), chunk, attempt)[0]

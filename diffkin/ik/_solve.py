@@ -133,10 +133,13 @@ def solve(
             be empty); its error is ``IKResult.com_err`` and success needs it within ``pos_tol``.
         avoid: robots: a :class:`~diffkin.ik.Avoid` (collision geometry, obstacles, margin): the
             robot's shapes are kept apart from the obstacles and (``self_collision``) from each
-            other by one-sided residuals (:mod:`diffkin.ik._terms.avoid`), seeds are screened for
-            clearance, and success also needs the exact clearance ``>= margin``
-            (``IKResult.clearance``). The implicit derivative of ``q`` is that of the targets alone:
-            exact where no distance is within ``margin + 0.01`` m of the obstacles.
+            other by one-sided residuals (:mod:`diffkin.ik._terms.avoid`). Those rows are
+            deferred (they cost ~30x the pose's): seeds iterate without them until a target's best
+            state is on target but not clear, and its later rounds (seeds screened for clearance)
+            keep them. Success also needs the exact clearance ``>= margin`` (``IKResult.clearance``),
+            which a solution may meet without the ``0.01`` m band above it. The implicit derivative
+            of ``q`` is that of the targets alone: exact where no distance is within
+            ``margin + 0.01`` m of the obstacles.
         weights: robots: ``{frame_name: w}`` (``{(a, b): w}`` for a relative target), ``w`` six
             non-negative weights of the ``[v; w]`` error in the target frame (world axes for a
             position target) or a pair

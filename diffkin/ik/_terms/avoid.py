@@ -165,6 +165,10 @@ class AvoidTerm:
     frames: tuple[int, ...]
     slots: tuple[int, ...]
     self_collision: bool
+    #: its rows (every pair's distance and motion) cost far more than a pose target's: a search's
+    #: first round iterates without them and checks the clearance of its results only
+    #: (:meth:`diffkin.ik._problem.Problem.undeferred`); later rounds iterate with them.
+    deferred = True
 
     @classmethod
     def of(cls, avoid: Avoid) -> AvoidTerm:
@@ -213,6 +217,10 @@ class AvoidTerm:
         _, d_self, d_world, _, _ = self._measure(kin, avoid)
         d = d_self + ([] if d_world is None else [d_world.reshape(-1, kin.shape[0])])
         return jnp.min(jnp.concatenate(d), axis=0)
+
+    def met(self, kin, avoid: Avoid) -> jax.Array:
+        """``(P,)`` bool: the clearance is at least the margin (exactly)."""
+        return self.clearance(kin, avoid) >= avoid.margin
 
     def rows(self, kin, avoid: Avoid, jacobian: bool) -> Rows:
         dtype, reach = kin.dtype, avoid.margin + BAND
