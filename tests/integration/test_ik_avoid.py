@@ -8,14 +8,15 @@ a shelf and spheres, every success re-checked by coal on the real meshes (marked
 
 from __future__ import annotations
 
+import os
 import sys
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _reference import BAXTER, ERD, EXPERIMENTS, HANDS, robot_poses
 from _reference import CAPSULE_ARM as ARM
-from _reference import EXPERIMENTS, robot_poses
 
 import diffkin as dk
 from diffkin import _rigid as rg
@@ -264,6 +265,44 @@ def test_panda_among_obstacles_against_coal_on_the_real_meshes():
         assert judged["tight"] == 1.0 and judged["in collision"] == 0.0, (margin, judged)
         clearance = np.asarray(dk.collision.clearance(robot, geom, q[:-1], bench.world_of(scene, jnp.float64)))
         assert np.all(clearance >= margin - 1e-6)
+
+
+@pytest.mark.slow
+def test_baxter_two_hands_clear_of_itself_against_coal():
+    """Baxter of example-robot-data (41 fitted shapes, the SRDF's self pairs), both grippers at the
+    poses of configurations whose shapes clear each other by 3 cm, self-collision only, float32: every
+    target solved at margin 1 cm; at margin 0 too; every success re-checked in float64 (both hands
+    within 1e-5 m / 1e-4 rad) and by coal on the URDF's real collision geometry (no self contact)."""
+    for module in ("pinocchio", "coal", "trimesh"):
+        pytest.importorskip(module)
+    sys.path.insert(0, EXPERIMENTS)
+    import bench_ik_collision as bench
+
+    srdf = os.path.join(ERD, "baxter_description", "srdf", "baxter_manipulation.srdf")
+    robot = dk.load_robot(BAXTER)
+    geom = dk.collision.load(BAXTER, robot, srdf=srdf)
+    real = bench.RealGeometry(BAXTER, robot, geom, None)
+    rng = np.random.default_rng(5)
+    q = rng.uniform(np.asarray(robot.lower), np.asarray(robot.upper), (600, robot.dof))
+    q = q[np.asarray(dk.collision.self_distances(robot, geom, q)).min(axis=-1) >= 0.03][:16]
+    assert len(q) == 16
+    T = np.asarray(dk.fk(robot, q, HANDS))  # (16, 2, 4, 4)
+    targets = {h: jnp.asarray(T[:, k], jnp.float32) for k, h in enumerate(HANDS)}
+    solve = jax.jit(lambda t, margin: dk.ik.solve(robot, t, avoid=dk.ik.Avoid(geom, None, margin=margin)))
+    for margin in (0.01, 0.0):
+        res = solve(targets, jnp.float32(margin))
+        ok = np.asarray(res.success)
+        assert ok.all(), margin
+        solved = np.asarray(res.q, np.float64)
+        reached = np.asarray(dk.fk(robot, solved, HANDS))
+        pos = np.linalg.norm(reached[..., :3, 3] - T[..., :3, 3], axis=-1)
+        rot = np.linalg.norm(
+            np.asarray(dk.se3.so3_log(np.swapaxes(T[..., :3, :3], -1, -2) @ reached[..., :3, :3])), axis=-1
+        )
+        assert pos.max() <= 1e-5 and rot.max() <= 1e-4, (margin, pos.max(), rot.max())
+        assert not real.colliding(solved).any(), margin
+        clearance = np.asarray(dk.collision.self_distances(robot, geom, solved)).min(axis=-1)
+        assert np.all(clearance >= margin - 1e-6), margin
 
 
 def test_self_motion_samples_in_collision_are_not_valid():
