@@ -20,6 +20,26 @@ jax.config.update("jax_enable_x64", True)
 # The CLI's persistent compilation cache stays off in tests (and their subprocesses) unless a test asks.
 os.environ["DIFFKIN_CACHE_DIR"] = "off"
 
+
+def _compilation_cache() -> str | None:
+    """The folder of the test runs' own persistent compilation cache, or ``None``: ``DIFFKIN_TEST_CACHE_DIR``
+    (``off``, empty, ``0``, ``false``, ``no``, ``none``: no cache), else ``$XDG_CACHE_HOME/diffkin/jax-tests``
+    (``~/.cache``), outside the repository."""
+    env = os.environ.get("DIFFKIN_TEST_CACHE_DIR")
+    if env is not None:
+        return None if env.strip().lower() in ("", "0", "off", "false", "no", "none") else env
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "diffkin", "jax-tests")
+
+
+# Most of a test run is XLA compiling: with JAX's persistent cache, a rerun compiles only the programs
+# that changed (keys hold the program, the flags and the versions; at most 4 GiB, least recently used out).
+if (_cache := _compilation_cache()) is not None:
+    jax.config.update("jax_compilation_cache_dir", _cache)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.1)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    jax.config.update("jax_compilation_cache_max_size", 4 * 2**30)
+
 TESTS = Path(__file__).resolve().parent
 if str(TESTS) not in sys.path:
     sys.path.insert(0, str(TESTS))
