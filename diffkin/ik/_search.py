@@ -31,7 +31,9 @@ GROUP = 4  # seeds per target in a round
 # max(n / 32, 8) targets (one compiled loop serves every later round, and small chunks keep its
 # iterations cheap).
 _CHUNK_DIV, _MIN_CHUNK = 32, 8
-_WHOLE_DIV = 4  # rounds with the deferred terms take a quarter of those targets (their iterations cost ~30x)
+# Rounds with the deferred terms (their iterations cost ~30x) take a quarter of those targets, at
+# least 2: few targets need them, and a pass costs its whole chunk, padding included.
+_WHOLE_DIV, _MIN_WHOLE = 4, 2
 _SCREEN = 8  # each random seed is the best (least screening cost) of this many uniform draws
 _JITTER = 0.05  # a polishing round's perturbations: each a step of this fraction towards a random seed
 
@@ -301,7 +303,7 @@ def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int, defer: bool = 
     With ``defer``, a target's rounds leave the deferred terms out (``attempt(..., defer=True)``: a
     result that breaks them costs ``inf``) until its best state or a round's result breaks them;
     its later rounds include them. The passes without them go first; the others take
-    ``chunk / _WHOLE_DIV`` targets at a time (their iterations cost many times more).
+    ``max(chunk / _WHOLE_DIV, _MIN_WHOLE)`` targets at a time (their iterations cost many times more).
     """
     n = best.success.shape[0]
 
@@ -327,5 +329,5 @@ def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int, defer: bool = 
     state = (best, jnp.ones(n, jnp.int32), jnp.isinf(best.ev.cost))
     if defer:
         state = passes(state, lambda b, d, whole: pending(b, d) & ~whole, chunk, partial(attempt, defer=True))
-        chunk = min(chunk, max(_MIN_CHUNK, chunk // _WHOLE_DIV))
+        chunk = max(_MIN_WHOLE, chunk // _WHOLE_DIV)
     return passes(state, lambda b, d, _: pending(b, d), chunk, attempt)[0]
