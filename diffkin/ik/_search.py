@@ -303,7 +303,7 @@ def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int, defer: bool = 
     With ``defer``, a target's rounds leave the deferred terms out (``attempt(..., defer=True)``: a
     result that breaks them costs ``inf``) until its best state or a round's result breaks them;
     its later rounds include them. The passes without them go first; the others take
-    ``max(chunk / _WHOLE_DIV, _MIN_WHOLE)`` targets at a time (their iterations cost many times more).
+    ``chunk / _WHOLE_DIV`` targets at a time, at least ``_MIN_WHOLE`` (their iterations cost far more).
     """
     n = best.success.shape[0]
 
@@ -329,5 +329,5 @@ def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int, defer: bool = 
     state = (best, jnp.ones(n, jnp.int32), jnp.isinf(best.ev.cost))
     if defer:
         state = passes(state, lambda b, d, whole: pending(b, d) & ~whole, chunk, partial(attempt, defer=True))
-        chunk = max(_MIN_WHOLE, chunk // _WHOLE_DIV)
+        chunk = min(chunk, max(_MIN_WHOLE, chunk // _WHOLE_DIV))
     return passes(state, lambda b, d, _: pending(b, d), chunk, attempt)[0]
