@@ -165,9 +165,10 @@ class AvoidTerm:
     frames: tuple[int, ...]
     slots: tuple[int, ...]
     self_collision: bool
-    #: its rows (every pair's distance and motion) cost far more than a pose target's: a search's
-    #: first round iterates without them and checks the clearance of its results only
-    #: (:meth:`diffkin.ik._problem.Problem.undeferred`); later rounds iterate with them.
+    #: its rows (every pair's distance and motion) cost far more than a pose target's: a search
+    #: iterates without them (:meth:`diffkin.ik._problem.Problem.undeferred`) and checks the clearance
+    #: of each target's best state, until that state is on its pose but not clear; from then on that
+    #: target's rounds iterate with them (:func:`diffkin.ik._search._retry_unsolved`).
     deferred = True
 
     @classmethod
