@@ -24,7 +24,7 @@ from jax.custom_derivatives import SymbolicZero
 from diffkin import _trig
 from diffkin._static import is_concrete
 from diffkin._trig import atan2
-from diffkin._xla import materialize
+from diffkin._xla import inverse_sqrt, materialize
 
 Entry = jax.Array | float
 # Three entries, and three rows of three. Variable-length tuple types: the entries are built by
@@ -344,8 +344,10 @@ def so3_log(M: Mat3) -> tuple[Vec3, jax.Array]:
     first = (S[0][0] >= S[1][1]) & (S[0][0] >= S[2][2])
     second = S[1][1] >= S[2][2]
     col = [jnp.where(first, S[i][0], jnp.where(second, S[i][1], S[i][2])) for i in range(3)]
-    norm = jnp.sqrt(jnp.maximum(col[0] * col[0] + col[1] * col[1] + col[2] * col[2], jnp.finfo(theta.dtype).tiny))
-    signed = jnp.where(col[0] * v[0] + col[1] * v[1] + col[2] * v[2] < 0, -theta, theta) / norm
+    inv_norm = inverse_sqrt(
+        jnp.maximum(col[0] * col[0] + col[1] * col[1] + col[2] * col[2], jnp.finfo(theta.dtype).tiny)
+    )
+    signed = jnp.where(col[0] * v[0] + col[1] * v[1] + col[2] * v[2] < 0, -theta, theta) * inv_norm
     near_pi = cos_ < -0.99
     w = tuple(jnp.where(near_pi, signed * col[i], factor * v[i]) for i in range(3))
     return w, theta

@@ -26,7 +26,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from diffkin._xla import materialize
+from diffkin._xla import inverse_sqrt, materialize
 from diffkin.collision._closest import (
     Vec,
     dot,
@@ -53,7 +53,7 @@ def _unit(v: Vec) -> tuple[Vec, jax.Array]:
     """``v / |v|`` and a mask of the axes in use (``|v|`` not vanishingly small)."""
     sq = dot(v, v)
     ok = sq > jnp.sqrt(jnp.finfo(sq.dtype).tiny)
-    inv = 1 / jnp.sqrt(jnp.where(ok, sq, 1))
+    inv = inverse_sqrt(jnp.where(ok, sq, 1))
     return (v[0] * inv, v[1] * inv, v[2] * inv), ok
 
 

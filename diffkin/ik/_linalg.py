@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 
 from diffkin import _rigid as rg
-from diffkin._xla import materialize
+from diffkin._xla import inverse_sqrt, materialize
 
 
 def _cholesky_solve(A: list[list], b: list) -> list:
@@ -21,7 +21,7 @@ def _cholesky_solve(A: list[list], b: list) -> list:
     inv_diag = []
     for j in range(n):
         d = rg.add(A[j][j], *(-rg.mul(L[j][k], L[j][k]) for k in range(j)))
-        inv = 1.0 / jnp.sqrt(jnp.maximum(d, jnp.finfo(jnp.result_type(d)).tiny))
+        inv = inverse_sqrt(jnp.maximum(d, jnp.finfo(jnp.result_type(d)).tiny))
         inv_diag.append(inv)
         for i in range(j + 1, n):
             L[i][j] = rg.mul(rg.add(A[i][j], *(-rg.mul(L[i][k], L[j][k]) for k in range(j))), inv)
