@@ -210,9 +210,7 @@ def self_of_placed(geom: Geometry, shapes, n: int) -> jax.Array:
     blocks = pair_blocks(geom)
     if not blocks:
         return jnp.zeros((0, n), jnp.result_type(float))
-    pieces = jax.lax.optimization_barrier(  # each kind pair a loop of its own (as blocks_joined)
-        [distance(take(shapes[ka], ia), take(shapes[kb], ib)) for _, ka, kb, ia, ib in blocks]
-    )
+    pieces = [distance(take(shapes[ka], ia), take(shapes[kb], ib)) for _, ka, kb, ia, ib in blocks]
     out = jnp.concatenate([jnp.broadcast_to(p, (p.shape[0], n)) for p in pieces], axis=0)
     inverse = np.argsort(np.concatenate([rows for rows, *_ in blocks]))
     return out[inverse] if not np.array_equal(inverse, np.arange(len(inverse))) else out
@@ -255,13 +253,28 @@ def clearance(robot: Robot, geom: Geometry, q, world: World | None = None, base=
     Returns:
         ``(...,)``, metres (``inf`` if there is nothing to measure).
     """
-    d = self_distances(robot, geom, q, base)
-    parts = [d]
-    if world is not None:
-        w = world_distances(robot, geom, q, world, base)
-        parts.append(w.reshape(*w.shape[:-2], -1))
-    every = jnp.concatenate(parts, axis=-1)
-    return jnp.min(every, axis=-1, initial=jnp.inf)
+    check_geometry(robot, geom)
+    if world is not None and not isinstance(world, World):
+        raise TypeError(f"world: expected a diffkin.collision.World or None, got {type(world).__name__}")
+    return smallest_distance(robot, geom, q, world, base)
+
+
+def smallest_distance(robot: Robot, geom: Geometry, q, world: World | None, base=None, self_pairs: bool = True):
+    """:func:`clearance` (arguments checked), over the self pairs only where ``self_pairs``: ``(...,)``.
+
+    One pass per step gives both the self and the world distances, reduced within the step."""
+
+    def smallest(q_, base_):
+        n = q_.shape[0]
+        shapes = batch_last(placed(robot, geom, q_, base_))
+        parts = [self_of_placed(geom, shapes, n)] if self_pairs else []
+        if world is not None:
+            parts.append(world_of_placed(shapes, world, n).reshape(-1, n))
+        if not parts:
+            return jnp.full((n,), jnp.inf, q_.dtype)
+        return jnp.min(jnp.concatenate(parts, axis=0), axis=0, initial=jnp.inf)
+
+    return configurations_in_steps(smallest, q, base, STEP, halves=True)
 
 
 __all__ = ["KINDS", "World", "clearance", "self_distances", "world_distances"]

@@ -125,6 +125,21 @@ def test_blocks_joined_and_steps_along_the_last_axis_keep_values():
         np.testing.assert_array_equal(np.asarray(second), x[:, 0])
 
 
+
+@pytest.mark.parametrize("n", [63, 64, 65, 100])
+def test_configurations_last_in_steps_keep_values(n):
+    """From ``LAST_STEPPED`` configurations an output with the configurations last goes through the
+    stepped loop (two steps, the last overlapping for an odd count): the same values as one call."""
+    from diffkin._xla import LAST_STEPPED, configurations_in_steps
+
+    q = np.random.default_rng(5).normal(size=(n, 3))
+    base = np.tile(np.eye(4), (n, 1, 1)) * np.arange(1, n + 1)[:, None, None]
+    scaled = lambda q_, b_: (q_ * b_[:, :1, 0]).T[None]  # noqa: E731  (1, 3, N): the configurations last
+    fn = jax.jit(lambda q, b: configurations_in_steps(scaled, q, b, 1024, last=True))
+    np.testing.assert_array_equal(np.asarray(fn(q, base)), (q * np.arange(1, n + 1)[:, None])[:, None, :])
+    assert ("while" in fn.lower(q, base).as_text()) == (n >= LAST_STEPPED)
+
+
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 def test_inverse_sqrt_is_one_over_sqrt_without_a_float64_rsqrt(dtype):
     """Values and derivatives of ``1 / sqrt(x)`` (float64 to 2 ulp, float32 to 2e-7 relative) over 400

@@ -32,12 +32,12 @@ from diffkin.collision._robot import (
     World,
     batch_last,
     batch_shape,
+    check_geometry,
     expanded,
     flattened,
     pair_blocks,
-    self_distances,
+    smallest_distance,
     take,
-    world_distances,
     world_of_placed,
 )
 from diffkin.collision._shapes import Box
@@ -89,12 +89,8 @@ class Avoid:
     def clearance(self, robot, q, base=None) -> jax.Array:
         """``(...,)`` metres: the smallest distance this checks at ``q`` ``(..., dof)`` (the self pairs
         when ``self_collision``, every shape to the world), ``inf`` if nothing is checked."""
-        parts = [self_distances(robot, self.geom, q, base)] if self.self_collision else []
-        world = _obstacles(self)
-        if world is not None:
-            w = world_distances(robot, self.geom, q, world, base)
-            parts.append(w.reshape(*w.shape[:-2], -1))
-        return jnp.min(jnp.concatenate(parts, axis=-1), axis=-1, initial=jnp.inf)
+        check_geometry(robot, self.geom)
+        return smallest_distance(robot, self.geom, q, _obstacles(self), base, self.self_collision)
 
 
 def _obstacles(avoid: Avoid) -> World | None:
