@@ -125,7 +125,6 @@ def test_blocks_joined_and_steps_along_the_last_axis_keep_values():
         np.testing.assert_array_equal(np.asarray(second), x[:, 0])
 
 
-
 @pytest.mark.parametrize("n", [63, 64, 65, 100])
 def test_configurations_last_in_steps_keep_values(n):
     """From ``LAST_STEPPED`` configurations an output with the configurations last goes through the
