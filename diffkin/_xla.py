@@ -148,8 +148,8 @@ def blocks_joined(blocks: list[list[jax.Array]], n: int) -> jax.Array:
 #: With ``last``, batches of at least this many configurations go through :func:`in_steps` (in at
 #: least two steps): the configurations' axis is then moved to the front in a kernel of its own,
 #: reading the buffer the loop wrote. In one call XLA fuses that move into the computation, which
-#: then writes across the configurations and is not vectorised (world distances of 1,024 Panda
-#: configurations, float64, one core: 46 -> 14 ms).
+#: then writes across the configurations and is not vectorised (world distances 2.5-4x slower;
+#: docs/performance.md).
 LAST_STEPPED = 64
 
 
