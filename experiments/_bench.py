@@ -60,6 +60,27 @@ def median_seconds(fn, *args, repeats: int = 5, warmup: int = 2, min_time: float
     return statistics.median(times)
 
 
+def median_seconds_interleaved(calls: list, rounds: int = 10, min_time: float = 0.3) -> list[float]:
+    """Median wall times of several ``(fn, args)`` timed in turns, as :func:`median_seconds` each.
+
+    Each round times every call for ``min_time / rounds`` seconds (at least one call), one after the
+    other, so that a slow spell of a shared machine falls on all of them alike instead of on
+    whichever ran then (a call of 0.2 ms measured in separate minutes moved by 50 %).
+    """
+    samples: list[list[float]] = [[] for _ in calls]
+    for fn, args in calls:
+        jax.block_until_ready(fn(*args))
+    for _ in range(rounds):
+        for (fn, args), times in zip(calls, samples, strict=True):
+            total, first = 0.0, True
+            while first or total < min_time / rounds:
+                start = time.perf_counter()
+                jax.block_until_ready(fn(*args))
+                times.append(time.perf_counter() - start)
+                total, first = total + times[-1], False
+    return [statistics.median(times) for times in samples]
+
+
 def page_faults_per_call(fn, *args, calls: int = 10) -> float | None:
     """Mean minor page faults of one warm call of ``fn(*args)`` (``None`` where the OS does not count them).
 

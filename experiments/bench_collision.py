@@ -8,7 +8,8 @@ capsule per link fitted to the meshes, the SRDF's pairs ignored as diffkin's: ``
 PyRoki has no box, so each box is its six face half-spaces, as the IK benchmark does: the same
 number of obstacles to check, a cheaper kind). Batch 1, 1,000 and 100,000, float32 and float64; the
 coal loop is timed on 200 configurations and reported per configuration times the batch. Medians
-of 5 warm calls (batches 1 and 1,000: as many as fill 0.3 s); PyRoki's compile apart (first call).
+of 5 warm calls (batches 1 and 1,000: as many as fill 1 s, diffkin's and PyRoki's calls in turns,
+ten rounds, so that both meet the same spells of a shared machine); PyRoki's compile apart (first call).
 ``--compile``: instead, the seconds to trace, lower and compile (at batch 1,000) the value of
 ``self_distances`` + ``world_distances`` and the gradient of their sum with respect to ``q`` (what
 IK and the tests differentiate).
@@ -29,7 +30,7 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
-from _bench import median_seconds  # noqa: E402
+from _bench import median_seconds, median_seconds_interleaved  # noqa: E402
 
 import diffkin as dk  # noqa: E402
 
@@ -182,16 +183,21 @@ def main(argv=None) -> int:
         f = jax.jit(distances(robot, geom, world, dtype))
         for batch in (1, 1000) if args.quick else (1, 1000, 100_000):
             q = jax.numpy.asarray(rng.uniform(lo, hi, (batch, robot.dof)).astype(dtype))  # on the device, as PyRoki's
-            min_time = 0.3 if batch < 100_000 else 0.0  # thousands of samples of a fast call: a stable median
-            s = median_seconds(f, q, repeats=5, warmup=1, min_time=min_time)
             peer_cells = "n/a | n/a"
+            if batch == 100_000:  # seconds a call: five each
+                s = median_seconds(f, q, repeats=5, warmup=1, min_time=0.0)
             if peer is not None:
                 qp = jax.numpy.asarray(q)  # the same joints in the same order (its mimic finger follows, as ours)
                 start = time.perf_counter()
                 jax.block_until_ready(peer(qp))
                 first = time.perf_counter() - start
-                p = median_seconds(peer, qp, repeats=5, warmup=0, min_time=min_time)
+                if batch == 100_000:
+                    p = median_seconds(peer, qp, repeats=5, warmup=0, min_time=0.0)
+                else:  # thousands of samples of a fast call, the two in turns: stable medians, the same spells
+                    s, p = median_seconds_interleaved([(f, (q,)), (peer, (qp,))], min_time=1.0)
                 peer_cells = f"{p:.3g} (compile {first:.1f}) | {p / s:.1f}x"
+            elif batch < 100_000:
+                s = median_seconds(f, q, repeats=5, warmup=1, min_time=1.0)
             coal_cells = f"{coal_s * batch:.3g} | {coal_s * batch / s:.0f}x"
             print(f"| {np.dtype(dtype).name} | {batch:,} | {s:.3g} | {coal_cells} | {peer_cells} |", flush=True)
     return 0
