@@ -1,4 +1,4 @@
-"""PyRoki's collision-aware IK on a Panda, as a peer for diffkin's benchmarks.
+"""PyRoki's collision-aware IK and trajectory optimisation on a Panda, as a peer for diffkin's benchmarks.
 
 Follows PyRoki's ``examples/pyroki_snippets/_solve_ik_with_collision.py`` (chungmin99/pyroki @ 70b30a5,
 jaxls @ 50a58be): one jaxls least-squares problem per target with PyRoki's own costs and weights
@@ -29,6 +29,7 @@ POSE_WEIGHTS = (5.0, 1.0)  # position, orientation (PyRoki's example)
 LIMIT_WEIGHT, REST_WEIGHT = 100.0, 0.01
 SELF_MARGIN, SELF_WEIGHT = 0.02, 5.0
 WORLD_MARGIN, WORLD_WEIGHT = 0.05, 10.0
+SMOOTH_WEIGHT = 0.1  # consecutive configurations of a path (PyRoki's trajectory example)
 
 
 def _package_handler(urdf_path: str):
@@ -176,6 +177,60 @@ def solve_batch(
         pp, pn = jnp.asarray(n * float(plane[1]), dt), jnp.asarray(n, dt)
     q = _batched_solver()(robot, coll, link_index, target, sph if len(sph) else None, bp, bn, pp, pn)
     return np.asarray(q), list(robot.joints.actuated_names)
+
+
+@functools.cache
+def _path_solver(steps: int):
+    """``jit(vmap(solve one path of steps waypoints))`` of :func:`solve_paths`."""
+    import jax
+    import jax.numpy as jnp
+    import jaxlie
+    import jaxls
+    import pyroki as pk
+    from loguru import logger
+
+    logger.disable("jaxls")
+
+    def solve_one(robot, link_index, targets, q0):
+        path = robot.joint_var_cls(jnp.arange(steps))
+        each = jax.tree.map(lambda x: x[None], robot)  # the robot broadcast over the waypoints
+        costs = [
+            pk.costs.pose_cost(each, path, jaxlie.SE3.from_matrix(targets), link_index[None], *POSE_WEIGHTS),
+            pk.costs.limit_cost(each, path, LIMIT_WEIGHT),
+            pk.costs.rest_cost(path, jnp.asarray(path.default_factory())[None], REST_WEIGHT),
+            pk.costs.smoothness_cost(
+                robot.joint_var_cls(jnp.arange(1, steps)), robot.joint_var_cls(jnp.arange(steps - 1)), SMOOTH_WEIGHT
+            ),
+        ]
+        start = jaxls.VarValues.make((path.with_value(jnp.broadcast_to(q0, (steps, q0.shape[-1]))),))
+        return jaxls.LeastSquaresProblem(costs, [path]).analyze().solve(start, verbose=False)[path]
+
+    return jax.jit(jax.vmap(solve_one, in_axes=(None, None, 0, 0)))
+
+
+def solve_paths(robot: Any, target_link: str, waypoints: np.ndarray, q0: np.ndarray) -> np.ndarray:
+    """PyRoki's trajectory optimisation (``examples/pyroki_snippets/_trajopt.py``'s costs) along given waypoints.
+
+    One jaxls problem per path over all its configurations: the pose of ``target_link`` at every
+    waypoint (PyRoki's IK weights: position 5, orientation 1), soft joint limits (100), the rest pose
+    (0.01) and the difference of consecutive configurations (0.1, the trajectory example's smoothness
+    weight); every configuration starts at ``q0``; jaxls' defaults (Levenberg-Marquardt, conjugate
+    gradients, at most 100 iterations). The example's own start/end constraints and collision sweeps
+    are left out: here every waypoint is a target. ``jax.vmap`` over the paths.
+
+    Args:
+        waypoints: ``(P, T, 4, 4)`` poses of ``target_link``.
+        q0: ``(P, dof)`` start configurations in PyRoki's actuated joint order.
+
+    Returns:
+        ``(P, T, dof)`` configurations (float32 unless the caller enabled ``jax_enable_x64``).
+    """
+    import jax.numpy as jnp
+
+    dt = jnp.zeros(()).dtype
+    link_index = jnp.asarray(robot.links.names.index(target_link), jnp.int32)
+    solve = _path_solver(int(waypoints.shape[1]))
+    return np.asarray(solve(robot, link_index, jnp.asarray(waypoints, dt), jnp.asarray(q0, dt)))
 
 
 def _example_robot_data_panda() -> tuple[str, str]:

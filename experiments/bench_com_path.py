@@ -9,7 +9,9 @@
    ``max_step=0.1`` rad, against solving the 100,000 waypoints independently with ``dk.ik.solve``:
    time (median of warm calls, compile separately), waypoint success, paths without a failed
    waypoint, and jumps (consecutive waypoints whose solutions differ by more than ``max_step``
-   in some joint).
+   in some joint). With PyRoki installed (experiments/README.md), its trajectory optimisation's
+   costs along the first 100 of the same paths (``_pyroki_peer.solve_paths``): one least-squares
+   problem per path, every waypoint a pose target, consecutive configurations kept close.
 
     python experiments/bench_com_path.py [--quick]
 """
@@ -136,6 +138,57 @@ def bench_paths(n: int, T: int) -> list[str]:
     ]
 
 
+#: Paths PyRoki solves (the first of the benchmark's): about 0.3 s a path on 2 CPU cores.
+PYROKI_PATHS = 100
+
+
+def waypoint_errors(chain, q: np.ndarray, paths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Position (m) and rotation (rad) errors ``(P, T)`` of the flange at ``q`` against ``paths``.
+
+    The angle of ``R^T R_target`` from its sine and cosine together (``atan2``), which stays accurate for
+    small angles where ``arccos`` of the trace loses them (float32 FK: 1e-7 in the trace is 5e-4 rad)."""
+    T = np.asarray(dk.fk(chain, jnp.asarray(q)), np.float64)
+    pos = np.linalg.norm(T[..., :3, 3] - paths[..., :3, 3], axis=-1)
+    E = np.einsum("...ji,...jk->...ik", T[..., :3, :3], paths[..., :3, :3])
+    sin = 0.5 * np.linalg.norm(
+        np.stack([E[..., 2, 1] - E[..., 1, 2], E[..., 0, 2] - E[..., 2, 0], E[..., 1, 0] - E[..., 0, 1]]), axis=0
+    )
+    return pos, np.arctan2(sin, (np.trace(E, axis1=-2, axis2=-1) - 1) / 2)
+
+
+def bench_paths_pyroki(n: int, T: int) -> list[str]:
+    """PyRoki's trajectory optimisation along the first ``PYROKI_PATHS`` of the same paths (``_pyroki_peer``),
+    or no row without PyRoki. Its flange (``panda_link8`` of example-robot-data's URDF) is diffkin's
+    Panda's end effector to 1e-15; the finger joint starts at 0.02 m."""
+    try:
+        from _pyroki_peer import _example_robot_data_panda, panda_robot, solve_paths
+    except ImportError:
+        return []
+    try:
+        robot, _ = panda_robot(_example_robot_data_panda()[0])
+    except ImportError:
+        return []
+    chain = dk.robots.panda()
+    paths, q_start = panda_paths(n, T, np.random.default_rng(1))
+    k = min(PYROKI_PATHS, n)
+    paths, q0 = paths[:k], np.concatenate([q_start[:k], np.full((k, 1), 0.02)], axis=1)
+    start = time.perf_counter()
+    q = solve_paths(robot, "panda_link8", paths, q0)
+    compile_s = time.perf_counter() - start
+    warm = median_seconds(lambda: solve_paths(robot, "panda_link8", paths, q0), repeats=1, warmup=0, min_time=0.0)
+    q = q[..., : chain.dof]
+    pos, rot = waypoint_errors(chain, q, paths)
+    lo, hi = np.asarray(chain.lower), np.asarray(chain.upper)
+    within = np.all((q >= lo) & (q <= hi), axis=-1)
+    ok = (pos <= 1e-5) & (rot <= 1e-4) & within
+    near = (pos <= 5e-3) & (rot <= 0.05) & within
+    return [
+        f"| PyRoki trajectory optimisation (5 mm / 0.05 rad: {100 * float(near.mean()):.2f} %) | {k:,} x {T} | "
+        f"{warm:.3f} | {compile_s:.1f} | {100 * float(ok.mean()):.2f} % | {100 * float(ok.all(axis=1).mean()):.1f} % | "
+        f"{jumps(q)} | {float(np.abs(np.diff(q, axis=1)).max()):.3f} |"
+    ]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small batches (a smoke run)")
@@ -159,7 +212,8 @@ def main() -> None:
         "jumps | largest step (rad) |"
     )
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
-    for row in bench_paths(n, T):
+    jax.config.update("jax_enable_x64", False)  # float32 throughout, as a float32 user runs it (PyRoki's jaxls too)
+    for row in bench_paths(n, T) + bench_paths_pyroki(n, T):
         print(row, flush=True)
 
 
