@@ -32,6 +32,7 @@ jax.config.update("jax_enable_x64", True)
 from _bench import busy_note, machine_line, median_seconds, random_configs  # noqa: E402
 
 import diffkin as dk  # noqa: E402
+from diffkin import se3  # noqa: E402
 
 MAX_STEP = 0.1
 
@@ -142,18 +143,13 @@ def bench_paths(n: int, T: int) -> list[str]:
 PYROKI_PATHS = 100
 
 
-def waypoint_errors(chain, q: np.ndarray, paths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Position (m) and rotation (rad) errors ``(P, T)`` of the flange at ``q`` against ``paths``.
-
-    The angle of ``R^T R_target`` from its sine and cosine together (``atan2``), which stays accurate for
-    small angles where ``arccos`` of the trace loses them (float32 FK: 1e-7 in the trace is 5e-4 rad)."""
-    T = np.asarray(dk.fk(chain, jnp.asarray(q)), np.float64)
-    pos = np.linalg.norm(T[..., :3, 3] - paths[..., :3, 3], axis=-1)
-    E = np.einsum("...ji,...jk->...ik", T[..., :3, :3], paths[..., :3, :3])
-    sin = 0.5 * np.linalg.norm(
-        np.stack([E[..., 2, 1] - E[..., 1, 2], E[..., 0, 2] - E[..., 2, 0], E[..., 1, 0] - E[..., 0, 1]]), axis=0
-    )
-    return pos, np.arctan2(sin, (np.trace(E, axis1=-2, axis2=-1) - 1) / 2)
+def waypoint_errors(q: np.ndarray, paths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Position (m) and rotation (rad) errors ``(P, T)`` of the Panda's flange at ``q`` against ``paths`` (float64
+    FK, the angle by ``se3.rotation_angle``, accurate near 0 where ``arccos`` of the trace is not)."""
+    with jax.enable_x64(True):
+        T = np.asarray(dk.fk(dk.robots.panda(), jnp.asarray(q, jnp.float64)))
+        rot = np.asarray(se3.rotation_angle(np.swapaxes(T[..., :3, :3], -1, -2) @ paths[..., :3, :3]))
+    return np.linalg.norm(T[..., :3, 3] - paths[..., :3, 3], axis=-1), rot
 
 
 def bench_paths_pyroki(n: int, T: int) -> list[str]:
@@ -177,7 +173,7 @@ def bench_paths_pyroki(n: int, T: int) -> list[str]:
     compile_s = time.perf_counter() - start
     warm = median_seconds(lambda: solve_paths(robot, "panda_link8", paths, q0), repeats=1, warmup=0, min_time=0.0)
     q = q[..., : chain.dof]
-    pos, rot = waypoint_errors(chain, q, paths)
+    pos, rot = waypoint_errors(q, paths)
     lo, hi = np.asarray(chain.lower), np.asarray(chain.upper)
     within = np.all((q >= lo) & (q <= hi), axis=-1)
     ok = (pos <= 1e-5) & (rot <= 1e-4) & within
