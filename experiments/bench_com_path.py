@@ -156,13 +156,11 @@ def bench_paths_pyroki(n: int, T: int) -> list[str]:
     """PyRoki's trajectory optimisation along the first ``PYROKI_PATHS`` of the same paths (``_pyroki_peer``),
     or no row without PyRoki. Its flange (``panda_link8`` of example-robot-data's URDF) is diffkin's
     Panda's end effector to 1e-15; the finger joint starts at 0.02 m."""
-    try:
-        from _pyroki_peer import _example_robot_data_panda, panda_robot, solve_paths
-    except ImportError:
-        return []
+    from _pyroki_peer import _example_robot_data_panda, panda_robot, solve_paths  # PyRoki imported inside
+
     try:
         robot, _ = panda_robot(_example_robot_data_panda()[0])
-    except ImportError:
+    except ImportError:  # PyRoki (or yourdfpy) not installed
         return []
     chain = dk.robots.panda()
     paths, q_start = panda_paths(n, T, np.random.default_rng(1))
