@@ -40,6 +40,16 @@ except ImportError:
 PK_IK_TOL = (1e-3, 1e-2)  # pytorch-kinematics' default IK tolerances: 1 mm, 0.01 rad
 
 
+def example_robot_data() -> str:
+    """The ``robots`` folder of example-robot-data: ``$EXAMPLE_ROBOT_DATA`` (a copy of it, as carried to a
+    machine without the validation install) if set, else the installed package's."""
+    robots = os.environ.get("EXAMPLE_ROBOT_DATA")
+    if robots is not None:
+        return os.path.abspath(robots)
+    share = importlib.metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share")
+    return os.path.join(str(share), "example-robot-data", "robots")
+
+
 def median_seconds(fn, *args, repeats: int = 5, warmup: int = 2, min_time: float = 0.3) -> float:
     """Median wall time of ``fn(*args)`` (outputs blocked on), after ``warmup`` untimed calls.
 

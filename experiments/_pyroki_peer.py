@@ -234,10 +234,9 @@ def solve_paths(robot: Any, target_link: str, waypoints: np.ndarray, q0: np.ndar
 
 
 def _example_robot_data_panda() -> tuple[str, str]:
-    import pinocchio
+    from _bench import example_robot_data
 
-    share = os.path.join(os.path.dirname(pinocchio.__file__), *[".."] * 4, "share")
-    root = os.path.abspath(os.path.join(share, "example-robot-data", "robots", "panda_description"))
+    root = os.path.join(example_robot_data(), "panda_description")
     return os.path.join(root, "urdf", "panda.urdf"), os.path.join(root, "srdf", "panda.srdf")
 
 

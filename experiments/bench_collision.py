@@ -30,21 +30,14 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
-from _bench import median_seconds, median_seconds_interleaved  # noqa: E402
+from _bench import example_robot_data, median_seconds, median_seconds_interleaved  # noqa: E402
 
 import diffkin as dk  # noqa: E402
 
 
 def panda():
-    """The Panda of example-robot-data: its robot, URDF and SRDF paths. The files come from
-    ``$EXAMPLE_ROBOT_DATA`` (a copy of its ``robots`` folder) if set, else from the validation install."""
-    robots = os.environ.get("EXAMPLE_ROBOT_DATA")
-    if robots is None:
-        import pinocchio  # example-robot-data comes with the validation install
-
-        share = os.path.join(os.path.dirname(os.path.dirname(pinocchio.__file__)), "..", "..", "..", "share")
-        robots = os.path.join(share, "example-robot-data", "robots")
-    root = os.path.abspath(os.path.join(robots, "panda_description"))
+    """The Panda of example-robot-data (:func:`_bench.example_robot_data`): its robot, URDF and SRDF paths."""
+    root = os.path.join(example_robot_data(), "panda_description")
     urdf, srdf = os.path.join(root, "urdf", "panda.urdf"), os.path.join(root, "srdf", "panda.srdf")
     robot = dk.load_robot(urdf)
     return robot, urdf, srdf

@@ -29,7 +29,7 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
-from _bench import busy_note, machine_line, median_seconds, random_configs  # noqa: E402
+from _bench import busy_note, example_robot_data, machine_line, median_seconds, random_configs  # noqa: E402
 
 import diffkin as dk  # noqa: E402
 from diffkin import se3  # noqa: E402
@@ -38,12 +38,9 @@ MAX_STEP = 0.1
 
 
 def talos():
-    from importlib import metadata
-
     import pinocchio as pin
 
-    root = metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data/robots")
-    path = os.path.join(str(root), "talos_data/robots/talos_full_v2.urdf")
+    path = os.path.join(example_robot_data(), "talos_data/robots/talos_full_v2.urdf")
     return dk.load_robot(path, floating=True), pin.buildModelFromUrdf(path, pin.JointModelFreeFlyer())
 
 
@@ -187,6 +184,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small batches (a smoke run)")
     parser.add_argument("--only", choices=("com", "paths"), help="one of the two tables")
+    parser.add_argument("--com-batches", type=int, nargs="+", help="the centre of mass's batches (1,000 and 100,000)")
     args = parser.parse_args()
     batch, (n, T) = (1_000, (50, 20)) if args.quick else (100_000, (1_000, 100))
     print(machine_line())
@@ -195,7 +193,7 @@ def main() -> None:
     if args.only != "paths":
         print("| robot | batch | diffkin com + com_jacobian (ms) | Pinocchio loop (ms) | speed-up | compile (s) |")
         print("| --- | --- | --- | --- | --- | --- |")
-        for b in sorted({1_000, batch}):
+        for b in args.com_batches or sorted({1_000, batch}):
             for row in bench_com(b):
                 print(row, flush=True)
         print()
