@@ -134,9 +134,10 @@ def solve(
         avoid: robots: a :class:`~diffkin.ik.Avoid` (collision geometry, obstacles, margin): the
             robot's shapes are kept apart from the obstacles and (``self_collision``) from each
             other by one-sided residuals (:mod:`diffkin.ik._terms.avoid`). Those rows are
-            deferred (they cost ~30x the pose's): seeds iterate without them until a target's best
-            state is on target but not clear, and its later rounds (seeds screened for clearance)
-            keep them. Success also needs the exact clearance ``>= margin`` (``IKResult.clearance``),
+            deferred (they cost ~30x the pose's): seeds iterate without them and each round's best
+            state is checked for clearance; a target whose states are on target but not clear gets
+            them in its last random round and its polishing rounds (seeds screened for clearance).
+            Success also needs the exact clearance ``>= margin`` (``IKResult.clearance``),
             which a solution may meet without the ``0.01`` m band above it. The implicit derivative
             of ``q`` is that of the targets alone: exact where no distance is within
             ``margin + 0.01`` m of the obstacles.

@@ -163,8 +163,8 @@ class AvoidTerm:
     self_collision: bool
     #: its rows (every pair's distance and motion) cost far more than a pose target's: a search
     #: iterates without them (:meth:`diffkin.ik._problem.Problem.undeferred`) and checks the clearance
-    #: of each target's best state, until that state is on its pose but not clear; from then on that
-    #: target's rounds iterate with them (:func:`diffkin.ik._search._retry_unsolved`).
+    #: of each round's best state; a target whose states are on its pose but not clear iterates with
+    #: them in its last rounds (:func:`diffkin.ik._search._retry_unsolved`).
     deferred = True
 
     @classmethod
