@@ -26,7 +26,7 @@ import xml.etree.ElementTree as ET
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _bench import median_seconds
+from _bench import example_robot_data, median_seconds
 from bench_collision import panda
 
 import diffkin as dk
@@ -170,10 +170,7 @@ def targets_of(robot, geom, world64, n: int, rng) -> np.ndarray:
 def baxter(n: int) -> None:
     """Baxter's two grippers (self-collision only, SRDF pairs), float32: ``avoid`` against no avoid, the real
     geometry (coal) judging self-collision; targets from configurations whose shapes clear each other by 3 cm."""
-    import pinocchio
-
-    share = os.path.join(os.path.dirname(os.path.dirname(pinocchio.__file__)), "..", "..", "..", "share")
-    root = os.path.abspath(os.path.join(share, "example-robot-data", "robots", "baxter_description"))
+    root = os.path.join(example_robot_data(), "baxter_description")
     urdf, srdf = os.path.join(root, "urdf", "baxter.urdf"), os.path.join(root, "srdf", "baxter_manipulation.srdf")
     robot = dk.load_robot(urdf)
     geom = C.load(urdf, robot, srdf=srdf)
