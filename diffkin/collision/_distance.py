@@ -128,6 +128,10 @@ def distance(shape_a, shape_b) -> jax.Array:
     return _TABLE[kinds[::-1]](shape_b, shape_a)
 
 
+#: the pairs of kinds whose :func:`lower_bound` is cheaper than their :func:`distance`
+BOUNDED = frozenset({(Box, Box), (Capsule, Box), (Box, Capsule)})
+
+
 def lower_bound(a, b) -> jax.Array:
     """A lower bound of :func:`distance` that is much cheaper for box-box and capsule-box (the face
     axes' separation); the distance itself for the other pairs (already cheap)."""

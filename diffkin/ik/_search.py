@@ -31,9 +31,10 @@ GROUP = 4  # seeds per target in a round
 # max(n / 32, 8) targets (one compiled loop serves every later round, and small chunks keep its
 # iterations cheap).
 _CHUNK_DIV, _MIN_CHUNK = 32, 8
-# Rounds with the deferred terms (their iterations cost ~30x) take a quarter of those targets, at
-# least 2: few targets need them, and a pass costs its whole chunk, padding included.
-_WHOLE_DIV, _MIN_WHOLE = 4, 2
+# Rounds with the deferred terms (their iterations cost ~30x) take 2 targets at a time: few targets
+# need them (most find a clear branch in a random round without them), and a pass costs its whole
+# size, padding included (docs/performance.md, "Collision-aware IK").
+_WHOLE = 2
 _SCREEN = 8  # each random seed is the best (least screening cost) of this many uniform draws
 _JITTER = 0.05  # a polishing round's perturbations: each a step of this fraction towards a random seed
 
@@ -305,8 +306,7 @@ def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int, defer: bool = 
     result that breaks them costs ``inf``); once its best state or a round's result has broken them,
     its rounds from ``whole_from`` on include them (another random round without them often finds a
     clear branch: docs/performance.md, "Collision-aware IK"). The passes without them go first; the
-    others take ``chunk / _WHOLE_DIV`` targets at a time, at least ``_MIN_WHOLE`` (their iterations
-    cost far more).
+    others take ``_WHOLE`` targets at a time (their iterations cost far more).
     """
     n = best.success.shape[0]
 
@@ -334,5 +334,5 @@ def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int, defer: bool = 
         state = passes(
             state, lambda b, d, broke: pending(b, d) & (~broke | (d < whole_from)), chunk, partial(attempt, defer=True)
         )
-        chunk = min(chunk, max(_MIN_WHOLE, chunk // _WHOLE_DIV))
+        chunk = min(chunk, _WHOLE)
     return passes(state, lambda b, d, _: pending(b, d), chunk, attempt)[0]

@@ -26,7 +26,7 @@ import numpy as np
 from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._xla import blocks_joined
-from diffkin.collision._distance import distance, lower_bound, motion
+from diffkin.collision._distance import BOUNDED, distance, lower_bound, motion
 from diffkin.collision._geometry import Geometry, moved
 from diffkin.collision._robot import (
     World,
@@ -40,7 +40,6 @@ from diffkin.collision._robot import (
     take,
     world_of_placed,
 )
-from diffkin.collision._shapes import Box
 from diffkin.ik._terms import Rows
 
 #: metres above the margin where the residual starts (a centimetre: the size of a gripper finger).
@@ -102,13 +101,14 @@ def _near_motion(a, b, reach: jax.Array) -> tuple[jax.Array, jax.Array, jax.Arra
     """:func:`motion` of shapes ``a``, ``b`` (batch axes broadcast to ``B``) where it matters: ``(d, W_a, W_b)``,
     ``d`` ``B``, the wrenches ``B + (6,)``.
 
-    Box pairs first get a cheap lower bound of their distance (:func:`lower_bound`); where it is at
-    least ``reach`` the residual and its row are zero, so ``d`` is that bound and the wrenches are
-    zero. The exact motion is computed for the others only, gathered (at most ``1 / NEAR_SHARE`` of
-    the pairs; all pairs when more are near).
+    Box-box and capsule-box pairs (:data:`BOUNDED`) first get a cheap lower bound of their distance
+    (:func:`lower_bound`); where it is at least ``reach`` the residual and its row are zero, so ``d``
+    is that bound and the wrenches are zero. The exact motion is computed for the others only,
+    gathered (at most ``1 / NEAR_SHARE`` of the pairs; all pairs when more are near). The other
+    kinds' motion is as cheap as a bound: computed for every pair.
     """
     batch = tuple(jnp.broadcast_shapes(batch_shape(a), batch_shape(b)))
-    if not isinstance(a, Box) and not isinstance(b, Box):
+    if (type(a), type(b)) not in BOUNDED:
         d, Wa, Wb = motion(a, b)
         return jnp.broadcast_to(d, batch), jnp.broadcast_to(Wa, batch + (6,)), jnp.broadcast_to(Wb, batch + (6,))
     total = int(np.prod(batch))
