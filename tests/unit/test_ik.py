@@ -175,9 +175,11 @@ def test_seed_draws_are_uniform_independent_and_per_target():
     target's draws depend on its own index and round only (not on the rest of the batch), and on the key."""
     from diffkin.ik import _uniform
 
+    # jitted, as inside the solver: one compilation per key type and batch shape (eagerly, ~45 small ones)
+    uniform = jax.jit(_uniform.uniform, static_argnums=(3, 4, 5))
     key = jax.random.key(3)
     targets, rounds = jnp.arange(2000), jnp.zeros(2000, jnp.int32)
-    u = np.asarray(_uniform.uniform(key, targets, rounds, 8, 7, jnp.float64))
+    u = np.asarray(uniform(key, targets, rounds, 8, 7, jnp.float64))
     assert u.shape == (8, 2000, 7) and u.min() >= 0.0 and u.max() < 1.0
     assert np.all(u * 2**24 == np.round(u * 2**24))  # 24 bits, exact
     flat = u.reshape(-1, 7)  # 16,000 draws of 7 joints
@@ -194,12 +196,12 @@ def test_seed_draws_are_uniform_independent_and_per_target():
     corr = np.corrcoef(np.concatenate([u[0], u[1], np.roll(u[0], 1, axis=0)], axis=1).T)
     assert np.max(np.abs(corr - np.eye(21))) < 0.1
     # per target: targets 5 and 1999 alone give the same draws as inside the batch; another round or key differs
-    alone = np.asarray(_uniform.uniform(key, jnp.asarray([1999, 5]), jnp.zeros(2, jnp.int32), 8, 7, jnp.float64))
+    alone = np.asarray(uniform(key, jnp.asarray([1999, 5]), jnp.zeros(2, jnp.int32), 8, 7, jnp.float64))
     np.testing.assert_array_equal(alone[:, 0], u[:, 1999])
     np.testing.assert_array_equal(alone[:, 1], u[:, 5])
-    other_round = np.asarray(_uniform.uniform(key, targets, rounds + 1, 8, 7, jnp.float64))
-    other_key = np.asarray(_uniform.uniform(jax.random.key(4), targets, rounds, 8, 7, jnp.float64))
-    raw_key = np.asarray(_uniform.uniform(jax.random.PRNGKey(3), targets, rounds, 8, 7, jnp.float64))
+    other_round = np.asarray(uniform(key, targets, rounds + 1, 8, 7, jnp.float64))
+    other_key = np.asarray(uniform(jax.random.key(4), targets, rounds, 8, 7, jnp.float64))
+    raw_key = np.asarray(uniform(jax.random.PRNGKey(3), targets, rounds, 8, 7, jnp.float64))
     for v in (other_round, other_key):
         assert np.mean(v == u) < 1e-3
     np.testing.assert_array_equal(raw_key, u)  # a raw key holds the same words as the typed one

@@ -27,6 +27,12 @@ _ik_jacobians = jax.jit(
 )
 _sample = jax.jit(srs.sample_self_motion, static_argnums=2)
 SAMPLES = 2000
+N32 = 2000  # float32 ik problems per call of `ik32`
+# Eager dk.fk, dk.link_poses and dk.jacobian (the DH references) compile a few dozen small programs per
+# batch shape, mostly shared among the three: the tests call them on REF configurations, dk.jacobian on
+# REF_JACOBIAN (dq/dpsi against finite differences is checked on 200: more reach ill-conditioned ones).
+REF = 500
+REF_JACOBIAN = 200
 
 
 def sample(arm, T, *, key=None, gc=None):
@@ -66,6 +72,15 @@ def fk(arm, q):
     return batched(_fk, arm, q, core=(1,))[0]
 
 
+def ik32(arm, T, psi, gc):
+    """``_ik`` of float32 ``T (n, 4, 4)`` and ``psi (n,)`` with float64 ``gc (n, 3)``, ``n <= N32``, padded to
+    ``N32`` problems: one float32 compilation."""
+    pad = lambda x, dtype: np.resize(np.asarray(x, dtype), (N32,) + np.shape(x)[1:])  # noqa: E731
+    q, valid = _ik(arm, pad(T, np.float32), pad(psi, np.float32), pad(gc, np.float64))
+    n = len(psi)
+    return q[:n], valid[:n]
+
+
 def ik_jacobians(arm, T, psi, gc):
     """``dq/dT (..., 7, 4, 4)`` and ``dq/dpsi (..., 7)``."""
     return batched(_ik_jacobians, arm, T, psi, gc, core=(2, 0, 1))
@@ -94,7 +109,7 @@ def test_model_matches_table_robots_and_shipped_urdf(name):
     np.testing.assert_allclose(lengths, TABLE[name], atol=1e-15)
     np.testing.assert_allclose(arm.upper, LIMITS, atol=1e-15)
     np.testing.assert_allclose(arm.lower, -LIMITS, atol=1e-15)
-    q = random_q(arm, 300, seed=1)
+    q = random_q(arm, REF, seed=1)
     T = np.asarray(fk(arm, q))
     urdf = dk.load_urdf(dk.robots.urdf_path(name), f"{name}_link_ee")
     np.testing.assert_allclose(T, dk.fk(getattr(dk.robots, name)(), q), atol=1e-14)
@@ -164,7 +179,7 @@ def test_shimizu_feasible_arm_angles():
 def test_arm_angle_matches_elbow_definition():
     """psi = signed angle between the elbow planes n_ref, n (SRS.md), from the DH link frames."""
     arm = ARMS["iiwa14"]
-    q = random_q(arm, 500, seed=3)
+    q = random_q(arm, REF, seed=3)
     links = np.asarray(dk.link_poses(arm.chain(), q))
     x_s, x_e, x_w = links[:, 1, :3, 3], links[:, 3, :3, 3], links[:, 5, :3, 3]
     x_sw = x_w - x_s
@@ -229,9 +244,9 @@ def test_every_valid_solution_reaches_the_pose_over_the_full_circle(name):
 
 def test_global_configuration_symmetries():
     arm = ARMS["iiwa14"]
-    T = fk(arm, random_q(arm, 50, seed=6))[:, None]
-    psi = np.random.default_rng(7).uniform(-np.pi, np.pi, (50, 1))
-    q, _ = ik(arm, T, psi, ALL_GC)  # (50, 8, 7)
+    T = fk(arm, random_q(arm, REF, seed=6))[:, None]
+    psi = np.random.default_rng(7).uniform(-np.pi, np.pi, (REF, 1))
+    q, _ = ik(arm, T, psi, ALL_GC)  # (REF, 8, 7)
     q = np.asarray(q)
     wrap = lambda x: np.angle(np.exp(1j * x))  # noqa: E731
     # gc2 -> -gc2 (rows 0 and 4): (q1, q2, q3) -> (q1 + pi, -q2, q3 + pi); gc6 likewise (rows 0 and 1).
@@ -250,7 +265,7 @@ def test_global_configuration_symmetries():
 
 def test_dq_dpsi_matches_finite_differences_and_keeps_the_pose():
     arm = ARMS["iiwa14"]
-    q0 = random_q(arm, 200, seed=8)
+    q0 = random_q(arm, REF_JACOBIAN, seed=8)
     T = fk(arm, q0)
     psi, gc = arm_angle(arm, q0)
     _, J = ik_jacobians(arm, T, psi, gc)
@@ -265,15 +280,15 @@ def test_dq_dpsi_matches_finite_differences_and_keeps_the_pose():
 def test_derivative_with_respect_to_the_target_inverts_fk():
     """Moving the target position by dp moves the solution by dq with J_fk dq = [dp; 0]."""
     arm = ARMS["iiwa7"]
-    q0 = random_q(arm, 100, seed=9)
+    q0 = random_q(arm, REF_JACOBIAN, seed=9)
     T = fk(arm, q0)
     psi, gc = arm_angle(arm, q0)
     dq_dT, _ = ik_jacobians(arm, T, psi, gc)
-    dq_dp = dq_dT[..., :3, 3]  # (100, 7, 3)
+    dq_dp = dq_dT[..., :3, 3]  # (REF_JACOBIAN, 7, 3)
     Jfk = np.asarray(dk.jacobian(arm.chain(), q0, method="analytic"))
     expected = np.concatenate([np.eye(3), np.zeros((3, 3))])
     moved = np.einsum("nij,njk->nik", Jfk, dq_dp)
-    np.testing.assert_allclose(moved, np.broadcast_to(expected, (100, 6, 3)), atol=1e-10)
+    np.testing.assert_allclose(moved, np.broadcast_to(expected, moved.shape), atol=1e-10)
 
 
 def test_gradient_with_respect_to_arm_lengths():
@@ -296,10 +311,10 @@ def test_gradient_with_respect_to_arm_lengths():
 
 def test_float32():
     arm = ARMS["iiwa14"]
-    q = random_q(arm, 2000, seed=10)
+    q = random_q(arm, N32, seed=10)
     T = np.asarray(fk(arm, q))
-    psi, gc = arm_angle(arm, q)
-    q32, valid = _ik(arm, T.astype(np.float32), np.asarray(psi, np.float32), gc)
+    psi, gc = arm_angle(arm, q)  # float64 gc: ik casts it to the dtype of T and psi
+    q32, valid = ik32(arm, T, psi, gc)
     assert q32.dtype == jnp.float32 and valid.dtype == jnp.bool_
     q32 = np.asarray(q32, np.float64)
     assert np.all(valid) and np.all(np.isfinite(q32))
@@ -522,8 +537,8 @@ def test_valid_means_valid(dtype):
     """Issue 18: traced gc not +-1, non-rigid or non-finite targets, huge or non-finite psi."""
     arm = ARMS["iiwa14"]
     q_true = np.array([0.4, 0.7, -0.3, -1.1, 0.5, 0.9, 0.2])
-    T = np.asarray(dk.fk(arm.chain(), q_true), np.float64)
-    psi, gc = (np.asarray(x, np.float64) for x in srs.arm_angle(arm, q_true))
+    T = fk(arm, q_true)
+    psi, gc = arm_angle(arm, q_true)
     scaled, skew = T.copy(), T.copy()
     scaled[:3, :3] *= 1.001
     skew[3, :3] = [0.0, 0.1, 0.0]
@@ -545,9 +560,9 @@ def test_valid_means_valid(dtype):
     ]
     targets = np.stack([c[0] for c in cases]).astype(dtype)
     psis = np.array([c[1] for c in cases], dtype)
-    gcs = np.stack([np.broadcast_to(c[2], (3,)) for c in cases]).astype(dtype)
-    # jitted: gc, target and psi are traced (float64: in the module's padded chunk, compiled once)
-    q, valid = ik(arm, targets, psis, gcs) if dtype == np.float64 else _ik(arm, targets, psis, gcs)
+    gcs = np.stack([np.broadcast_to(c[2], (3,)) for c in cases])  # float64: ik casts gc to the dtype of T and psi
+    # jitted: gc, target and psi are traced (in the module's padded batches, compiled once per dtype)
+    q, valid = ik(arm, targets, psis, gcs) if dtype == np.float64 else ik32(arm, targets, psis, gcs)
     q, valid = np.asarray(q), np.asarray(valid)
     assert np.all(np.isfinite(q))
     for i, (_, _, _, expected) in enumerate(cases):
