@@ -137,7 +137,7 @@ def test_base_and_tool_transforms_apply():
     base[:3, :3], base[:3, 3] = _rz(0.3), [0.1, -0.2, 0.3]
     tool[:3, :3], tool[:3, 3] = _rz(-1.1).T, [0.0, 0.05, 0.1]
     moved = chain.replace(base=jnp.asarray(base), tool=jnp.asarray(tool))
-    q = random_q(chain, 20, seed=12)
+    q = random_q(chain, N, seed=12)
     np.testing.assert_allclose(dk.fk(moved, q), base @ np.asarray(dk.fk(chain, q)) @ tool, atol=1e-14)
 
 
@@ -160,11 +160,6 @@ def test_batch_shapes(model, shape):
 def test_jit_vmap_grad_match_eager(model):
     chain = model
     q = jnp.asarray(random_q(chain, 8, seed=14))
-    eager = dk.fk(chain, q)
-    np.testing.assert_allclose(jax.jit(lambda x: dk.fk(chain, x))(q), eager, atol=1e-15)
-    np.testing.assert_allclose(jax.jit(dk.fk)(chain, q), eager, atol=1e-14)  # traced chain: general path
-    np.testing.assert_allclose(jax.vmap(lambda x: dk.fk(chain, x))(q), eager, atol=1e-15)
-    np.testing.assert_allclose(jax.vmap(dk.link_poses, (None, 0))(chain, q), dk.link_poses(chain, q), atol=1e-15)
 
     def per_row(x):
         return jnp.sum(dk.fk(chain, x)[..., :3, 3] ** 2, -1)
@@ -172,7 +167,14 @@ def test_jit_vmap_grad_match_eager(model):
     def loss(x):
         return jnp.sum(per_row(x))
 
-    g, g_jit = jax.grad(loss)(q), jax.jit(jax.grad(loss))(q)
+    # the chain closed over by jit: its poses and gradient in one program (one compile)
+    T_jit, g_jit = jax.jit(lambda x: (dk.fk(chain, x), jax.grad(loss)(x)))(q)
+    eager = dk.fk(chain, q)
+    np.testing.assert_allclose(T_jit, eager, atol=1e-15)
+    np.testing.assert_allclose(jax.jit(dk.fk)(chain, q), eager, atol=1e-14)  # traced chain: general path
+    np.testing.assert_allclose(jax.vmap(lambda x: dk.fk(chain, x))(q), eager, atol=1e-15)
+    np.testing.assert_allclose(jax.vmap(dk.link_poses, (None, 0))(chain, q), dk.link_poses(chain, q), atol=1e-15)
+    g = jax.grad(loss)(q)
     np.testing.assert_allclose(g_jit, g, atol=1e-13)
     h = 1e-6  # rows are independent: a shift of column i gives each row's partial derivative
     steps = h * np.eye(chain.dof)[:, None]  # (dof, 1, dof): column i shifted, every row, in one eager call
