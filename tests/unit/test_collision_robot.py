@@ -42,23 +42,31 @@ def test_urdf_shapes_and_pairs(toy):
     assert set(geom.volume_overhead()) == {"upper"}
 
 
+@jax.jit
+def _distances(robot, geom, q, world):
+    """Self distances, world distances and clearance, compiled as one program."""
+    return (
+        dk.collision.self_distances(robot, geom, q),
+        dk.collision.world_distances(robot, geom, q, world),
+        dk.collision.clearance(robot, geom, q, world),
+    )
+
+
 def test_distances_closed_form(toy):
     """Arm folded down onto the base: the hand sphere against the box is computed by hand."""
     robot, geom = toy
     q = jnp.array([0.0, np.pi])  # lower points straight down from the elbow at z = 0.55
-    d = jax.jit(dk.collision.self_distances)(robot, geom, q)
-    hand = dict(zip(map(tuple, geom.pairs), d, strict=True))[(1, 4)]
-    # hand centre: elbow (0.55) - 0.4 = 0.15; box top at 0.05; sphere radius 0.06
-    np.testing.assert_allclose(hand, 0.15 - 0.05 - 0.06, atol=1e-12)
     world = World(
         Plane(jnp.array([0.0, 0, 1]), -1.0), Sphere(jnp.array([[0.0, 0, 2], [5, 5, 5]]), jnp.array([0.1, 0.1]))
     )
-    w = jax.jit(dk.collision.world_distances)(robot, geom, q, world)
+    d, w, c = (np.asarray(x) for x in _distances(robot, geom, q, world))
+    hand = dict(zip(map(tuple, geom.pairs), d, strict=True))[(1, 4)]
+    # hand centre: elbow (0.55) - 0.4 = 0.15; box top at 0.05; sphere radius 0.06
+    np.testing.assert_allclose(hand, 0.15 - 0.05 - 0.06, atol=1e-12)
     assert w.shape == (5, 3) and world.size == 3
     # obstacles by kind: the two spheres, then the half-space
     np.testing.assert_allclose(w[4, 2], 1.0 - 0.05, atol=1e-12)  # the base box above the floor at -1
     np.testing.assert_allclose(w[0, 0], 2 - 0.55 - 0.07 - 0.1, atol=1e-12)  # upper's sphere below the ball
-    c = jax.jit(dk.collision.clearance)(robot, geom, q, world)
     np.testing.assert_allclose(c, min(d.min(), w.min()))
 
 
@@ -105,7 +113,7 @@ def test_mjcf_classes_filters_and_fits():
     assert geom.counts == (0, 3, 1)
     # a-b and b-c are parent and child, a-c excluded by <exclude>: no pair is left; without the exclude, a-c
     assert geom.pairs.shape == (0, 2)
-    assert dk.collision.self_distances(robot, geom, jnp.zeros(3)).shape == (0,)
+    assert jax.jit(dk.collision.self_distances)(robot, geom, jnp.zeros(3)).shape == (0,)  # one compile (op by op: 65)
     free = dk.collision.load(MJCF.replace('<contact><exclude body1="a" body2="c"/></contact>', ""), robot)
     assert [(free.shape_names[i], free.shape_names[j]) for i, j in free.pairs] == [("ga", "gc")]  # gd: bits 2 vs 1
     c = dict(zip(geom.shape_names, range(4), strict=True))
