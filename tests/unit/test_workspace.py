@@ -52,10 +52,16 @@ def test_sample_configs_within_limits_and_uniform():
 
 
 def test_manipulability_matches_core():
+    """The maps' division-free manipulability (one forward pass, Cauchy-Binet) equals the core's
+    ``dk.manipulability`` on 500 sampled configurations: both in one compiled program per chain."""
     for chain in (dk.robots.iiwa14(), dk.robots.ur5(), dk.robots.planar([1.0, 0.5, 0.3])):  # 7, 6 and 3 joints
-        q = ws.sample_configs(chain, 500, KEY)
-        ours = jax.jit(lambda q, chain=chain: _bins._manipulability(chain.forward(list(q.T)), chain.dof))(q)
-        np.testing.assert_allclose(ours, dk.manipulability(chain, q), rtol=1e-9, atol=1e-12)
+
+        def both(key, chain=chain):
+            q = ws.sample_configs(chain, 500, key)
+            return _bins._manipulability(chain.forward(list(q.T)), chain.dof), dk.manipulability(chain, q)
+
+        ours, core = jax.jit(both)(KEY)
+        np.testing.assert_allclose(ours, core, rtol=1e-9, atol=1e-12)
 
 
 def test_orientation_bins_partition_so3_evenly():
@@ -67,14 +73,18 @@ def test_orientation_bins_partition_so3_evenly():
         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
     ]
-    bins = np.asarray(_bins._orientation_bin([[jnp.asarray(e) for e in row] for row in R], 8))
-    counts = np.bincount(bins, minlength=48)
+    # Followed by rotations about z by each sector's centre: one compiled call for both sets.
+    phi = -np.pi + (np.arange(8) + 0.5) * np.pi / 4
+    c, s, zero, one = np.cos(phi), np.sin(phi), np.zeros(8), np.ones(8)
+    planar = [[c, -s, zero], [s, c, zero], [zero, zero, one]]
+    both = [
+        [jnp.asarray(np.concatenate(pair)) for pair in zip(*rows, strict=True)] for rows in zip(R, planar, strict=True)
+    ]
+    bins = np.asarray(jax.jit(_bins._orientation_bin, static_argnums=1)(both, 8))
+    counts = np.bincount(bins[:n], minlength=48)
     assert counts.size == 48  # every bin in [0, 48)
     assert np.all(np.abs(counts - n / 48) < 5.5 * np.sqrt(n / 48))  # equal measure (binomial, 5.5 sd)
-    phi = jnp.asarray(-np.pi + (np.arange(8) + 0.5) * np.pi / 4)  # rotations about z by each sector's centre
-    c, s, zero, one = jnp.cos(phi), jnp.sin(phi), jnp.zeros(8), jnp.ones(8)
-    planar = np.asarray(_bins._orientation_bin([[c, -s, zero], [s, c, zero], [zero, zero, one]], 8))
-    np.testing.assert_array_equal(planar, 32 + np.arange(8))  # distinct planar angles, distinct bins
+    np.testing.assert_array_equal(bins[n:], 32 + np.arange(8))  # distinct planar angles, distinct bins
 
 
 def test_map_matches_numpy_on_the_same_samples():
@@ -135,7 +145,8 @@ def test_samples_from_an_independent_stream_land_in_occupied_voxels():
     chain = dk.robots.iiwa14()
     m = ws.reachability(chain, 300_000, key=KEY, voxel_size=0.2, chunk=1 << 15)
     assert m.counts.sum() == 300_000 and m.n_outside == 0  # the default box holds the whole reach
-    p = np.asarray(dk.fk(chain, ws.sample_configs(chain, 20_000, jax.random.key(123)))[:, :3, 3])
+    positions = jax.jit(lambda key: dk.fk(chain, ws.sample_configs(chain, 20_000, key))[:, :3, 3])
+    p = np.asarray(positions(jax.random.key(123)))
     cell = np.floor((p - m.origin) / m.voxel_size).astype(int)
     hit = m.counts[tuple(cell.T)] > 0
     assert hit.mean() >= 0.999  # only voxels of tiny reachable volume can be missed by 300k samples
@@ -190,9 +201,10 @@ def test_bad_chain_and_unbounded_prismatic_joint():
 
 def test_chunk_is_capped_and_fine_grids_are_refused(monkeypatch):
     chain = dk.robots.planar([1.0, 0.5])
-    # chunk=10**8 for 1,000 samples: the chunk is capped (it would take ~12 GB and minutes otherwise).
-    m = ws.reachability(chain, 1000, key=KEY, voxel_size=0.25, chunk=10**8)
-    assert m.counts.sum() + m.n_outside == 1000
+    # chunk=10**8 for 512 samples: the chunk is capped (it would take ~12 GB and minutes otherwise), to
+    # 512: the program of test_compiled_once_per_chain_grid_and_chunk, compiled once for the file.
+    m = ws.reachability(chain, 512, key=KEY, voxel_size=0.25, chunk=10**8)
+    assert m.counts.sum() + m.n_outside == 512
     with pytest.raises(ValueError, match=r"^voxel_size: 0.008 m gives a grid .* GiB of maps"):
         ws.reachability(dk.robots.ur5(), 1000, key=KEY, voxel_size=0.008)
     monkeypatch.setattr(ws, "MAX_GRID_BYTES", 1000)
@@ -203,7 +215,7 @@ def test_chunk_is_capped_and_fine_grids_are_refused(monkeypatch):
 
 
 def test_load_errors_name_the_file_and_the_problem(tmp_path):
-    m = ws.reachability(dk.robots.planar([1.0, 0.5]), 500, key=KEY, voxel_size=0.25, chunk=500)
+    m = ws.reachability(dk.robots.planar([1.0, 0.5]), 512, key=KEY, voxel_size=0.25, chunk=512)  # compiled above
     m.save(tmp_path / "map")  # numpy writes map.npz ...
     back = ws.ReachabilityMap.load(tmp_path / "map")  # ... and load finds it by the same name
     np.testing.assert_array_equal(back.counts, m.counts)
