@@ -94,13 +94,13 @@ def test_jacobian_columns_are_exact(arm, configurations, kinematics):
     q = configurations
     poses, J, J_auto, com, J_com = (np.asarray(x) for x in kinematics(jnp.asarray(q)))
     np.testing.assert_allclose(J, J_auto, rtol=0, atol=1e-12)
-    tip = jax.jit(lambda q: dk.fk(arm, q, "tip"))
-    dT = _central_differences(tip, q)  # (n, 4, 4, dof)
-    T = np.asarray(tip(jnp.asarray(q)))
+    tip_and_com = jax.jit(lambda q: (dk.fk(arm, q, "tip"), dk.com(arm, q)))  # one compile for both differences
+    dT = _central_differences(lambda q: tip_and_com(q)[0], q)  # (n, 4, 4, dof)
+    T = poses[:, arm.frame_index("tip")]
     W = np.einsum("nijk,nlj->nilk", dT[:, :3, :3], T[:, :3, :3])  # dR R^T: the angular velocity, skew
     expected = np.concatenate([dT[:, :3, 3], np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], axis=1)], axis=1)
     np.testing.assert_allclose(J, expected, rtol=0, atol=1e-8)
-    np.testing.assert_allclose(J_com, _central_differences(jax.jit(lambda q: dk.com(arm, q)), q), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(J_com, _central_differences(lambda q: tip_and_com(q)[1], q), rtol=0, atol=1e-9)
     masses, body_coms = np.asarray(arm.masses), np.asarray(arm.body_coms)
     frames = [arm.frame_index(n) for n in ("world", "upper", "fore", "hand")]  # a body's frame is the body
     bodies = [arm.frame_bodies[f] for f in frames]

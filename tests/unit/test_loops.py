@@ -31,9 +31,27 @@ def four_bar():
     return dk.load_robot(FOUR_BAR)
 
 
+N = 41  # the four-bar's batches of crank angles, padded to N rows: `solved` compiles once
+
+
+def _batch(theta) -> jax.Array:
+    """Crank angles as an ``(N, 1)`` batch, padded with the reference configuration (zero)."""
+    theta = np.asarray(theta, np.float64)
+    return jnp.asarray(np.pad(theta, (0, N - len(theta)))[:, None])
+
+
 @pytest.fixture(scope="module")
-def closure(four_bar):
-    return jax.jit(lambda q: dk.loop_closure(four_bar, q))
+def solved(four_bar):
+    """At ``(N, 1)`` crank angles: the dependent joints and the gap, the coupler's and the rocker's poses, the
+    tip's, the centre of mass (the four-bar closed over: its constants fold, which compiles far faster than a
+    robot passed as an argument)."""
+
+    @jax.jit
+    def run(q):
+        dependent, gap = dk.loop_closure(four_bar, q)
+        return dependent, gap, dk.fk(four_bar, q, ["coupler", "rocker"]), dk.fk(four_bar, q, "tip"), dk.com(four_bar, q)
+
+    return run
 
 
 def _closed_form(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -53,23 +71,22 @@ def _closed_form(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return wrap(coupler_dir - theta), wrap(rocker_dir)
 
 
-def test_the_coupler_and_rocker_are_solved_from_the_crank(four_bar, closure):
+def test_the_coupler_and_rocker_are_solved_from_the_crank(four_bar, solved):
     assert four_bar.joint_names == ("crank",) and four_bar.dependent_names == ("coupler", "rocker")
-    theta = np.linspace(-np.pi, np.pi, 41)
-    dependent, gap = (np.asarray(x) for x in closure(jnp.asarray(theta[:, None])))
+    theta = np.linspace(-np.pi, np.pi, N)
+    dependent, gap, poses = (np.asarray(x) for x in solved(_batch(theta))[:3])
     assert gap.max() < 1e-12
     coupler, rocker = _closed_form(theta)
     turns = lambda a, b: np.angle(np.exp(1j * (a - b)))  # noqa: E731  (the same angle, up to whole turns)
     np.testing.assert_allclose(turns(dependent[:, 0], coupler), 0.0, rtol=0, atol=1e-10)
     np.testing.assert_allclose(turns(dependent[:, 1], rocker), 0.0, rtol=0, atol=1e-10)
     # the pin of each body, from their poses: the same point
-    poses = np.asarray(dk.fk(four_bar, theta[:, None], ["coupler", "rocker"]))
     pin_coupler = poses[:, 0] @ np.array([0.1, 0.2, 0, 1])
     pin_rocker = poses[:, 1] @ np.array([-0.05, 0.2, 0, 1])
     np.testing.assert_allclose(pin_coupler, pin_rocker, rtol=0, atol=1e-12)
 
 
-def test_a_connect_between_sites_is_the_same_loop(closure):
+def test_a_connect_between_sites_is_the_same_loop(solved):
     """MuJoCo's site form: the two sites' origins coincide (here where the body form puts the pin)."""
     sites = FOUR_BAR.replace('<site name="tip"', '<site name="pin_c" pos=".1 .2 0"/><site name="tip"').replace(
         '<geom size=".01" mass=".1"/></body>', '<geom size=".01" mass=".1"/><site name="pin_r" pos="-.05 .2 0"/></body>'
@@ -77,8 +94,10 @@ def test_a_connect_between_sites_is_the_same_loop(closure):
     robot = dk.load_robot(
         sites.replace('body1="coupler" body2="rocker" anchor=".1 .2 0"', 'site1="pin_c" site2="pin_r"')
     )
-    theta = jnp.asarray(np.linspace(-3.0, 3.0, 7)[:, None])
-    np.testing.assert_allclose(np.asarray(dk.loop_closure(robot, theta)[0]), np.asarray(closure(theta)[0]), atol=1e-12)
+    theta = np.linspace(-3.0, 3.0, 7)
+    np.testing.assert_allclose(
+        np.asarray(dk.loop_closure(robot, theta[:, None])[0]), np.asarray(solved(_batch(theta))[0])[:7], atol=1e-12
+    )
 
 
 @pytest.mark.parametrize("relpose", ["", ' relpose=".1 .2 0 0.9659258 0 0 0.2588190"'], ids=["reference", "relpose"])
@@ -93,7 +112,8 @@ def test_a_weld_holds_the_relative_pose(relpose):
         T_rel[:3, :3] = [[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]]
         T_rel[:3, 3] = [0.1, 0.2, 0.0]
     else:
-        T0 = np.asarray(dk.fk(robot, np.zeros(2), ["a3", "b2"]))  # (the loops close at the reference: q = 0)
+        # (the loops close at the reference, q = 0: a batch of q's shape, whose compiles the calls below reuse)
+        T0 = np.asarray(dk.fk(robot, np.zeros((16, 2)), ["a3", "b2"]))[0]
         T_rel = np.linalg.solve(T0[0], T0[1])
     q = np.random.default_rng(0).uniform(-0.2, 0.2, (16, 2))
     _, gap = dk.loop_closure(robot, q)
@@ -105,23 +125,26 @@ def test_a_weld_holds_the_relative_pose(relpose):
     )
 
 
-def test_derivatives_are_the_implicit_functions(four_bar, closure):
-    theta = np.linspace(-3.0, 3.0, 13)[:, None]
-    d_dep = np.asarray(jax.jit(jax.vmap(jax.jacfwd(lambda q: dk.loop_closure(four_bar, q)[0])))(jnp.asarray(theta)))
-    step = 1e-6
-    plus, minus = (np.asarray(closure(jnp.asarray(theta + s))[0]) for s in (step, -step))
-    np.testing.assert_allclose(d_dep[..., 0], (plus - minus) / (2 * step), rtol=0, atol=1e-8)
-    J = jax.jit(lambda q: (dk.jacobian(four_bar, q, "tip"), dk.jacobian(four_bar, q, "tip", method="autodiff")))
-    analytic, autodiff = (np.asarray(x) for x in J(jnp.asarray(theta)))
-    np.testing.assert_allclose(analytic, autodiff, rtol=0, atol=1e-12)
-    tip = jax.jit(lambda q: dk.fk(four_bar, q, "tip"))
-    dp = (np.asarray(tip(jnp.asarray(theta + step))) - np.asarray(tip(jnp.asarray(theta - step)))) / (2 * step)
-    np.testing.assert_allclose(analytic[:, :3, 0], dp[:, :3, 3], rtol=0, atol=1e-8)
-    com = jax.jit(lambda q: (dk.com(four_bar, q), dk.com_jacobian(four_bar, q)))
-    (c_plus, _), (c_minus, _), (_, J_com) = (com(jnp.asarray(theta + s)) for s in (step, -step, 0.0))
-    np.testing.assert_allclose(
-        np.asarray(J_com)[..., 0], (np.asarray(c_plus) - np.asarray(c_minus)) / (2 * step), atol=1e-9
+def test_derivatives_are_the_implicit_functions(four_bar, solved):
+    theta = np.linspace(-3.0, 3.0, 13)
+    n, step = len(theta), 1e-6
+
+    @jax.jit
+    def derivatives(q):
+        """d dependent / d crank (forward mode), the tip's Jacobian (analytic and autodiff), the centre of mass's."""
+        d_dependent = jax.vmap(jax.jacfwd(lambda q: dk.loop_closure(four_bar, q)[0]))(q)
+        analytic, autodiff = dk.jacobian(four_bar, q, "tip"), dk.jacobian(four_bar, q, "tip", method="autodiff")
+        return d_dependent, analytic, autodiff, dk.com_jacobian(four_bar, q)
+
+    d_dep, analytic, autodiff, J_com = (np.asarray(x) for x in derivatives(jnp.asarray(theta[:, None])))
+    (dep_plus, _, _, tip_plus, com_plus), (dep_minus, _, _, tip_minus, com_minus) = (
+        [np.asarray(x)[:n] for x in solved(_batch(theta + s))] for s in (step, -step)
     )
+    np.testing.assert_allclose(d_dep[..., 0], (dep_plus - dep_minus) / (2 * step), rtol=0, atol=1e-8)
+    np.testing.assert_allclose(analytic, autodiff, rtol=0, atol=1e-12)
+    dp = (tip_plus - tip_minus) / (2 * step)
+    np.testing.assert_allclose(analytic[:, :3, 0], dp[:, :3, 3], rtol=0, atol=1e-8)
+    np.testing.assert_allclose(J_com[..., 0], (com_plus - com_minus) / (2 * step), atol=1e-9)
 
 
 def test_a_loop_that_cannot_close_says_so():

@@ -2,15 +2,34 @@
 near-half-turn rotations over several batch shapes, derivatives against finite differences, and the
 entry-wise SO(3) log (``diffkin._rigid.so3_log``, the one the IK residual uses) in float32 and float64."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import scipy.linalg
 
 from diffkin import _rigid as rg
 from diffkin import se3
 
 SHAPES = [(), (1,), (5,), (2, 3)]
+
+
+def _skew(w: np.ndarray) -> np.ndarray:
+    """``[w]`` in numpy: row ``i`` of ``-cross(w, I)`` is ``-(w x e_i)``."""
+    return -np.cross(w[..., None, :], np.eye(3))
+
+
+def _expm_skew(w: np.ndarray) -> np.ndarray:
+    """``exp([w])`` in numpy (the reference rotations, compiled nowhere)."""
+    return scipy.linalg.expm(_skew(w))
+
+
+@jax.jit
+def _angle_and_log(R):
+    """``se3.rotation_angle`` and ``se3.so3_log`` of ``R``: one compile per shape, shared by the kinds."""
+    return se3.rotation_angle(R), se3.so3_log(R)
 
 
 def _rotations(kind: str, shape, seed=0):
@@ -25,19 +44,19 @@ def _rotations(kind: str, shape, seed=0):
     else:
         angle = np.pi - 10.0 ** rng.uniform(-9, -3, shape)
     w = axis * angle[..., None]
-    return np.asarray(jax.scipy.linalg.expm(se3.skew(w))), w, angle
+    return _expm_skew(w), w, angle
 
 
 @pytest.mark.parametrize("shape", SHAPES)
 @pytest.mark.parametrize("kind", ["random", "near_identity", "near_pi"])
 def test_log_and_angle_invert_exp(kind, shape):
     R, w, angle = _rotations(kind, shape)
-    np.testing.assert_allclose(se3.rotation_angle(R), angle, atol=1e-12)
-    w_log = np.asarray(se3.so3_log(R))
+    theta, w_log = (np.asarray(x) for x in _angle_and_log(R))
+    np.testing.assert_allclose(theta, angle, atol=1e-12)
     assert w_log.shape == shape + (3,)
     # near pi the sign of the axis is ambiguous only at exactly pi: here it is not.
     np.testing.assert_allclose(w_log, w, atol=1e-7 if kind == "near_pi" else 1e-12)
-    np.testing.assert_allclose(jax.scipy.linalg.expm(se3.skew(jnp.asarray(w_log))), R, atol=1e-12)
+    np.testing.assert_allclose(_expm_skew(w_log), R, atol=1e-12)
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
@@ -78,19 +97,23 @@ def test_skew_vee_adjoint():
     np.testing.assert_allclose(inv, np.linalg.inv(T), atol=1e-13)
 
 
+@functools.partial(jax.jit, static_argnums=0)
+def _tangent_and_values(fn, R, dR, R_steps):
+    """``fn``'s derivative at ``R`` along ``dR`` (``jax.jvp``), and ``fn`` at the rotations ``R_steps``."""
+    return jax.jvp(fn, (R,), (dR,))[1], fn(R_steps)
+
+
 @pytest.mark.parametrize("kind", ["random", "near_identity", "near_pi"])
 def test_derivatives_match_finite_differences(kind):
-    """d/dt of log(exp([a] t) R) and of its angle, through the whole function, at every kind of rotation."""
+    """d/dt of log(exp([a] t) R) and of its angle at t = 0 (a jvp along d/dt exp([a] t) R = [a] R), against
+    central differences, at every kind of rotation."""
     R, _, angle = _rotations(kind, (), seed=4)
     a = np.random.default_rng(5).normal(size=3)
-
-    def rotated(t):
-        return jax.scipy.linalg.expm(se3.skew(jnp.asarray(a) * t)) @ R
-
+    eps = min(1e-6, (np.pi - angle) / 10)  # do not step across the half-turn, where log jumps
+    steps = np.stack([_expm_skew(a * eps) @ R, _expm_skew(-a * eps) @ R])
     for fn in (se3.so3_log, se3.rotation_angle):
-        _, tangent = jax.jvp(lambda t, fn=fn: fn(rotated(t)), (0.0,), (1.0,))
-        eps = min(1e-6, (np.pi - angle) / 10)  # do not step across the half-turn, where log jumps
-        fd = (fn(rotated(eps)) - fn(rotated(-eps))) / (2 * eps)
+        tangent, (plus, minus) = (np.asarray(x) for x in _tangent_and_values(fn, R, _skew(a) @ R, steps))
+        fd = (plus - minus) / (2 * eps)
         assert np.all(np.isfinite(tangent))
         if kind == "near_identity" and fn is se3.rotation_angle:
             continue  # |w| is not differentiable at the identity: finite, but no two-sided derivative
@@ -98,10 +121,10 @@ def test_derivatives_match_finite_differences(kind):
 
 
 def test_derivatives_are_finite_at_the_identity_and_a_half_turn():
-    for R in (np.eye(3), np.diag([1.0, -1.0, -1.0])):
-        for fn in (se3.so3_log, se3.rotation_angle):
-            J = jax.jacfwd(lambda M, fn=fn: fn(M))(jnp.asarray(R))
-            assert np.all(np.isfinite(J))
+    for fn in (se3.so3_log, se3.rotation_angle):
+        jacobian = jax.jit(jax.jacfwd(fn))  # one compile for both rotations
+        for R in (np.eye(3), np.diag([1.0, -1.0, -1.0])):
+            assert np.all(np.isfinite(jacobian(jnp.asarray(R))))
 
 
 @pytest.mark.parametrize("shape", SHAPES)
