@@ -2,7 +2,7 @@
 warnings are errors (pyproject), shared robot fixtures, and the tiers.
 
 The tests live in three directories, by what they need (CONTRIBUTING.md): ``unit/`` (diffkin, numpy,
-jax, optax, hypothesis: ``pip install -e ".[dev]"``), ``validation/`` (other libraries: Pinocchio,
+scipy, jax, optax, hypothesis: ``pip install -e ".[dev]"``), ``validation/`` (other libraries: Pinocchio,
 MuJoCo, pytorch-kinematics, coal, example-robot-data, dm_control, real meshes) and ``integration/``
 (subprocesses, the CLI, the viewer's server, benchmarks and experiments, the docs' examples). Each test
 is marked with its directory's name (``-m unit``); tests outside the unit tier are also ``slow``, so
