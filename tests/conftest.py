@@ -34,8 +34,8 @@ def _compilation_cache() -> str | None:
 
 # Most of a test run is XLA compiling: with JAX's persistent cache, a rerun compiles only the programs
 # that changed (keys hold the program, the flags and the versions, not source lines; at most 4 GiB, least
-# recently used out). Every program is kept, the small ones too: the ~2,500 eager operations' programs of
-# 10-30 ms each are read back faster than they compile (CONTRIBUTING.md has the figures).
+# recently used out). Every program is kept, the small ones too: the ~2,100 small programs (eager
+# operations, 10-30 ms each) are read back faster than they compile (CONTRIBUTING.md has the figures).
 if (_cache := _compilation_cache()) is not None:
     jax.config.update("jax_compilation_cache_dir", _cache)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
