@@ -72,10 +72,11 @@ def test_rows_match_finite_differences(arm):
     np.testing.assert_allclose(np.asarray(ev.cost), np.sum(np.asarray(ev.r) ** 2, axis=0), rtol=1e-12)
 
 
-@pytest.fixture(scope="module")
-def arm_solutions(arm):
-    """60 hand targets from random configurations that clear everything by the margin + band; each
-    solved with and without ``avoid`` (float64), and one target inside the box."""
+def test_solutions_are_clear_on_target_and_a_target_inside_an_obstacle_fails(arm):
+    """60 hand targets from random configurations that clear everything by the margin + band, and one
+    inside the box, each solved with and without ``avoid`` (float64; one test, so that one process
+    compiles both solvers): every success clear and on target, the one inside failing with finite
+    values, and without ``avoid`` some solved through an obstacle."""
     robot, geom, world = arm
     margin = 0.02
     rng = np.random.default_rng(0)
@@ -85,14 +86,9 @@ def arm_solutions(arm):
     targets = np.asarray(dk.fk(robot, q, "hand"))[:, :3, 3]
     inside = np.array([[0.45, -0.1, 0.25]])  # the box's centre
     targets = np.concatenate([targets, inside])
-    avoid = dk.ik.Avoid(geom, world, margin=margin)
-    with_avoid = dk.ik.solve(robot, {"hand": targets}, avoid=avoid)
+    res = dk.ik.solve(robot, {"hand": targets}, avoid=dk.ik.Avoid(geom, world, margin=margin))
     plain = dk.ik.solve(robot, {"hand": targets})
-    return robot, geom, world, margin, targets, with_avoid, plain
 
-
-def test_successes_are_clear_and_on_target(arm_solutions):
-    robot, geom, world, margin, targets, res, plain = arm_solutions
     ok = np.asarray(res.success[:-1])
     assert ok.mean() >= 0.95
     q = np.asarray(res.q)
@@ -107,14 +103,12 @@ def test_successes_are_clear_and_on_target(arm_solutions):
     plain_clear = np.asarray(dk.collision.clearance(robot, geom, np.asarray(plain.q), world))
     assert np.sum(np.asarray(plain.success) & (plain_clear < margin)) >= 2
 
-
-def test_target_inside_an_obstacle_fails_finitely(arm_solutions):
-    *_, res, plain = arm_solutions
-    assert bool(plain.success[-1])  # reachable, through the box
+    # the target inside the box: reachable (through the box), not solved with avoid, finite
+    assert bool(plain.success[-1])
     assert not bool(res.success[-1])
     for field in (res.q[-1], res.pos_err[-1], res.clearance[-1]):
         assert np.all(np.isfinite(np.asarray(field)))
-    assert float(res.clearance[-1]) < 0.02
+    assert float(res.clearance[-1]) < margin
 
 
 def test_floating_locked_secondary_with_avoid(arm):
@@ -357,29 +351,32 @@ def _rotation(w):
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
-@pytest.mark.parametrize("spread", [1.0, 0.25])  # few pairs near (gathered), most near (all computed)
-def test_near_motion_is_exact_where_the_reach_is(spread):
+def test_near_motion_is_exact_where_the_reach_is():
     """The term's broad phase (``_near_motion``): where the exact distance is below the reach, the
     distance is :func:`motion`'s, elsewhere at least the reach; the wrenches are :func:`motion`'s
-    where the cheap bound is below the reach and zero elsewhere; box-box and capsule-box, in both
-    branches (the near pairs gathered, or all computed)."""
+    where the cheap bound is below the reach and zero elsewhere; box-box and capsule-box, with no
+    pair near (no step), few (gathered in one step) and most (in several). One test: the spreads
+    share the two compiled programs."""
     from diffkin.collision import Capsule
     from diffkin.collision._distance import lower_bound, motion
     from diffkin.ik._terms.avoid import NEAR_SHARE, _near_motion
 
+    near_motion = jax.jit(_near_motion)
     rng = np.random.default_rng(7)
     n, reach = 400, 0.05
-    ends = rng.uniform(-spread, spread, (n, 3))
-    capsules = Capsule(ends, ends + rng.uniform(-0.2, 0.2, (n, 3)), rng.uniform(0.02, 0.1, n))
-    for a in (capsules, _random_boxes(rng, n, spread)):
-        b = _random_boxes(rng, n, spread)
-        d, Wa, Wb = jax.jit(_near_motion)(a, b, reach)
-        d_exact, Wa_exact, Wb_exact = motion(a, b)
-        near = np.asarray(d_exact) < reach
-        measured = np.asarray(lower_bound(a, b)) < reach  # exact there, zero wrenches elsewhere
-        assert near.sum() > 0 and (measured.sum() <= n // NEAR_SHARE) == (spread == 1.0)
-        np.testing.assert_allclose(np.asarray(d)[near], np.asarray(d_exact)[near], rtol=0, atol=1e-14)
-        assert np.all(np.asarray(d)[~near] >= reach)
-        for W, exact in ((Wa, Wa_exact), (Wb, Wb_exact)):
-            np.testing.assert_allclose(np.asarray(W)[measured], np.asarray(exact)[measured], rtol=1e-12, atol=1e-12)
-            assert np.all(np.asarray(W)[~measured] == 0)
+    budget = -(-n // NEAR_SHARE)  # pairs per step
+    for spread, steps in ((8.0, range(0, 1)), (1.0, range(1, 2)), (0.25, range(2, NEAR_SHARE + 1))):
+        ends = rng.uniform(-spread, spread, (n, 3))
+        capsules = Capsule(ends, ends + rng.uniform(-0.2, 0.2, (n, 3)), rng.uniform(0.02, 0.1, n))
+        for a in (capsules, _random_boxes(rng, n, spread)):
+            b = _random_boxes(rng, n, spread)
+            d, Wa, Wb = near_motion(a, b, reach)
+            d_exact, Wa_exact, Wb_exact = motion(a, b)
+            near = np.asarray(d_exact) < reach
+            measured = np.asarray(lower_bound(a, b)) < reach  # exact there, zero wrenches elsewhere
+            assert -(-measured.sum() // budget) in steps and (near.sum() > 0) == (steps.start > 0), spread
+            np.testing.assert_allclose(np.asarray(d)[near], np.asarray(d_exact)[near], rtol=0, atol=1e-14)
+            assert np.all(np.asarray(d)[~near] >= reach)
+            for W, exact in ((Wa, Wa_exact), (Wb, Wb_exact)):
+                np.testing.assert_allclose(np.asarray(W)[measured], np.asarray(exact)[measured], rtol=1e-12, atol=1e-12)
+                assert np.all(np.asarray(W)[~measured] == 0)

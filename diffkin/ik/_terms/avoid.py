@@ -44,7 +44,7 @@ from diffkin.ik._terms import Rows
 
 #: metres above the margin where the residual starts (a centimetre: the size of a gripper finger).
 BAND = 0.01
-#: the exact motion of box pairs is computed for the near ones only, gathered when they are at most 1 / NEAR_SHARE.
+#: the exact motion of box pairs is computed for the near ones only, gathered 1 / NEAR_SHARE of the pairs at a time.
 NEAR_SHARE = 8
 
 
@@ -104,8 +104,9 @@ def _near_motion(a, b, reach: jax.Array) -> tuple[jax.Array, jax.Array, jax.Arra
     Box-box and capsule-box pairs (:data:`BOUNDED`) first get a cheap lower bound of their distance
     (:func:`lower_bound`); where it is at least ``reach`` the residual and its row are zero, so ``d``
     is that bound and the wrenches are zero. The exact motion is computed for the others only,
-    gathered (at most ``1 / NEAR_SHARE`` of the pairs; all pairs when more are near). The other
-    kinds' motion is as cheap as a bound: computed for every pair.
+    gathered ``1 / NEAR_SHARE`` of the pairs at a time (no step when none is near, one when few are,
+    up to ``NEAR_SHARE``): one traced :func:`motion` serves every case, which XLA compiles once. The
+    other kinds' motion is as cheap as a bound: computed for every pair.
     """
     batch = tuple(jnp.broadcast_shapes(batch_shape(a), batch_shape(b)))
     if (type(a), type(b)) not in BOUNDED:
@@ -114,21 +115,18 @@ def _near_motion(a, b, reach: jax.Array) -> tuple[jax.Array, jax.Array, jax.Arra
     total = int(np.prod(batch))
     a, b = (flattened(s, batch) for s in (a, b))
     bound = lower_bound(a, b)
-    near = bound < reach
     budget = -(-total // NEAR_SHARE)
 
-    def few(_):
-        idx = jnp.nonzero(near, size=budget, fill_value=total)[0]
+    def step(state):
+        left, d, Wa, Wb = state
+        idx = jnp.nonzero(left, size=budget, fill_value=total)[0]
         safe = jnp.minimum(idx, total - 1)
-        d, Wa, Wb = motion(take(a, safe), take(b, safe))
-        zero = jnp.zeros((total, 6), d.dtype)
-        return bound.at[idx].set(d, mode="drop"), zero.at[idx].set(Wa, mode="drop"), zero.at[idx].set(Wb, mode="drop")
+        measured = motion(take(a, safe), take(b, safe))
+        put = lambda x, value: x.at[idx].set(value, mode="drop")  # noqa: E731
+        return put(left, False), *(put(x, m) for x, m in zip((d, Wa, Wb), measured, strict=True))
 
-    def every(_):
-        d, Wa, Wb = motion(a, b)
-        return jnp.where(near, d, bound), jnp.where(near[:, None], Wa, 0.0), jnp.where(near[:, None], Wb, 0.0)
-
-    d, Wa, Wb = jax.lax.cond(jnp.sum(near) <= budget, few, every, None)
+    zero = jnp.zeros((total, 6), bound.dtype)
+    _, d, Wa, Wb = jax.lax.while_loop(lambda state: jnp.any(state[0]), step, (bound < reach, bound, zero, zero))
     return d.reshape(batch), Wa.reshape(batch + (6,)), Wb.reshape(batch + (6,))
 
 
