@@ -32,10 +32,17 @@ from _bench import example_robot_data, median_seconds, median_seconds_interleave
 from bench_collision import panda
 
 import diffkin as dk
+from diffkin._xla import SOLVER_COMPILE
 
 C = dk.collision
 MARGIN = 0.01
 EE = "panda_hand"
+
+
+def solver_jit(fn):
+    """``jax.jit(fn)`` compiled as ``dk.ik.solve`` compiles itself when called directly (a solve traced
+    inside a ``jit`` takes that ``jit``'s compiler options: docs/performance.md, "The first call")."""
+    return jax.jit(fn, compiler_options=SOLVER_COMPILE)
 
 
 def scene() -> dict:
@@ -189,7 +196,7 @@ def baxter(n: int) -> None:
     print("| solver | first call (s) | warm (s) | success 1e-5 m/1e-4 rad | self-collision (real geometry) |")
     print("| --- | --- | --- | --- | --- |")
     for name, kw in (("diffkin avoid (self)", dict(avoid=avoid)), ("diffkin (no avoid)", {})):
-        fn = jax.jit(lambda t, kw=kw: dk.ik.solve(robot, t, **kw))
+        fn = solver_jit(lambda t, kw=kw: dk.ik.solve(robot, t, **kw))
         start = time.perf_counter()
         res = jax.block_until_ready(fn(targets))
         first = time.perf_counter() - start
@@ -229,8 +236,8 @@ def main(argv=None) -> int:
         except ImportError as err:
             print(f"# PyRoki not installed ({err}): its rows are left out")
     solvers = {
-        "diffkin avoid": jax.jit(lambda T: dk.ik.solve(robot, {EE: T}, avoid=avoid).q),
-        "diffkin (no avoid)": jax.jit(lambda T: dk.ik.solve(robot, {EE: T}).q),
+        "diffkin avoid": solver_jit(lambda T: dk.ik.solve(robot, {EE: T}, avoid=avoid).q),
+        "diffkin (no avoid)": solver_jit(lambda T: dk.ik.solve(robot, {EE: T}).q),
     }
     print(f"# Panda ({len(geom.shape_names)} shapes, {len(geom.pairs)} self pairs), {world32.size} obstacles;")
     print(f"# jax {jax.__version__}, {jax.devices()[0].device_kind}, {os.cpu_count()} CPUs; float32 solvers")

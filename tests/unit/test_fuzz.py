@@ -39,7 +39,7 @@ from _chain_fuzz import (
     dh_chains,
     fk,
 )
-from _reference import FUZZ, MJCF_FUZZ, MJCF_TIME_LIMIT, rotation_angle, time_limit
+from _reference import FUZZ, MJCF_FUZZ, MJCF_TIME_LIMIT, rotation_angle, solver_jit, time_limit
 from _reference import fk as fk_reference
 from _reference import number_text as _text
 from hypothesis import given
@@ -83,7 +83,7 @@ def test_jacobian_matches_central_differences(data):
 
 
 IK_STRUCTURE = ("RPR", True)
-_ik_solve = jax.jit(lambda chain, T: dk.ik.solve(chain, T, key=jax.random.key(0), num_seeds=4, max_iters=20))
+_ik_solve = solver_jit(lambda chain, T: dk.ik.solve(chain, T, key=jax.random.key(0), num_seeds=4, max_iters=20))
 
 
 @FUZZ

@@ -7,7 +7,6 @@ on the long chains (7 and 8 joints: compiling their Jacobians is slow). Budgets 
 
 import _reference
 import hypothesis.extra.numpy as hnp
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -18,7 +17,7 @@ from _chain_fuzz import (
     check_fk_and_jacobians_finite_for_any_finite_q,
     check_jacobians_match_central_differences,
 )
-from _reference import EXAMPLES, FINGER, FUZZ, MJCF_FUZZ, MJCF_TIME_LIMIT, time_limit
+from _reference import EXAMPLES, FINGER, FUZZ, MJCF_FUZZ, MJCF_TIME_LIMIT, solver_jit, time_limit
 from _reference import finite_floats as _floats
 from _reference import number_text as _text
 from hypothesis import assume, given, settings
@@ -252,7 +251,7 @@ def _robot_solve(weights, lock):
             locked = None if lock is None else {lock: locked_value}
             return dk.ik.solve(_FINGER_ROBOT, {"finger_tip_link": p}, weights=w, locked=locked, num_seeds=8)
 
-        _robot_solvers[weights, lock] = jax.jit(solve)
+        _robot_solvers[weights, lock] = solver_jit(solve)
     return _robot_solvers[weights, lock]
 
 

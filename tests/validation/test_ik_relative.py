@@ -17,6 +17,7 @@ from _reference import (
     SLACK_POS,
     SLACK_ROT,
     SOLO,
+    solver_jit,
 )
 from _reference import frame_errors as _errors
 from _reference import pin_poses as _pin_poses
@@ -42,7 +43,7 @@ def test_two_hands_hold_a_box_while_one_reaches():
     baxter = dk.load_robot(BAXTER)
     T = np.asarray(dk.fk(baxter, _random_q(baxter, N, seed=20), HANDS))
     T_l_r = _relative_pose(T)
-    solve = jax.jit(
+    solve = solver_jit(
         lambda left, rel: dk.ik.solve(
             baxter, {"left_gripper": left}, relative={("left_gripper", "right_gripper"): rel}, key=jax.random.key(3)
         )

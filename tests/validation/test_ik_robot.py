@@ -22,6 +22,7 @@ from _reference import (
     SOLO,
     pose_errors,
     robot_poses,
+    solver_jit,
 )
 from _reference import frame_errors as _errors
 from _reference import pin_poses as _pin_poses
@@ -70,7 +71,7 @@ def baxter_problem(baxter):
     targets = np.asarray(dk.fk(baxter, q_true, HANDS))
     locked = {"head_pan": 0.3, "right_e0": jnp.asarray(q_true[:, baxter.joint_names.index("right_e0")], jnp.float32)}
     q0 = jnp.asarray(_random_q(baxter, N, seed=1), jnp.float32)
-    solve = jax.jit(
+    solve = solver_jit(
         lambda t: dk.ik.solve(
             baxter, {h: t[:, k] for k, h in enumerate(HANDS)}, locked=locked, q0=q0, key=jax.random.key(1)
         )
@@ -136,7 +137,7 @@ def solo_solved(solo):
     base[:, :3, :3] = _rotations(rng.normal(0, 0.3, (N, 3)))
     base[:, :3, 3] = rng.normal(0, 0.2, (N, 3))
     targets = np.asarray(dk.fk(solo, q_true, FEET, base=base))
-    solve = jax.jit(lambda t: dk.ik.solve(solo, t, solve_base=True, key=jax.random.key(4)))
+    solve = solver_jit(lambda t: dk.ik.solve(solo, t, solve_base=True, key=jax.random.key(4)))
     return targets, solve({c: jnp.asarray(targets[:, k, :3, 3], jnp.float32) for k, c in enumerate(FEET)})
 
 
@@ -206,7 +207,7 @@ IIWA_REST = np.zeros(7, np.float32)
 @pytest.fixture(scope="module")
 def iiwa_solve(iiwa):
     """The iiwa's flange with its z rotation free (5 constraints, 7 joints); with or without a rest posture."""
-    return jax.jit(
+    return solver_jit(
         lambda t, rest=None: dk.ik.solve(iiwa, {"iiwa14_link_ee": t}, weights=FREE_Z, rest=rest, key=jax.random.key(2))
     )
 
@@ -255,7 +256,7 @@ def test_implicit_gradient_with_respect_to_two_targets(iiwa):
         T = np.asarray(dk.fk(robot, q_star, names))
 
         # The elbow (link 4) by position, the flange by pose: 3 + 6 = 9 rows, 7 joints (least squares).
-        @jax.jit
+        @solver_jit
         def solved(p4, T_ee):
             return dk.ik.solve(
                 robot,
@@ -319,7 +320,7 @@ def test_panda_tree_with_mimic_finger_and_position_target():
     q_true = _random_q(panda, 16, seed=11)
     names = [f for f in ("panda_leftfinger", "panda_rightfinger") if f in panda.frame_names]
     T = np.asarray(dk.fk(panda, q_true, names), np.float32)
-    res = jax.jit(lambda a, b: dk.ik.solve(panda, {names[0]: a, names[1]: b}, key=jax.random.key(0)))(
+    res = solver_jit(lambda a, b: dk.ik.solve(panda, {names[0]: a, names[1]: b}, key=jax.random.key(0)))(
         T[:, 0], T[:, 1, :3, 3]
     )
     assert _rate(res.success) >= 0.99 and res.pos_err.shape == (16, 2)
@@ -339,7 +340,7 @@ def test_non_finite_locked_values_and_rest_are_rejected_or_fail(iiwa):
             dk.ik.solve(iiwa, {"iiwa14_link_ee": T}, locked={"iiwa14_joint_1": bad})
         with pytest.raises(ValueError, match="rest: expected a finite rest configuration"):
             dk.ik.solve(iiwa, {"iiwa14_link_ee": T}, rest=np.full(7, bad))
-    solve = jax.jit(lambda v: dk.ik.solve(iiwa, {"iiwa14_link_ee": T[None]}, locked={"iiwa14_joint_1": v}))
+    solve = solver_jit(lambda v: dk.ik.solve(iiwa, {"iiwa14_link_ee": T[None]}, locked={"iiwa14_joint_1": v}))
     res = solve(jnp.asarray([np.nan]))
     assert not np.any(np.asarray(res.success)) and np.all(np.isfinite(np.asarray(res.q)))
     assert bool(solve(jnp.asarray([0.0])).success[0])
@@ -358,7 +359,7 @@ def test_only_the_ratios_of_the_weights_matter(iiwa, iiwa_solve):
     the largest is 1 (LM's damping floor is absolute; 1e-5 solved 0 of 64 reachable poses before)."""
     T = jnp.asarray(_iiwa_targets(iiwa, 32, seed=9), jnp.float32)
     small = {f: tuple(1e-5 * w for w in ws) for f, ws in FREE_Z.items()}
-    res = jax.jit(lambda t: dk.ik.solve(iiwa, {"iiwa14_link_ee": t}, weights=small, key=jax.random.key(2)))(T)
+    res = solver_jit(lambda t: dk.ik.solve(iiwa, {"iiwa14_link_ee": t}, weights=small, key=jax.random.key(2)))(T)
     ref = iiwa_solve(T)
     assert _rate(res.success) >= 0.99
     assert np.array_equal(np.asarray(res.q), np.asarray(ref.q))

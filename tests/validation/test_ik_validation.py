@@ -9,7 +9,7 @@ import optax
 import pytest
 import pytorch_kinematics as pk
 import torch
-from _reference import URDF_ROBOTS, dh_fk, pose_errors, random_q
+from _reference import URDF_ROBOTS, dh_fk, pose_errors, random_q, solver_jit
 
 import diffkin as dk
 import diffkin.ik as ik
@@ -31,7 +31,7 @@ def _solver(chain, key_name, **kw):
     """One jitted solver per (robot, settings): each configuration compiles once per module."""
     k = (key_name, tuple(sorted(kw.items())))
     if k not in _solve32:
-        _solve32[k] = jax.jit(lambda target, key, q0=None: ik.solve(chain, target, key=key, q0=q0, **kw))
+        _solve32[k] = solver_jit(lambda target, key, q0=None: ik.solve(chain, target, key=key, q0=q0, **kw))
     return _solve32[k]
 
 
@@ -66,7 +66,7 @@ def test_round_trip_success_rate_float32(kind, name, urdf_chains):
 def test_position_only_targets(urdf_chains):
     chain, fk64 = urdf_chains["iiwa14"], _pk_fk("iiwa14")
     target = fk64(random_q(chain, 200, seed=2))[:, :3, 3]
-    res = jax.jit(lambda t: ik.solve(chain, t, key=jax.random.key(0), num_seeds=4))(jnp.asarray(target, jnp.float32))
+    res = solver_jit(lambda t: ik.solve(chain, t, key=jax.random.key(0), num_seeds=4))(jnp.asarray(target, jnp.float32))
     pos = np.linalg.norm(fk64(np.asarray(res.q, np.float64))[:, :3, 3] - target, axis=-1)
     assert np.all(np.asarray(res.rot_err) == 0)
     assert np.all(pos[np.asarray(res.success)] <= 1e-5 + 5e-7)
@@ -77,7 +77,7 @@ def test_optax_method_reaches_loose_tolerance(urdf_chains):
     """Default Adam, 1,000 steps: a first-order method settles to ~1e-3 m (see the bench for the trade-off)."""
     chain, fk64 = urdf_chains["iiwa14"], _pk_fk("iiwa14")
     target = fk64(random_q(chain, 100, seed=11))
-    res = jax.jit(lambda t: ik.solve(chain, t, method="optax", num_seeds=4, pos_tol=5e-3, rot_tol=5e-2))(
+    res = solver_jit(lambda t: ik.solve(chain, t, method="optax", num_seeds=4, pos_tol=5e-3, rot_tol=5e-2))(
         jnp.asarray(target, jnp.float32)
     )
     success = np.asarray(res.success)
@@ -117,20 +117,20 @@ def test_unreachable_and_nan_targets_fail_honestly():
     T_nan = np.full((4, 4), np.nan)
     ok = dh_fk(chain, random_q(chain, 1, seed=5))[0]
     targets = jnp.asarray(np.stack([T_far, T_nan, ok]), jnp.float32)
-    res = jax.jit(lambda t: ik.solve(chain, t, key=jax.random.key(0), num_seeds=4, max_iters=30))(targets)
+    res = solver_jit(lambda t: ik.solve(chain, t, key=jax.random.key(0), num_seeds=4, max_iters=30))(targets)
     assert list(np.asarray(res.success)) == [False, False, True]
     for x in (res.q, res.pos_err, res.rot_err):
         assert np.all(np.isfinite(np.asarray(x)))
     assert float(res.pos_err[0]) > 3.0 - 0.95 - 1e-3  # the UR5 reaches < 0.95 m from its shoulder
     pos_nan = jnp.full((3,), jnp.nan, jnp.float32)
-    res = jax.jit(lambda t: ik.solve(chain, t, num_seeds=2, max_iters=5))(pos_nan)
+    res = solver_jit(lambda t: ik.solve(chain, t, num_seeds=2, max_iters=5))(pos_nan)
     assert not bool(res.success) and np.isfinite(float(res.pos_err)) and np.all(np.isfinite(res.q))
 
 
 def test_batch_shapes_vmap_and_independence():
     chain = dk.robots.iiwa7()
     target = jnp.asarray(dh_fk(chain, random_q(chain, 6, seed=8)), jnp.float32)
-    solve = jax.jit(lambda t: ik.solve(chain, t, key=jax.random.key(3), num_seeds=16))
+    solve = solver_jit(lambda t: ik.solve(chain, t, key=jax.random.key(3), num_seeds=16))
     res = solve(target.reshape(2, 3, 4, 4))
     assert res.q.shape == (2, 3, 7) and res.success.shape == (2, 3) and res.iters.shape == (2, 3)
     flat = solve(target)
@@ -218,7 +218,7 @@ def test_non_rigid_targets_are_rejected_or_fail():
     with pytest.raises(TypeError, match=r"^target: expected float32 or float64, got float16"):
         ik.solve(chain, T.astype(np.float16))
     # Traced: success=False, finite outputs, for the bad ones; the good one still succeeds.
-    solve = jax.jit(lambda t: ik.solve(chain, t, key=jax.random.key(0), num_seeds=8, max_iters=30))
+    solve = solver_jit(lambda t: ik.solve(chain, t, key=jax.random.key(0), num_seeds=8, max_iters=30))
     for dtype in (np.float32, np.float64):
         targets = np.stack([T[0], scaled[1], nearly[2], last_row[0]]).astype(dtype)
         res = solve(targets)
