@@ -32,17 +32,11 @@ from _bench import example_robot_data, median_seconds, median_seconds_interleave
 from bench_collision import panda
 
 import diffkin as dk
-from diffkin._xla import SOLVER_COMPILE
+from diffkin._xla import solver_jit  # compiled as dk.ik.solve compiles itself (docs/performance.md)
 
 C = dk.collision
 MARGIN = 0.01
 EE = "panda_hand"
-
-
-def solver_jit(fn):
-    """``jax.jit(fn)`` compiled as ``dk.ik.solve`` compiles itself when called directly (a solve traced
-    inside a ``jit`` takes that ``jit``'s compiler options: docs/performance.md, "The first call")."""
-    return jax.jit(fn, compiler_options=SOLVER_COMPILE)
 
 
 def scene() -> dict:

@@ -161,16 +161,6 @@ def random_robot_q(robot, n, seed):
     return np.random.default_rng(seed).uniform(lo, hi, (n, robot.dof))
 
 
-def solver_jit(fn, **kwargs):
-    """``jax.jit(fn)`` compiled as ``dk.ik.solve`` compiles itself when called directly (XLA's classic CPU
-    emitter, ``diffkin._xla.SOLVER_COMPILE``): a solve traced inside a test's own ``jit`` would take that
-    ``jit``'s options and compile about twice as long. The plain outer ``jit`` is tested on its own
-    (``tests/unit/test_xla.py``, ``tests/unit/test_ik.py``)."""
-    from diffkin._xla import SOLVER_COMPILE
-
-    return jax.jit(fn, compiler_options=SOLVER_COMPILE, **kwargs)
-
-
 def success_rate(success) -> float:
     """Fraction of successes, counted exactly (a float32 mean of 99 of 100 reads 0.98999995)."""
     success = np.asarray(success)

@@ -39,13 +39,14 @@ from _chain_fuzz import (
     dh_chains,
     fk,
 )
-from _reference import FUZZ, MJCF_FUZZ, MJCF_TIME_LIMIT, rotation_angle, solver_jit, time_limit
+from _reference import FUZZ, MJCF_FUZZ, MJCF_TIME_LIMIT, rotation_angle, time_limit
 from _reference import fk as fk_reference
 from _reference import number_text as _text
 from hypothesis import given
 from hypothesis import strategies as st
 
 import diffkin as dk
+from diffkin._xla import solver_jit  # compiled as dk.ik.solve compiles itself
 from diffkin.ik import _args
 
 # ----- properties -------------------------------------------------------------------------------------

@@ -17,13 +17,14 @@ from _chain_fuzz import (
     check_fk_and_jacobians_finite_for_any_finite_q,
     check_jacobians_match_central_differences,
 )
-from _reference import EXAMPLES, FINGER, FUZZ, MJCF_FUZZ, MJCF_TIME_LIMIT, solver_jit, time_limit
+from _reference import EXAMPLES, FINGER, FUZZ, MJCF_FUZZ, MJCF_TIME_LIMIT, time_limit
 from _reference import finite_floats as _floats
 from _reference import number_text as _text
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import diffkin as dk
+from diffkin._xla import solver_jit  # compiled as dk.ik.solve compiles itself
 
 # Each example runs under a SIGALRM limit (a hang, such as an include bomb, fails the test instead of
 # stalling CI) and a hypothesis deadline (an example slower than that is reported). No JAX compilation:

@@ -17,7 +17,6 @@ from _reference import (
     SLACK_POS,
     SLACK_ROT,
     SOLO,
-    solver_jit,
 )
 from _reference import frame_errors as _errors
 from _reference import pin_poses as _pin_poses
@@ -26,6 +25,7 @@ from _reference import success_rate as _rate
 
 import diffkin as dk
 from diffkin import _rigid as rg
+from diffkin._xla import solver_jit  # compiled as dk.ik.solve compiles itself
 from diffkin.ik._problem import Problem
 from diffkin.ik._terms.pose import PoseTarget
 from diffkin.ik._terms.relative import RelativeTarget

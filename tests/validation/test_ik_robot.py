@@ -22,7 +22,6 @@ from _reference import (
     SOLO,
     pose_errors,
     robot_poses,
-    solver_jit,
 )
 from _reference import frame_errors as _errors
 from _reference import pin_poses as _pin_poses
@@ -32,6 +31,7 @@ from _reference import success_rate as _rate
 
 import diffkin as dk
 from diffkin import se3
+from diffkin._xla import solver_jit  # compiled as dk.ik.solve compiles itself
 from diffkin.ik import _secondary
 
 pytestmark = pytest.mark.skipif(not ERD, reason="example-robot-data is not installed (pip install -e '.[test]')")

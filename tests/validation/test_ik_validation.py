@@ -9,10 +9,11 @@ import optax
 import pytest
 import pytorch_kinematics as pk
 import torch
-from _reference import URDF_ROBOTS, dh_fk, pose_errors, random_q, solver_jit
+from _reference import URDF_ROBOTS, dh_fk, pose_errors, random_q
 
 import diffkin as dk
 import diffkin.ik as ik
+from diffkin._xla import solver_jit  # compiled as dk.ik.solve compiles itself
 
 ROBOTS = ("iiwa7", "iiwa14", "panda", "ur5")
 
