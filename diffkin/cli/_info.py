@@ -14,9 +14,13 @@ def _tree_lines(robot, spec: str) -> list[str]:
     body_name = {0: robot.frame_names[0]}
     for f, b in enumerate(robot.frame_bodies):
         body_name.setdefault(b, robot.frame_names[f])
+    frames_of: dict[int, list[str]] = {}
+    for f, b in enumerate(robot.frame_bodies):
+        frames_of.setdefault(b, []).append(robot.frame_names[f])
+    mimic = robot.mimic  # a property that builds its dict: once, not per joint
     kind = "floating root" if robot.floating else "fixed root"
     lines = [
-        f"{robot.name or spec}: Robot (tree), {robot.dof} actuated joints, {len(robot.mimic)} mimic, "
+        f"{robot.name or spec}: Robot (tree), {robot.dof} actuated joints, {len(mimic)} mimic, "
         f"{len(robot.frame_names)} frames, {kind} {robot.frame_names[0]!r}",
         "",
         f"{'q':>3}  {'joint':<28} {'type':<10} {'parent -> child':<44} limits or coupling",
@@ -27,8 +31,8 @@ def _tree_lines(robot, spec: str) -> list[str]:
         kind = {"R": "revolute", "P": "prismatic", "B": "ball"}[robot.joint_types[j]]
         if robot.sources[j] >= robot.dof:
             index, what = "", "solved from q (closed loop)"
-        elif name in robot.mimic:
-            source, m, o = robot.mimic[name]
+        elif name in mimic:
+            source, m, o = mimic[name]
             index, what = "", f"mimic: {m:g} * {source} + {o:g}"
         else:
             i = robot.sources[j]
@@ -36,11 +40,7 @@ def _tree_lines(robot, spec: str) -> list[str]:
         lines.append(f"{index:>3}  {name:<28} {kind:<10} {link:<44} {what}")
     lines += [
         "",
-        "frames (by body): "
-        + "; ".join(
-            ", ".join(robot.frame_names[f] for f, b in enumerate(robot.frame_bodies) if b == body)
-            for body in sorted(set(robot.frame_bodies))
-        ),
+        "frames (by body): " + "; ".join(", ".join(frames_of[body]) for body in sorted(frames_of)),
     ]
     return lines
 
