@@ -21,26 +21,63 @@ jax.config.update("jax_enable_x64", True)
 os.environ["DIFFKIN_CACHE_DIR"] = "off"
 
 
+def _off(value: str) -> bool:
+    return value.strip().lower() in ("", "0", "off", "false", "no", "none")
+
+
 def _compilation_cache() -> str | None:
     """The folder of the test runs' own persistent compilation cache, or ``None``: ``DIFFKIN_TEST_CACHE_DIR``
     (``off``, empty, ``0``, ``false``, ``no``, ``none``: no cache), else ``$XDG_CACHE_HOME/diffkin/jax-tests``
     (``~/.cache``), outside the repository."""
     env = os.environ.get("DIFFKIN_TEST_CACHE_DIR")
     if env is not None:
-        return None if env.strip().lower() in ("", "0", "off", "false", "no", "none") else env
+        return None if _off(env) else env
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return os.path.join(base, "diffkin", "jax-tests")
 
 
 # Most of a test run is XLA compiling: with JAX's persistent cache, a rerun compiles only the programs
-# that changed (keys hold the program, the flags and the versions, not source lines; at most 4 GiB, least
-# recently used out). Every program is kept, the small ones too: the ~2,100 small programs (eager
-# operations, 10-30 ms each) are read back faster than they compile (CONTRIBUTING.md has the figures).
+# that changed (keys hold the program, the flags and the versions, not source lines). Every program is
+# kept, the small ones too (eager operations): they are read back faster than they compile. JAX's own size
+# limit stays off: with one, each write lists the folder and reads every entry's access time (its LRU
+# bookkeeping), which cost a run from an empty folder more than the cache saved (CONTRIBUTING.md); the
+# controller bounds the folder instead, once per run, before any worker starts.
+CACHE_MAX_BYTES = 4 * 2**30
+
+
+def _bound(folder: Path, max_bytes: int) -> None:
+    """Delete the oldest files of ``folder`` (by modification time) until it holds at most ``max_bytes``."""
+    files = sorted((s.st_mtime, s.st_size, p) for p in folder.iterdir() if p.is_file() for s in [p.stat()])
+    total = sum(size for _, size, _ in files)
+    for _, size, path in files:
+        if total <= max_bytes:
+            break
+        path.unlink(missing_ok=True)
+        total -= size
+
+
 if (_cache := _compilation_cache()) is not None:
     jax.config.update("jax_compilation_cache_dir", _cache)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    jax.config.update("jax_compilation_cache_max_size", 4 * 2**30)
+    if "PYTEST_XDIST_WORKER" not in os.environ and os.path.isdir(_cache):
+        _bound(Path(_cache), CACHE_MAX_BYTES)
+
+# The tests check values, not speed, so this process compiles for compile time: LLVM at -O0
+# (``jax_disable_most_optimizations``) and XLA's classic CPU emitter (``dk.ik.solve``'s solvers use it
+# anyway, ``diffkin._xla.SOLVER_COMPILE``): about a third of the compile time (CONTRIBUTING.md). The same
+# computations: no fast math, results within the last bits. XLA reads ``XLA_FLAGS`` once, at the first
+# compile, so the user's ``XLA_FLAGS`` come back after it: subprocesses (the CLI, the docs' examples,
+# the benchmarks) run with the options users get. ``DIFFKIN_TEST_FAST_COMPILE=off``: users' options here too.
+if not _off(os.environ.get("DIFFKIN_TEST_FAST_COMPILE", "on")):
+    jax.config.update("jax_disable_most_optimizations", True)
+    _users_flags = os.environ.get("XLA_FLAGS")
+    os.environ["XLA_FLAGS"] = " ".join(f for f in ("--xla_cpu_use_fusion_emitters=false", _users_flags) if f)
+    jax.jit(lambda x: x + 1)(0.0)
+    if _users_flags is None:
+        del os.environ["XLA_FLAGS"]
+    else:
+        os.environ["XLA_FLAGS"] = _users_flags
 
 TESTS = Path(__file__).resolve().parent
 if str(TESTS) not in sys.path:
