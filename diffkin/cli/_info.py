@@ -11,12 +11,10 @@ from diffkin.cli._text import clean, fmt, quaternions
 
 def _tree_lines(robot, spec: str) -> list[str]:
     """The tree of a ``dk.Robot``: joints with their parents, mimic couplings, and frames per body."""
-    body_name = {0: robot.frame_names[0]}
-    for f, b in enumerate(robot.frame_bodies):
-        body_name.setdefault(b, robot.frame_names[f])
     frames_of: dict[int, list[str]] = {}
     for f, b in enumerate(robot.frame_bodies):
         frames_of.setdefault(b, []).append(robot.frame_names[f])
+    body_name = {b: names[0] for b, names in frames_of.items()} | {0: robot.frame_names[0]}
     mimic = robot.mimic  # a property that builds its dict: once, not per joint
     kind = "floating root" if robot.floating else "fixed root"
     lines = [
