@@ -437,6 +437,13 @@ def _sincos_stacked_jvp(primals, tangents):
 _sincos_stacked.defjvp(_sincos_stacked_jvp, symbolic_zeros=True)
 
 
+def atan2_each(pairs: Sequence[tuple[jax.Array, jax.Array]]) -> list[jax.Array]:
+    """:func:`diffkin._trig.atan2` of each pair ``(y, x)`` of arrays (broadcast to one shape), through
+    one call on their stack: one ``lax.cond`` instead of one per pair, as :func:`sincos_each`."""
+    arrays = jnp.broadcast_arrays(*(v for pair in pairs for v in pair))
+    return list(atan2(jnp.stack(arrays[0::2]), jnp.stack(arrays[1::2])))
+
+
 def per_joint(x) -> list[Entry]:
     """The values of a ``(n,)`` model parameter, one per joint: snapped floats if concrete, else traced slices."""
     if is_concrete(x):

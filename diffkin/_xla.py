@@ -25,8 +25,8 @@ Elsewhere, as they are part of what those modules compute: the structure-of-arra
 transforms (:mod:`diffkin._rigid`), one stack of every entry for many poses
 (:func:`diffkin._rigid.to_matrices`, measured there), the fused ``sincos``/``atan2``
 (:mod:`diffkin._trig`, measured there), one ``sincos`` per forward pass
-(:func:`diffkin._rigid.sincos_each`: XLA's CPU compile time follows the number of kernels) and the
-IK's hashed seeds (:mod:`diffkin.ik._uniform`), each measured there.
+(:func:`diffkin._rigid.sincos_each`: XLA's CPU compile time follows the number of kernels; likewise
+:func:`diffkin._rigid.atan2_each`) and the IK's hashed seeds (:mod:`diffkin.ik._uniform`), each measured there.
 """
 
 from __future__ import annotations

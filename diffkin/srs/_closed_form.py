@@ -107,8 +107,9 @@ def tangent_pairs(e: AngleEntries, g2, g6) -> list[tuple]:
     ]
 
 
-def _spherical(g, num, den, cos_b, m11, m21, m31) -> list[jax.Array]:
-    """Angles ``a, b, c`` of ``M = Rz(a) Rx(-pi/2) Rz(b) Rx(pi/2) Rz(c) X`` with ``X`` fixing the x axis.
+def _spherical(g, num, den, cos_b, m11, m21, m31) -> list[tuple[jax.Array, jax.Array]]:
+    """``(y, x)`` pairs whose ``atan2`` are the angles ``a, b, c`` of ``M = Rz(a) Rx(-pi/2) Rz(b) Rx(pi/2) Rz(c) X``
+    with ``X`` fixing the x axis.
 
     ``a = atan2(num, den)`` with ``(num, den) = g (sin a, cos a) |sin b|``, ``b = atan2(g |sin b|, cos b)``
     (accurate near ``b = 0``, unlike ``g acos(cos b)``), and ``c`` from the first column
@@ -122,8 +123,7 @@ def _spherical(g, num, den, cos_b, m11, m21, m31) -> list[jax.Array]:
     # h (cos c, sin c): positive scaling leaves the angle unchanged and saves two divisions
     y = jnp.where(flat, m21, den * m21 - num * m11)
     x = jnp.where(flat, cos_b * m11, cos_b * (den * m11 + num * m21) - g * h2 * m31)
-    c = atan2(y, x)
-    return [atan2(num, den), atan2(sin_b, cos_b), c]
+    return [(num, den), (sin_b, cos_b), (y, x)]
 
 
 def joint_angles(e: AngleEntries, g2, g6, theta4) -> list[jax.Array]:
@@ -136,7 +136,8 @@ def joint_angles(e: AngleEntries, g2, g6, theta4) -> list[jax.Array]:
     (n1, d1), _, (n5, d5), _ = tangent_pairs(e, g2, g6)
     shoulder = _spherical(g2, n1, d1, e.r32, e.r11, e.r21, e.r31)
     wrist = _spherical(g6, n5, d5, e.w33, e.w11, e.w21, e.w31)
-    return shoulder + [theta4] + wrist
+    angles = rg.atan2_each(shoulder + wrist)  # one atan2 (one lax.cond) for the six angles
+    return angles[:3] + [theta4] + angles[3:]
 
 
 def _rows(flat) -> rg.Mat3:
@@ -390,7 +391,7 @@ def arm_angle(arm: SRSArm, q: ArrayLike) -> tuple[jax.Array, jax.Array]:
         raise ValueError(f"q: expected shape (..., 7) for an SRS arm, got {q.shape}")
     dtype = q.dtype
     d_se, d_ew = jnp.asarray(arm.d_se, dtype), jnp.asarray(arm.d_ew, dtype)
-    (s1, c1), (s2, c2), (s3, c3), (s4, c4) = (sincos(q[..., i]) for i in range(4))
+    (s1, c1), (s2, c2), (s3, c3), (s4, c4) = rg.sincos_each([q[..., i] for i in range(4)])
     R03 = (
         (c1 * c2 * c3 - s1 * s3, c1 * s2, c1 * c2 * s3 + s1 * c3),
         (s1 * c2 * c3 + c1 * s3, s1 * s2, s1 * c2 * s3 - c1 * c3),
