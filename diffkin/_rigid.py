@@ -19,12 +19,11 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.custom_derivatives import SymbolicZero
 
 from diffkin import _trig
 from diffkin._static import is_concrete
 from diffkin._trig import atan2
-from diffkin._xla import inverse_sqrt, materialize
+from diffkin._xla import gpu_outputs, inverse_sqrt, materialize, stacked_sincos
 
 Entry = jax.Array | float
 # Three entries, and three rows of three. Variable-length tuple types: the entries are built by
@@ -155,46 +154,14 @@ def stack(entries: list[Entry], shape: tuple[int, ...], dtype, axis: int = -1) -
 
 
 def outputs(entries: list[Entry], shape: tuple[int, ...], dtype) -> jax.Array:
-    """The entries stacked into one ``shape + (len(entries),)`` array (:func:`stack` on the last axis).
-
-    On the CPU, and in float64, a plain stack. In float32 off the CPU (a GPU) the computed entries
-    are first materialised behind an optimization barrier: XLA's GPU concatenate emits each
-    operand's expression on its own, so a stack of the entries of a forward pass recomputes the
-    shared part of the pass for every entry (3x faster FK on an H100); in float64 the barrier made FK
-    slower, so float64 stays plain. Measurements: docs/performance.md, "GPU outputs".
-    """
+    """The entries stacked into one ``shape + (len(entries),)`` array (:func:`stack` on the last axis),
+    the computed ones through :func:`diffkin._xla.gpu_outputs` (a barrier in float32 off the CPU)."""
     arrays = [jnp.broadcast_to(jnp.asarray(e, dtype=dtype), shape) for e in entries]
     computed = [i for i, e in enumerate(entries) if not isinstance(e, float)]
-    if shape and computed and jnp.dtype(dtype) == jnp.float32:
-        done = jax.lax.platform_dependent(*(arrays[i] for i in computed), cpu=_as_is, default=_materialized)
-        for i, a in zip(computed, done, strict=True):
+    if shape and computed:
+        for i, a in zip(computed, gpu_outputs([arrays[i] for i in computed], dtype), strict=True):
             arrays[i] = a
     return jnp.stack(arrays, axis=-1)
-
-
-def _as_is(*arrays):
-    return arrays
-
-
-def _materialized(*arrays):
-    return jax.lax.optimization_barrier(arrays)
-
-
-# A serial forward pass is materialised every this many joints (see :func:`segment_end`).
-SEGMENT = 8
-
-
-def segment_end(i: int, dof: int) -> bool:
-    """Whether a serial chain's forward pass materialises its pose after joint ``i`` (of ``dof``).
-
-    XLA's CPU fusion duplicates an elementwise producer into each consumer kernel, and every
-    output of a Jacobian depends on the forward pass up to its joint: without a barrier the
-    compiled program holds ``O(dof^2)`` copies of the pass, and compile time and memory grow
-    accordingly (docs/performance.md, "The first call"). Materialising the pose every
-    :data:`SEGMENT` joints bounds each copy to one segment; chains of up to :data:`SEGMENT`
-    joints (every arm) compile to the same program as without it.
-    """
-    return (i + 1) % SEGMENT == 0 and i + 1 < dof
 
 
 def checkpoint(A: Rigid) -> Rigid:
@@ -404,44 +371,14 @@ def sincos_each(xs: Sequence[Entry]) -> list[tuple[Entry, Entry]]:
     """:func:`sincos` of each entry; the array entries (broadcast to one shape) through one
     :func:`diffkin._trig.sincos` of their stack.
 
-    One call for a whole forward pass instead of one per joint: on the CPU each call is a
-    ``lax.cond`` with about nine kernels of its own, and XLA's compile time grows with the number
-    of kernels (docs/performance.md, "XLA CPU tricks").
+    One call for a whole forward pass instead of one per joint (:func:`diffkin._xla.stacked_sincos`).
     """
     arrays = [x for x in xs if not isinstance(x, float)]
     if not arrays:
         return [sincos(x) for x in xs]
-    s, c = _sincos_stacked(tuple(jnp.broadcast_arrays(*arrays)))
+    s, c = stacked_sincos(tuple(jnp.broadcast_arrays(*arrays)))
     computed = zip(s, c, strict=True)
     return [sincos(x) if isinstance(x, float) else next(computed) for x in xs]
-
-
-@jax.custom_jvp
-def _sincos_stacked(xs: tuple) -> tuple[tuple, tuple]:
-    """``(sin x, cos x)`` of each array of ``xs`` (one shape), by one :func:`diffkin._trig.sincos`."""
-    s, c = _trig.sincos(jnp.stack(xs))
-    return tuple(s), tuple(c)
-
-
-def _sincos_stacked_jvp(primals, tangents):
-    """Per entry, so that an entry without a tangent keeps a symbolic zero: a forward-mode
-    Jacobian moves one joint at a time, and instantiated zeros for the others would carry tangent
-    arithmetic through the whole pass (the autodiff Jacobian of 20 joints then compiled in 32 s, not 19 s)."""
-    (xs,), (dxs,) = primals, tangents
-    s, c = _sincos_stacked(xs)
-    ds = tuple(dx if isinstance(dx, SymbolicZero) else ck * dx for ck, dx in zip(c, dxs, strict=True))
-    dc = tuple(dx if isinstance(dx, SymbolicZero) else -sk * dx for sk, dx in zip(s, dxs, strict=True))
-    return (s, c), (ds, dc)
-
-
-_sincos_stacked.defjvp(_sincos_stacked_jvp, symbolic_zeros=True)
-
-
-def atan2_each(pairs: Sequence[tuple[jax.Array, jax.Array]]) -> list[jax.Array]:
-    """:func:`diffkin._trig.atan2` of each pair ``(y, x)`` of arrays (broadcast to one shape), through
-    one call on their stack: one ``lax.cond`` instead of one per pair, as :func:`sincos_each`."""
-    arrays = jnp.broadcast_arrays(*(v for pair in pairs for v in pair))
-    return list(atan2(jnp.stack(arrays[0::2]), jnp.stack(arrays[1::2])))
 
 
 def per_joint(x) -> list[Entry]:

@@ -20,13 +20,18 @@ The measurements that justify them are in docs/performance.md, "XLA CPU tricks".
   then runs one entry at a time).
 - :data:`SOLVER_COMPILE` and :func:`solver_jit`: the IK solvers are compiled by XLA's classic CPU
   kernel emitter, which compiles in two thirds of the time of the newer MLIR emitters (see there).
+- :func:`segment_end`: a long serial forward pass is materialised every :data:`SEGMENT` joints, so
+  that XLA's fusion does not copy the pass into every output of a Jacobian.
+- :func:`gpu_outputs`: float32 outputs are computed once behind a barrier on a GPU, whose
+  concatenate would recompute the shared pass for each entry.
+- :func:`stacked_sincos` (with its derivative rule) and :func:`stacked_atan2`: many sines and
+  cosines, or arctangents, through one call, whose ``lax.cond`` and kernels then come once.
 
 Elsewhere, as they are part of what those modules compute: the structure-of-arrays rigid
 transforms (:mod:`diffkin._rigid`), one stack of every entry for many poses
 (:func:`diffkin._rigid.to_matrices`, measured there), the fused ``sincos``/``atan2``
-(:mod:`diffkin._trig`, measured there), one ``sincos`` per forward pass
-(:func:`diffkin._rigid.sincos_each`: XLA's CPU compile time follows the number of kernels; likewise
-:func:`diffkin._rigid.atan2_each`) and the IK's hashed seeds (:mod:`diffkin.ik._uniform`), each measured there.
+(:mod:`diffkin._trig`, measured there) and the IK's hashed seeds (:mod:`diffkin.ik._uniform`),
+each measured there.
 """
 
 from __future__ import annotations
@@ -37,6 +42,9 @@ from collections.abc import Callable
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_derivatives import SymbolicZero
+
+from diffkin import _trig
 
 #: Compiler options of the IK solvers' ``jax.jit`` (:func:`diffkin.ik.solve` and the CLI's and
 #: viewer's compiled solvers): XLA's classic CPU kernel emitter instead of its MLIR fusion
@@ -97,6 +105,78 @@ def materialize(values: list) -> jax.Array:
     # XLA folds away a stack of one (and the barrier with it): a single value is stacked twice.
     stacked = jnp.stack(entries * 2 if len(entries) == 1 else entries)
     return jax.lax.optimization_barrier(stacked)[: len(entries)]
+
+
+# A serial forward pass is materialised every this many joints (see :func:`segment_end`).
+SEGMENT = 8
+
+
+def segment_end(i: int, dof: int) -> bool:
+    """Whether a serial chain's forward pass materialises its pose after joint ``i`` (of ``dof``).
+
+    XLA's CPU fusion duplicates an elementwise producer into each consumer kernel, and every
+    output of a Jacobian depends on the forward pass up to its joint: without a barrier the
+    compiled program holds ``O(dof^2)`` copies of the pass, and compile time and memory grow
+    accordingly (docs/performance.md, "The first call"). Materialising the pose every
+    :data:`SEGMENT` joints (:func:`diffkin._rigid.checkpoint`) bounds each copy to one segment;
+    chains of up to :data:`SEGMENT` joints (every arm) compile to the same program as without it.
+    """
+    return (i + 1) % SEGMENT == 0 and i + 1 < dof
+
+
+def gpu_outputs(arrays: list[jax.Array], dtype) -> list[jax.Array]:
+    """Computed outputs about to be stacked: in float32 off the CPU (a GPU) each computed once behind
+    an optimization barrier; on the CPU, and in float64, as they are.
+
+    XLA's GPU concatenate emits each operand's expression on its own, so a stack of the entries of a
+    forward pass recomputes the shared part of the pass for every entry (3x faster FK on an H100); in
+    float64 the barrier made FK slower, so float64 stays plain. Measurements: docs/performance.md,
+    "GPU outputs". The platform is the one the program is compiled for (``lax.platform_dependent``).
+    """
+    if not arrays or jnp.dtype(dtype) != jnp.float32:
+        return arrays
+    return list(jax.lax.platform_dependent(*arrays, cpu=_as_is, default=_materialized))
+
+
+def _as_is(*arrays):
+    return arrays
+
+
+def _materialized(*arrays):
+    return jax.lax.optimization_barrier(arrays)
+
+
+@jax.custom_jvp
+def stacked_sincos(xs: tuple) -> tuple[tuple, tuple]:
+    """``(sin x, cos x)`` of each array of ``xs`` (one shape), by one :func:`diffkin._trig.sincos` of their stack.
+
+    On the CPU each call of :func:`diffkin._trig.sincos` is a ``lax.cond`` with about nine kernels of
+    its own, and XLA's compile time grows with the number of kernels: one call for a whole forward
+    pass instead of one per joint (docs/performance.md, "XLA CPU tricks").
+    """
+    s, c = _trig.sincos(jnp.stack(xs))
+    return tuple(s), tuple(c)
+
+
+def _stacked_sincos_jvp(primals, tangents):
+    """Per entry, so that an entry without a tangent keeps a symbolic zero: a forward-mode
+    Jacobian moves one joint at a time, and instantiated zeros for the others would carry tangent
+    arithmetic through the whole pass (the autodiff Jacobian of 20 joints then compiled in 32 s, not 19 s)."""
+    (xs,), (dxs,) = primals, tangents
+    s, c = stacked_sincos(xs)
+    ds = tuple(dx if isinstance(dx, SymbolicZero) else ck * dx for ck, dx in zip(c, dxs, strict=True))
+    dc = tuple(dx if isinstance(dx, SymbolicZero) else -sk * dx for sk, dx in zip(s, dxs, strict=True))
+    return (s, c), (ds, dc)
+
+
+stacked_sincos.defjvp(_stacked_sincos_jvp, symbolic_zeros=True)
+
+
+def stacked_atan2(pairs: list[tuple[jax.Array, jax.Array]]) -> list[jax.Array]:
+    """:func:`diffkin._trig.atan2` of each pair ``(y, x)`` of arrays (broadcast to one shape), by one
+    call on their stack: one ``lax.cond`` instead of one per pair, as :func:`stacked_sincos`."""
+    arrays = jnp.broadcast_arrays(*(v for pair in pairs for v in pair))
+    return list(_trig.atan2(jnp.stack(arrays[0::2]), jnp.stack(arrays[1::2])))
 
 
 @jax.custom_jvp

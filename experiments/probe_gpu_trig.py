@@ -12,7 +12,7 @@ checked against float64 FK on the CPU. ``--dump`` writes the optimized HLO of ev
 Trigonometry (:mod:`diffkin._trig`): ``fused+cond`` the CPU version (a ``lax.cond`` on any angle
 beyond the fast range, one reduction over the array first); ``fused`` its polynomial alone (exact
 only for ``|x| <~ 1.3e4`` in float32: a probe); ``xla`` ``jnp.sin``/``jnp.cos`` (the library's
-choice off the CPU). Outputs (:func:`diffkin._rigid.outputs`): ``stack`` (the entries stacked
+choice off the CPU). Outputs (:func:`diffkin._xla.gpu_outputs`): ``stack`` (the entries stacked
 on the last axis as they are, the CPU's), ``entries|`` (the computed entries materialised behind
 an optimization barrier first: the library's choice off the CPU). An earlier run of this probe
 (2026-11-23, H100) also tried reading ``q`` through a transpose to rows and writing the outputs
@@ -34,10 +34,10 @@ import numpy as np
 from _bench import duration, median_seconds, rate, table
 
 import diffkin as dk
-from diffkin import _rigid, _trig
+from diffkin import _rigid, _trig, _xla
 
 TRIG = {"fused+cond": _trig._sincos_any, "fused": _trig._sincos_fast, "xla": _trig._sincos_xla}
-OUTPUTS = {"stack": _rigid._as_is, "entries|": _rigid._materialized}
+OUTPUTS = {"stack": _xla._as_is, "entries|": _xla._materialized}
 DEFAULT = ("xla", "entries|")
 
 
@@ -51,12 +51,12 @@ def kernels(compiled_text: str) -> int:
 @contextlib.contextmanager
 def variant(trig: str, outputs: str):
     """The library with this trigonometry and these outputs off the CPU (patched in while tracing)."""
-    saved = _rigid.sincos, _rigid._materialized
-    _rigid.sincos, _rigid._materialized = TRIG[trig], OUTPUTS[outputs]
+    saved = _rigid.sincos, _xla._materialized
+    _rigid.sincos, _xla._materialized = TRIG[trig], OUTPUTS[outputs]
     try:
         yield
     finally:
-        _rigid.sincos, _rigid._materialized = saved
+        _rigid.sincos, _xla._materialized = saved
 
 
 def compiled(fn, v, x):

@@ -10,6 +10,7 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
+from diffkin._xla import segment_end
 from diffkin.models import _validate as check
 from diffkin.models.forward import ChainPass, Pass
 
@@ -172,7 +173,7 @@ class DHChain:
                 T = rg.compose(T, A)
             z, origin = rg.column(axis_frame.R, 2), axis_frame.p
             screws.append((rg.cross(origin, z), z) if revolute else (z, (0.0, 0.0, 0.0)))
-            if rg.segment_end(i, self.dof):
+            if segment_end(i, self.dof):
                 T = rg.checkpoint(T)
             links.append(T)
         return ChainPass(links, rg.compose(T, rg.from_matrix(self.tool)), screws)

@@ -12,6 +12,7 @@ from diffkin import _rigid as rg
 from diffkin._checks import instance
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._static import host
+from diffkin._xla import segment_end
 from diffkin.models import _validate as check
 from diffkin.models.dh import DHChain
 from diffkin.models.forward import ChainPass, Pass
@@ -160,7 +161,7 @@ class PoEChain:
             w_now = rg.rotate(T.R, w)
             screws.append((rg.vadd(rg.rotate(T.R, v), rg.cross(T.p, w_now)), w_now))
             T = rg.compose(T, exps[i])
-            if rg.segment_end(i, self.dof):
+            if segment_end(i, self.dof):
                 T = rg.checkpoint(T)
             links.append(rg.compose(T, rg.from_matrix(L[i])))
         return ChainPass(links, rg.compose(T, rg.from_matrix(self.home)), screws)

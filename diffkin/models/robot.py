@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin import _rigid as rg
+from diffkin import _xla
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._static import host, is_concrete
 from diffkin._xla import materialize
@@ -257,7 +258,7 @@ class Robot:
                 screws.append((rg.vadd(rg.rotate(T.R, v), rg.cross(T.p, w_world)), w_world))
                 T = rg.compose(T, exps[j])
             depth.append(depth[parent] + 1)
-            if depth[-1] % rg.SEGMENT == 0 and j + 1 in inner:  # a long serial path: see rg.segment_end
+            if depth[-1] % _xla.SEGMENT == 0 and j + 1 in inner:  # a long serial path: see _xla.segment_end
                 T = rg.checkpoint(T)
             bodies.append(T)
         return RobotPass(self, bodies, screws, m)

@@ -31,7 +31,7 @@ from jax.typing import ArrayLike
 from diffkin import _rigid as rg
 from diffkin._checks import broadcast_batch, instance, pose_array, real_array, rigid_poses, sign_array
 from diffkin._trig import atan2, sincos
-from diffkin._xla import in_steps, materialize
+from diffkin._xla import in_steps, materialize, stacked_atan2
 from diffkin.srs._arm import AN_ARM, SRSArm
 
 POSE_TOL = {False: 1e-4, True: 1e-9}
@@ -136,7 +136,7 @@ def joint_angles(e: AngleEntries, g2, g6, theta4) -> list[jax.Array]:
     (n1, d1), _, (n5, d5), _ = tangent_pairs(e, g2, g6)
     shoulder = _spherical(g2, n1, d1, e.r32, e.r11, e.r21, e.r31)
     wrist = _spherical(g6, n5, d5, e.w33, e.w11, e.w21, e.w31)
-    angles = rg.atan2_each(shoulder + wrist)  # one atan2 (one lax.cond) for the six angles
+    angles = stacked_atan2(shoulder + wrist)  # one atan2 (one lax.cond) for the six angles
     return angles[:3] + [theta4] + angles[3:]
 
 

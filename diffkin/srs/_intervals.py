@@ -24,9 +24,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
-from diffkin import _rigid as rg
 from diffkin._checks import instance, pose_array, positive_int
 from diffkin._trig import sincos
+from diffkin._xla import stacked_atan2
 from diffkin.srs._arm import AN_ARM, SRSArm
 from diffkin.srs._closed_form import (
     AngleEntries,
@@ -56,7 +56,7 @@ def _roots(f: Trig) -> jax.Array:
     ratio = -f.c / jnp.where(r > 0, r, 1.0)
     exists = (r > 0) & (jnp.abs(ratio) <= 1.0)
     ratio = jnp.clip(ratio, -1.0, 1.0)
-    phase, half_width = rg.atan2_each([(f.a, f.b), (safe_sqrt(1.0 - ratio * ratio), ratio)])
+    phase, half_width = stacked_atan2([(f.a, f.b), (safe_sqrt(1.0 - ratio * ratio), ratio)])
     roots = jnp.concatenate([phase + half_width, phase - half_width], -1)
     roots = jnp.mod(roots + jnp.pi, 2.0 * jnp.pi) - jnp.pi
     return jnp.where(jnp.concatenate([exists, exists], -1), roots, -jnp.pi)
