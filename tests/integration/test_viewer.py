@@ -595,7 +595,7 @@ def test_names_from_the_file_reach_the_page_as_plain_text(viewer_of, tmp_path):
 
 @pytest.fixture(scope="module")
 def arm_avoid():
-    """tests/test_cli.py's arm of capsules, its geometry and scene (a turned box, a floor: margin 0.02 m)."""
+    """The capsule arm of tests/integration/test_cli.py, its geometry and scene (turned box, floor; margin 0.02 m)."""
     robot = dk.load_robot(ARM)
     geom = dk.collision.load(ARM, robot)
     scene = dk.collision.load_scene({**SCENE, "spheres": [{"center": [-0.4, 0, 0.5], "radius": 0.1}],
@@ -640,7 +640,7 @@ def test_obstacles_are_drawn_with_the_clearance(viewer_of, arm_avoid):
 def test_drag_with_avoid_is_solved_clear_of_the_obstacles(viewer_of, arm_avoid):
     """A hand pose above the box, dragged to: the whole arm solved onto it, clear of the box and the floor
     by the margin (checked by dk.collision.clearance at the configuration shown), the clearance on the page.
-    (The scene of tests/test_cli.py: two kinds of obstacles compile faster than four.)"""
+    (The scene of tests/integration/test_cli.py: two kinds of obstacles compile faster than four.)"""
     robot, geom, _ = arm_avoid
     scene = dk.collision.load_scene(SCENE)
     viewer = viewer_of(robot, avoid=dk.ik.Avoid(geom, scene.world, scene.margin))
