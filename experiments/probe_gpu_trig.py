@@ -34,7 +34,7 @@ import numpy as np
 from _bench import duration, median_seconds, rate, table
 
 import diffkin as dk
-from diffkin import _rigid, _trig, _xla
+from diffkin import _trig, _xla
 
 TRIG = {"fused+cond": _trig._sincos_any, "fused": _trig._sincos_fast, "xla": _trig._sincos_xla}
 OUTPUTS = {"stack": _xla._as_is, "entries|": _xla._materialized}
@@ -51,12 +51,12 @@ def kernels(compiled_text: str) -> int:
 @contextlib.contextmanager
 def variant(trig: str, outputs: str):
     """The library with this trigonometry and these outputs off the CPU (patched in while tracing)."""
-    saved = _rigid.sincos, _xla._materialized
-    _rigid.sincos, _xla._materialized = TRIG[trig], OUTPUTS[outputs]
+    saved = _trig.sincos, _xla._materialized
+    _trig.sincos, _xla._materialized = TRIG[trig], OUTPUTS[outputs]
     try:
         yield
     finally:
-        _rigid.sincos, _xla._materialized = saved
+        _trig.sincos, _xla._materialized = saved
 
 
 def compiled(fn, v, x):
