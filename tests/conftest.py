@@ -1,5 +1,5 @@
 """Test settings: float64 enabled (float32 tests pass float32 arrays explicitly), strict promotion off,
-warnings are errors (pyproject), shared robot fixtures, and the tiers.
+warnings are errors (pyproject), a mesh-fit cache of their own, shared robot fixtures, and the tiers.
 
 The tests live in three directories, by what they need (CONTRIBUTING.md): ``unit/`` (diffkin, numpy,
 scipy, jax, optax, hypothesis: ``pip install -e ".[dev]"``), ``validation/`` (other libraries: Pinocchio,
@@ -9,8 +9,11 @@ is marked with its directory's name (``-m unit``); tests outside the unit tier a
 ``-m "not slow"`` selects the unit tier. Shared helpers: ``tests/_reference.py`` (``tests/`` is put on
 ``sys.path`` here, so every tier imports it as ``_reference``)."""
 
+import atexit
 import os
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 import jax
@@ -19,6 +22,11 @@ import pytest
 jax.config.update("jax_enable_x64", True)
 # The CLI's persistent compilation cache stays off in tests (and their subprocesses) unless a test asks.
 os.environ["DIFFKIN_CACHE_DIR"] = "off"
+# Mesh fits are cached on disk (diffkin.collision._fitcache): the tests and their subprocesses use a folder of
+# their own, removed at exit, never the user's.
+_FIT_CACHE = tempfile.mkdtemp(prefix="diffkin-fit-cache-")
+os.environ["DIFFKIN_FIT_CACHE"] = _FIT_CACHE
+atexit.register(shutil.rmtree, _FIT_CACHE, ignore_errors=True)
 
 
 def _off(value: str) -> bool:

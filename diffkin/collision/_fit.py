@@ -5,11 +5,25 @@ convex hull). Cylinders and ellipsoids are fitted in closed form along their own
 capsule is searched for (axis and axis line by Nelder-Mead from the principal axes, the smallest
 volume for that line in an inner search over the radius), and whatever line is chosen, the radius
 and end points are computed so that every vertex is inside: the search only changes how tight it is.
+Mesh fits are cached on disk (:mod:`diffkin.collision._fitcache`).
 """
 
 from __future__ import annotations
 
+import functools
+import importlib.util
+
 import numpy as np
+
+from diffkin.collision import _fitcache
+
+# The mesh fit's version and settings: part of each cached fit's key, so changing one refits every mesh.
+# Change FIT_VERSION with any change to the search that changes its results.
+FIT_VERSION = "capsule-1"
+GRID = 65  # radii tried on each line
+HULL_ABOVE = 400  # more distinct points than this: only their convex hull's vertices are searched
+SEARCH = (("xatol", 1e-6), ("fatol", 1e-12), ("maxiter", 400))  # Nelder-Mead's options
+MARGIN = 1e-9  # added to the radius, times the points' largest extent (at least 1 mm)
 
 
 def capsule_volume(radius: float, length: float) -> float:
@@ -49,43 +63,73 @@ def ellipsoid(semi_axes) -> tuple[int, float, float]:
     return k, R, float(s[k] - R)
 
 
-def _segment_for(t: np.ndarray, rho: np.ndarray, R: float) -> tuple[float, float]:
-    """The shortest axis segment ``[lo, hi]`` (``lo <= hi``) whose capsule of radius ``R`` contains
-    points at axial positions ``t`` and radial distances ``rho <= R``."""
-    reach = np.sqrt(np.maximum(R * R - rho * rho, 0))
-    hi = float(np.max(t - reach))
-    lo = float(np.min(t + reach))
-    if lo > hi:  # a sphere suffices: any point of [hi, lo] is within reach of every point
-        mid = 0.5 * (lo + hi)
-        return mid, mid
-    return lo, hi
+def _segments_for(t: np.ndarray, rho: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each radius of ``R``: the shortest axis segment ``[lo, hi]`` (``lo <= hi``) whose capsule of
+    that radius contains points at axial positions ``t`` and radial distances ``rho <= R`` (arrays like ``R``)."""
+    reach = R[:, None] * R[:, None] - rho * rho
+    np.sqrt(np.maximum(reach, 0, out=reach), out=reach)
+    hi = np.max(t - reach, axis=1)
+    lo = np.min(np.add(t, reach, out=reach), axis=1)
+    sphere = lo > hi  # a sphere suffices: any point of [hi, lo] is within reach of every point
+    mid = 0.5 * (lo + hi)
+    return np.where(sphere, mid, lo), np.where(sphere, mid, hi)
+
+
+@functools.cache
+def _unit_grid(n: int) -> np.ndarray:
+    """``n`` values from 0 to 1, denser near 0 (squares of equal steps): the radius grid's shape."""
+    grid = np.linspace(0, 1, n) ** 2
+    grid.flags.writeable = False
+    return grid
 
 
 def _best_on_line(points: np.ndarray, origin: np.ndarray, axis: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """Smallest-volume capsule on the line ``origin + s axis`` containing the points: ``(volume, a, b)``."""
+    """Smallest-volume capsule on the line ``origin + s axis`` containing the points: ``(volume, a, b)``.
+
+    The radius is the best of a grid of ``GRID`` values from the points' largest distance to the line
+    up to half their extent along it more (the first of equal volumes), all evaluated at once.
+    """
     d = points - origin
     t = d @ axis
     rho = np.linalg.norm(d - t[:, None] * axis, axis=1)
     r0 = float(rho.max())
     span = float(t.max() - t.min())
-    grid = r0 + np.linspace(0, 1, 65) ** 2 * (0.5 * span + 1e-12)
-    best = (np.inf, 0.0, 0.0, 0.0)
-    for R in grid:
-        lo, hi = _segment_for(t, rho, float(R))
-        v = capsule_volume(float(R), hi - lo)
-        if v < best[0]:
-            best = (v, float(R), lo, hi)
-    return best[0], origin + best[2] * axis, origin + best[3] * axis
+    grid = r0 + _unit_grid(GRID) * (0.5 * span + 1e-12)
+    lo, hi = _segments_for(t, rho, grid)
+    volume = np.pi * grid**2 * (hi - lo) + 4.0 / 3.0 * np.pi * grid**3  # capsule_volume, elementwise
+    volume = np.where(volume < np.inf, volume, np.inf)  # NaN (non-finite points) never wins
+    i = int(np.argmin(volume))  # the first of equal volumes
+    if volume[i] == np.inf:
+        return float(np.inf), origin, origin
+    return float(volume[i]), origin + float(lo[i]) * axis, origin + float(hi[i]) * axis
 
 
 def points(vertices) -> tuple[np.ndarray, np.ndarray, float]:
     """``(a, b, radius)``: a capsule containing every point of ``vertices (n, 3)``, searched for a small volume.
 
-    The radius is computed from the final segment (every point's distance to it), plus 1e-9 of the
-    points' extent, so that no vertex is outside in float64.
+    The radius is computed from the final segment (every point's distance to it), plus ``MARGIN`` of the
+    points' extent, so that no vertex is outside in float64. Fits are cached on disk
+    (:mod:`diffkin.collision._fitcache`): one found there is used once it is checked to contain every point.
     """
-    P = np.unique(np.asarray(vertices, dtype=np.float64).reshape(-1, 3), axis=0)
-    if len(P) > 400:  # the hull's vertices decide containment; fewer points make the search fast
+    P = np.ascontiguousarray(np.asarray(vertices, dtype=np.float64).reshape(-1, 3))
+    return _fitcache.cached(P, settings(), _search, contains)
+
+
+def settings() -> str:
+    """What the fit of given points depends on besides them: its version, constants and whether scipy searches."""
+    search = importlib.util.find_spec("scipy") is not None
+    return f"{FIT_VERSION} grid={GRID} hull>{HULL_ABOVE} search={SEARCH if search else None} margin={MARGIN}"
+
+
+def contains(P: np.ndarray, a: np.ndarray, b: np.ndarray, radius: float) -> bool:
+    """Whether every point of ``P (n, 3)`` is within ``radius`` of the segment ``[a, b]`` (float64)."""
+    return bool(np.max(_point_segment(P, a, b), initial=0.0) <= radius)
+
+
+def _search(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """:func:`points` without the cache."""
+    P = np.unique(P, axis=0)
+    if len(P) > HULL_ABOVE:  # the hull's vertices decide containment; fewer points make the search fast
         try:
             from scipy.spatial import ConvexHull
 
@@ -106,14 +150,14 @@ def points(vertices) -> tuple[np.ndarray, np.ndarray, float]:
         try:
             from scipy.optimize import minimize
 
-            x = minimize(volume, x, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-12, "maxiter": 400}).x
+            x = minimize(volume, x, method="Nelder-Mead", options=dict(SEARCH)).x
         except ImportError:  # no search without scipy: the principal axes through the box centre
             pass
         n = axis + x[0] * u + x[1] * v
         candidates.append(_best_on_line(P, center + x[2] * u + x[3] * v, n / np.linalg.norm(n)))
     _, a, b = min(candidates, key=lambda c: c[0])
     radius = float(np.max(_point_segment(P, a, b)))
-    return a, b, radius + 1e-9 * max(float(np.ptp(P, axis=0).max()), 1e-3)
+    return a, b, radius + MARGIN * max(float(np.ptp(P, axis=0).max()), 1e-3)
 
 
 def _perpendicular(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
