@@ -381,8 +381,13 @@ def sincos_each(xs: Sequence[Entry]) -> list[tuple[Entry, Entry]]:
     return [sincos(x) if isinstance(x, float) else next(computed) for x in xs]
 
 
-def per_joint(x) -> list[Entry]:
-    """The values of a ``(n,)`` model parameter, one per joint: snapped floats if concrete, else traced slices."""
+def per_joint(x, snap: bool = True) -> list[Entry]:
+    """The values of a ``(n,)`` model parameter, one per joint: snapped floats if concrete, else traced slices.
+
+    ``snap=False`` keeps concrete values as they are (only exact zeros fold away): for quantities such as
+    masses whose scale is arbitrary, where 1e-13 is not 0.
+    """
     if is_concrete(x):
-        return [constant(v) for v in np.asarray(x, dtype=np.float64)]
+        values = np.asarray(x, dtype=np.float64)
+        return [constant(v) for v in values] if snap else [float(v) for v in values]
     return [x[..., i] for i in range(x.shape[-1])]

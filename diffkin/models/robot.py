@@ -386,7 +386,7 @@ class RobotPass:
         (world); its space screw ``(v_j, w_j)`` moves the centre by ``(M_j v_j + w_j x S_j) / M``.
         """
         robot = self.robot
-        masses = rg.per_joint(host(robot.masses))
+        masses = rg.per_joint(host(robot.masses), snap=False)  # tiny masses still weigh
         c = host(robot.body_coms)
         moments = [
             rg.scale(masses[b], rg.vadd(rg.rotate(T.R, rg.vector(c[b])), T.p)) for b, T in enumerate(self.bodies)

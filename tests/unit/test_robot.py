@@ -160,6 +160,17 @@ def test_com_refuses_what_has_no_masses():
         dk.load_robot(bad)
 
 
+def test_com_of_tiny_masses_is_their_centre_not_zero():
+    """Masses below 1e-12 kg still weigh: only exact zeros fold away (issue 56)."""
+    inertial = '<inertial><origin xyz="0 0 {z}"/><mass value="{m}"/></inertial>'
+    urdf = _urdf(_joint("j", REV, "a", "b", '<axis xyz="0 0 1"/>'))
+    urdf = urdf.replace('<link name="a"/>', f'<link name="a">{inertial.format(z=0, m=1e-13)}</link>')
+    urdf = urdf.replace('<link name="b"/>', f'<link name="b">{inertial.format(z=1, m=1e-13)}</link>')
+    robot = dk.load_robot(urdf)
+    np.testing.assert_allclose(dk.com(robot, np.zeros(1)), [0.0, 0.0, 0.5], atol=1e-12)
+    np.testing.assert_allclose(dk.com_jacobian(robot, np.zeros(1)), np.zeros((3, 1)), atol=1e-12)
+
+
 def _urdf(joints: str, links=None) -> str:
     import re
 
