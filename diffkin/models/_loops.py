@@ -102,6 +102,12 @@ def _step(robot, q: list, dep: jax.Array, shape, dtype):
     return dep - jnp.linalg.solve(A, jnp.einsum("...ki,...k->...i", J, r)[..., None])[..., 0], kin, world, J, A
 
 
+def _distance(g: rg.Vec3) -> jax.Array:
+    """``|g|``, NaN-free derivative at 0, and ``inf`` where ``g`` is not finite (a non-finite ``q``: never closed)."""
+    sq = jnp.asarray(rg.dot(g, g))
+    return jnp.where(jnp.isnan(sq), jnp.inf, rg._norm(g))
+
+
 def _loop_points(robot) -> list[tuple[rg.Vec3, rg.Vec3]]:
     P = robot.loop_points
     return [(rg.vector(P[k, 0]), rg.vector(P[k, 1])) for k in range(len(robot.loop_bodies))]
@@ -131,9 +137,7 @@ def solve(robot, q: list) -> tuple[list, tuple[list[list[rg.Entry]], jax.Array]]
     C_q = _array(_jacobian(robot, kin, world, range(dof)), shape, dtype)
     G = -jnp.linalg.solve(A, jnp.einsum("...ki,...kj->...ij", J_dep, C_q))  # (..., nd, dof)
     gaps = [rg.vadd(pa, rg.scale(-1.0, pb)) for pa, pb in world]
-    gap = jnp.max(
-        jnp.stack([jnp.broadcast_to(rg._norm(g), shape).astype(dtype) for g in gaps]), axis=0
-    )  # (NaN-free at 0)
+    gap = jnp.max(jnp.stack([jnp.broadcast_to(_distance(g), shape).astype(dtype) for g in gaps]), axis=0)
     return [dep[..., d] for d in range(nd)], ([[G[..., d, i] for i in range(dof)] for d in range(nd)], gap)
 
 

@@ -160,6 +160,14 @@ def test_a_loop_that_cannot_close_says_so():
     # (IK counts an open loop as no success: tests/validation/test_loops_validation.py, on the 2F-85)
 
 
+def test_a_non_finite_crank_angle_leaves_the_loop_open(four_bar):
+    """NaN and infinite ``q`` cannot close a loop: the gap is infinite, never the 0 of a closed one (issue 56)."""
+    theta = jnp.asarray([[np.nan], [np.inf], [-np.inf], [0.0]])
+    _, gap = dk.loop_closure(four_bar, theta)
+    np.testing.assert_array_equal(np.asarray(gap)[:3], np.inf)
+    assert np.asarray(gap)[3] < 1e-12
+
+
 def test_bad_loops_are_refused():
     with pytest.raises(ValueError, match="MJCF <equality><connect body1='coupler'>: unknown body or site 'nowhere'"):
         dk.load_robot(FOUR_BAR.replace('body2="rocker"', 'body2="nowhere"'))
