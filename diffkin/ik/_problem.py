@@ -302,7 +302,7 @@ def settle_choosing(entries: Entries, old: Eval, choose) -> tuple[Eval, jax.Arra
     computed = _computed(J_try)
     m = len(entries.r)
     J_old = old.J[:m].reshape((-1,) + shape)
-    J = materialize([jnp.where(take, J_try[i], J_old[i]) for i in computed])
+    J = materialize([jnp.where(take, J_try[i], J_old[i]) for i in computed]) if len(computed) else J_old[:0]
     blocks = None
     if entries.blocks is not None:
         blocks = tuple(

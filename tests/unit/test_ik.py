@@ -205,3 +205,20 @@ def test_seed_draws_are_uniform_independent_and_per_target():
     for v in (other_round, other_key):
         assert np.mean(v == u) < 1e-3
     np.testing.assert_array_equal(raw_key, u)  # a raw key holds the same words as the typed one
+
+
+STATIC = (
+    '<robot name="r"><link name="a"><inertial><mass value="1"/></inertial></link><link name="b"/>'
+    '<joint name="j" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>'
+    '<limit lower="-1" upper="1"/></joint></robot>'
+)
+
+
+def test_a_target_no_joint_moves_is_met_where_it_already_is():
+    """A frame on its own joint's axis, the root, a centre of mass no joint shifts: success iff already there."""
+    robot = dk.load_robot(STATIC)
+    at, off = jnp.zeros((2, 3)), jnp.asarray([[0.0, 0.0, 0.0], [0.0, 0.1, 0.0]])
+    for targets, com in (({"b": off}, None), ({"a": off}, None), ({}, off)):
+        res = ik.solve(robot, targets, com=com, num_seeds=4)
+        np.testing.assert_array_equal(res.success, [True, False])
+    assert bool(ik.solve(robot, {"b": at}, com=at, num_seeds=4).success.all())
