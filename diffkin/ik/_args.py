@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import warnings
 from collections.abc import Mapping, Sequence
 
 import jax
@@ -146,7 +147,29 @@ def locked_joints(robot, locked, q0, batch) -> tuple[tuple[bool, ...], jax.Array
                 values.append(jnp.broadcast_to(v, batch))
             else:
                 values.append(jnp.zeros(batch))
-        return mask, jnp.stack(values, axis=-1)
-    if q0 is None:
+        locked_q = jnp.stack(values, axis=-1)
+    elif q0 is None:
         raise ValueError("locked: a sequence of joint names takes their values from q0; pass q0 (or a mapping)")
-    return mask, jnp.broadcast_to(jnp.asarray(q0), batch + (robot.dof,))
+    else:
+        locked_q = jnp.broadcast_to(jnp.asarray(q0), batch + (robot.dof,))
+    _warn_outside_limits(robot, mask, locked_q)
+    return mask, locked_q
+
+
+def _warn_outside_limits(robot, mask: tuple[bool, ...], locked_q: jax.Array) -> None:
+    """A ``UserWarning`` per locked joint held outside its limits (concrete values only): locked joints stay
+    where the user puts them, the one exception to every returned ``q`` lying within the limits."""
+    if not (is_concrete(locked_q) and is_concrete(robot.lower) and is_concrete(robot.upper)):
+        return
+    values = np.asarray(locked_q, np.float64).reshape(-1, robot.dof)
+    lower, upper = np.asarray(robot.lower, np.float64), np.asarray(robot.upper, np.float64)
+    for j in np.flatnonzero(mask):
+        outside = np.flatnonzero((values[:, j] < lower[j]) | (values[:, j] > upper[j]))
+        if len(outside):
+            at = f" (target {int(outside[0])} of the flattened batch)" if values.shape[0] > 1 else ""
+            warnings.warn(
+                f"locked joint {robot.joint_names[j]!r} at {values[outside[0], j]:.6g}{at} is outside its limits "
+                f"[{lower[j]:.6g}, {upper[j]:.6g}]: held there (locked joints are not clipped to their limits)",
+                UserWarning,
+                stacklevel=4,
+            )

@@ -121,7 +121,8 @@ def solve(
         pos_tol: success tolerance on the position error, metres (may be a traced scalar: one
             compilation serves every tolerance).
         rot_tol: success tolerance on the rotation angle error, radians (may be traced).
-        respect_limits: keep every iterate (and the result) within ``[chain.lower, chain.upper]``.
+        respect_limits: keep every iterate (and the result) within ``[chain.lower, chain.upper]``;
+            locked joints excepted (``locked``).
         optimizer: an ``optax.GradientTransformation`` for ``method="optax"``; default
             ``optax.adam(1e-2)``.
         relative: robots: ``{(a, b): T_a_b}``, the pose ``(..., 4, 4)`` of frame ``b`` in frame ``a``
@@ -146,7 +147,9 @@ def solve(
             position target) or a pair
             ``(w_pos, w_rot)``; a zero frees that axis (errors and success ignore it). Default 1.
         locked: robots: ``{joint_name: value}`` (a number or one per target) or a sequence of
-            joint names whose values come from ``q0``; those joints do not move.
+            joint names whose values come from ``q0``; those joints do not move. A locked value
+            outside the joint's limits is held there, not clipped (a gripper held open wider than
+            its URDF allows), with a ``UserWarning`` naming the joint.
         rest: robots: ``(..., dof)`` rest configuration (for the ``"rest"`` objective).
         secondary: robots: ``"rest"``, ``"limits"``, a sequence of them or ``{name: weight}``
             (default ``"rest"`` when ``rest`` is given): lowered in the null space of the
@@ -159,6 +162,9 @@ def solve(
         :class:`IKResult`, each field with the batch shape of ``target``. Without a success the
         seed of least residual is returned. Non-finite targets give ``success=False``, ``q`` of
         that seed and errors ``finfo(dtype).max``.
+
+    Warns:
+        UserWarning: a concrete locked value outside its joint's limits (named; held there).
 
     Raises:
         ValueError: a bad target shape, ``q0`` of the wrong length or batch, an unknown method,

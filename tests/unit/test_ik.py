@@ -222,3 +222,19 @@ def test_a_target_no_joint_moves_is_met_where_it_already_is():
         res = ik.solve(robot, targets, com=com, num_seeds=4)
         np.testing.assert_array_equal(res.success, [True, False])
     assert bool(ik.solve(robot, {"b": at}, com=at, num_seeds=4).success.all())
+
+
+def test_a_joint_locked_outside_its_limits_is_held_there_with_a_warning():
+    """Locked joints stay where the user puts them, outside the limits too (a gripper held open wider), and
+    the solver says so (issue 56)."""
+    finger = (
+        '<joint name="f" type="prismatic"><parent link="b"/><child link="c"/><axis xyz="1 0 0"/>'
+        '<limit lower="0" upper="0.04"/></joint>'
+    )
+    robot = dk.load_robot(STATIC.replace("</robot>", f'<link name="c"/>{finger}</robot>'))
+    target = {"c": jnp.asarray([0.065, 0.0, 0.0])}
+    with pytest.warns(UserWarning, match=r"locked joint 'f' at 0\.065 is outside its limits \[0, 0\.04\]"):
+        res = ik.solve(robot, target, locked={"f": 0.065}, num_seeds=4)
+    assert bool(res.success) and float(res.q[1]) == np.float32(0.065)
+    with pytest.warns(UserWarning, match=r"locked joint 'f' at -0\.01 is outside"):
+        ik.solve(robot, target, locked=["f"], q0=jnp.asarray([0.0, -0.01]), num_seeds=4)
