@@ -45,19 +45,37 @@ class Scene:
     self_collision: bool
 
 
+def _show(value: Any, limit: int = 60) -> str:
+    """``value`` as JSON for a one-line message: cut at ``limit`` characters; what JSON cannot write (nested
+    too deeply, an integer too long for a string) by its type."""
+    try:
+        text = json.dumps(value)
+    except (RecursionError, ValueError):
+        return f"a {type(value).__name__}"
+    return text if len(text) <= limit else f"{text[:limit]}..."
+
+
 def _number(value: Any, where: str) -> float:
     """A finite JSON number (not a boolean) as a float, else a ValueError naming ``where``."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{where}: expected a number, got {json.dumps(value)}")
-    if not math.isfinite(value):
+        raise ValueError(f"{where}: expected a number, got {_show(value)}")
+    try:
+        number = float(value)
+    except OverflowError:  # an integer beyond float64
+        try:
+            digits = f"{len(str(abs(value)))} digits"
+        except ValueError:  # beyond Python's integer string conversion limit
+            digits = "thousands of digits"
+        raise ValueError(f"{where}: expected a finite number, got an integer of {digits}") from None
+    if not math.isfinite(number):
         raise ValueError(f"{where}: expected a finite number, got {value}")
-    return float(value)
+    return number
 
 
 def _vector(value: Any, where: str, n: int) -> np.ndarray:
     """A list of ``n`` finite numbers as a float64 array ``(n,)``, else a ValueError naming ``where``."""
     if not isinstance(value, list) or len(value) != n:
-        got = f"{len(value)} values" if isinstance(value, list) else json.dumps(value)
+        got = f"{len(value)} values" if isinstance(value, list) else _show(value)
         raise ValueError(f"{where}: expected a list of {n} numbers, got {got}")
     return np.array([_number(v, f"{where}[{i}]") for i, v in enumerate(value)])
 
@@ -65,13 +83,13 @@ def _vector(value: Any, where: str, n: int) -> np.ndarray:
 def _entries(kind: str, items: Any) -> list[dict[str, Any]]:
     """The checked fields of every obstacle of one kind: numbers as floats, vectors as arrays."""
     if not isinstance(items, list):
-        raise ValueError(f"{kind}: expected a list of objects, got {json.dumps(items)}")
+        raise ValueError(f"{kind}: expected a list of objects, got {_show(items)}")
     fields = _KINDS[kind]
     out = []
     for i, item in enumerate(items):
         where = f"{kind}[{i}]"
         if not isinstance(item, dict):
-            raise ValueError(f"{where}: expected an object with {', '.join(fields)}, got {json.dumps(item)}")
+            raise ValueError(f"{where}: expected an object with {', '.join(fields)}, got {_show(item)}")
         unknown = sorted(set(item) - set(fields))
         if unknown:
             raise ValueError(f"{where}: unknown key {unknown[0]!r}: expected {', '.join(fields)}")
@@ -151,7 +169,7 @@ def _parse(data: Any) -> Scene:
         raise ValueError(f"margin: expected a distance >= 0 (metres), got {margin}")
     self_collision = data.get("self_collision", True)
     if not isinstance(self_collision, bool):
-        raise ValueError(f"self_collision: expected true or false, got {json.dumps(self_collision)}")
+        raise ValueError(f"self_collision: expected true or false, got {_show(self_collision)}")
     kinds = {kind: _entries(kind, data.get(kind, [])) for kind in _KINDS}
     return Scene(_world(kinds), margin, self_collision)
 
@@ -178,10 +196,10 @@ def load_scene(source) -> Scene:
         The :class:`Scene`: ``world`` (a :class:`World`), ``margin``, ``self_collision``.
 
     Raises:
-        ValueError: invalid JSON, an unknown or missing key, a list of the wrong length, a value
+        ValueError: invalid JSON (or nested too deeply), an unknown or missing key, a list of the wrong length, a value
             that is not a finite number, a negative radius, half extent or margin, a quaternion
             whose norm is not 1, a zero plane normal; the message names the field (``boxes[1].
-            half_extents``) and, for a file, starts with its path.
+            half_extents``) and, for a file, starts with its path. A number beyond float64 is not finite.
         OSError: a file that cannot be read.
     """
     where = ""
@@ -197,7 +215,9 @@ def load_scene(source) -> Scene:
                 raw = fh.read()
         try:
             data = json.loads(raw)  # NaN and Infinity decode as floats: the field check names them
-        except json.JSONDecodeError as err:
+        except RecursionError:
+            raise ValueError(f"{where}not valid JSON: nested too deeply") from None
+        except ValueError as err:  # JSONDecodeError, or an integer beyond Python's string conversion limit
             raise ValueError(f"{where}not valid JSON: {err}") from None
     try:
         return _parse(data)
