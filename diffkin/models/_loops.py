@@ -160,7 +160,8 @@ def close(robot, connects: list[Connect], passive: set[str], stiff: set[str], wh
             q_ref_actuated[s] = q_ref[j]
     bodies, points = [], []
     kin = robot.tree_pass([jnp.asarray(x) for x in q_ref_actuated])
-    poses = np.stack([np.asarray(rg.to_matrix(T, (), jnp.float64)) for T in kin.bodies])  # at the reference
+    # (in the default float dtype: asking for float64 with x64 off warns and gets float32 anyway)
+    poses = np.stack([np.asarray(rg.to_matrix(T, (), jnp.result_type(float)), np.float64) for T in kin.bodies])
     for c in connects:
         ends = []
         for name in (c.body1, c.body2):
@@ -233,7 +234,7 @@ def _generic_jacobian(robot, q_ref: np.ndarray, free: list[int]) -> np.ndarray:
     for _ in range(30):
         kin, world = _points(robot, robot.loop_bodies, _loop_points(robot), [jnp.asarray(x) for x in q])
         r = np.array([float(e) for pa, pb in world for e in rg.vadd(pa, rg.scale(-1.0, pb))])
-        C = np.asarray(_array(_jacobian(robot, kin, world, range(robot.dof)), (), jnp.float64))
+        C = np.asarray(_array(_jacobian(robot, kin, world, range(robot.dof)), (), jnp.result_type(float)), np.float64)
         if np.abs(r).max() < 1e-13:
             break
         q[free] -= np.linalg.lstsq(C[:, free], r, rcond=None)[0]

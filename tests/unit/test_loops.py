@@ -3,11 +3,14 @@ four-bar's closed-form position analysis, closure, implicit-function derivatives
 the gap reported where the loop cannot close, and loading errors (the Robotiq 2F-85 and Cassie against
 MuJoCo: ``tests/validation/test_loops_validation.py``)."""
 
+import os
+import warnings
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import WELDED_ARMS, mjcf
+from _reference import DATA, WELDED_ARMS, mjcf
 
 import diffkin as dk
 
@@ -166,6 +169,16 @@ def test_a_non_finite_crank_angle_leaves_the_loop_open(four_bar):
     _, gap = dk.loop_closure(four_bar, theta)
     np.testing.assert_array_equal(np.asarray(gap)[:3], np.inf)
     assert np.asarray(gap)[3] < 1e-12
+
+
+def test_a_loop_robot_in_float32_loads_and_runs_without_warnings():
+    """The 2F-85 under a user's default settings (x64 off): no library-internal dtype warnings (issue 56)."""
+    with jax.enable_x64(False), warnings.catch_warnings():
+        warnings.simplefilter("error")
+        robot = dk.load_robot(os.path.join(DATA, "robotiq_2f85.xml"))
+        q = np.zeros(robot.dof, np.float32)
+        assert dk.fk(robot, q, "pinch").dtype == jnp.float32 and dk.link_poses(robot, q).dtype == jnp.float32
+        assert float(dk.loop_closure(robot, q)[1]) < 1e-5
 
 
 def test_bad_loops_are_refused():
