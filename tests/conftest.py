@@ -36,12 +36,16 @@ def _off(value: str) -> bool:
 def _compilation_cache() -> str | None:
     """The folder of the test runs' own persistent compilation cache, or ``None``: ``DIFFKIN_TEST_CACHE_DIR``
     (``off``, empty, ``0``, ``false``, ``no``, ``none``: no cache), else ``$XDG_CACHE_HOME/diffkin/jax-tests``
-    (``~/.cache``), outside the repository."""
+    (``~/.cache``), outside the repository. An xdist worker takes a folder of its own in it (``gw0``, ...):
+    JAX writes an entry in place, so a worker reading an entry another is writing got a ``ZstdError``
+    warning, which the tests' ``filterwarnings = error`` made a collection error."""
     env = os.environ.get("DIFFKIN_TEST_CACHE_DIR")
-    if env is not None:
-        return None if _off(env) else env
+    if env is not None and _off(env):
+        return None
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return os.path.join(base, "diffkin", "jax-tests")
+    folder = env if env is not None else os.path.join(base, "diffkin", "jax-tests")
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    return os.path.join(folder, worker) if worker else folder
 
 
 # Most of a test run is XLA compiling: with JAX's persistent cache, a rerun compiles only the programs
@@ -54,8 +58,9 @@ CACHE_MAX_BYTES = 4 * 2**30
 
 
 def _bound(folder: Path, max_bytes: int) -> None:
-    """Delete the oldest files of ``folder`` (by modification time) until it holds at most ``max_bytes``."""
-    files = sorted((s.st_mtime, s.st_size, p) for p in folder.iterdir() if p.is_file() for s in [p.stat()])
+    """Delete the oldest files of ``folder`` and its workers' folders (by modification time) until they hold at
+    most ``max_bytes``."""
+    files = sorted((s.st_mtime, s.st_size, p) for p in folder.rglob("*") if p.is_file() for s in [p.stat()])
     total = sum(size for _, size, _ in files)
     for _, size, path in files:
         if total <= max_bytes:
