@@ -232,10 +232,43 @@ def random_fields(kind: str, rng: np.random.Generator, n: int, points: float = 0
     return {"normal": normal, "offset": rng.uniform(-0.3, 0.3, n)}
 
 
+def random_cylinders(rng: np.random.Generator, n: int) -> dict[str, np.ndarray]:
+    """Fields of ``n`` random cylinders in the cube ``[-0.5, 0.5]^3`` (radii 0.02 to 0.3 m, half lengths 0 to 0.3 m)."""
+    T = np.tile(np.eye(4), (n, 1, 1))
+    T[:, :3, :3], T[:, :3, 3] = rotations(rng, n), rng.uniform(-0.5, 0.5, (n, 3))
+    return {"pose": T, "radius": rng.uniform(0.02, 0.3, n), "half_length": rng.uniform(0.0, 0.3, n)}
+
+
 def shape(kind: str, fields: dict, dtype=None):
-    """A ``dk.collision`` shape of one kind (sphere, capsule, box, plane) from :func:`random_fields`."""
+    """A ``dk.collision`` shape of one kind (sphere, capsule, box, cylinder, plane) from :func:`random_fields`
+    (:func:`random_cylinders`)."""
     classes = {"sphere": dk.collision.Sphere, "capsule": dk.collision.Capsule, "box": dk.collision.Box}
+    classes["cylinder"] = dk.collision.Cylinder
     return classes.get(kind, dk.collision.Plane)(**{k: jax.numpy.asarray(v, dtype) for k, v in fields.items()})
+
+
+def coal_shape(coal, kind: str, f: dict, i: int):
+    """The coal geometry and placement of shape ``i`` of :func:`random_fields` (:func:`random_cylinders`)."""
+    if kind == "cylinder":
+        T = f["pose"][i]
+        return coal.Cylinder(f["radius"][i], 2 * f["half_length"][i]), coal.Transform3s(T[:3, :3], T[:3, 3])
+    if kind == "sphere":
+        return coal.Sphere(f["radius"][i]), coal.Transform3s(np.eye(3), f["center"][i])
+    if kind == "capsule":
+        a, b = f["a"][i], f["b"][i]
+        axis = b - a
+        length = float(np.linalg.norm(axis))
+        R = np.eye(3)
+        if length > 0:
+            z = axis / length
+            x = np.cross([1.0, 0, 0] if abs(z[0]) < 0.9 else [0, 1.0, 0], z)
+            x /= np.linalg.norm(x)
+            R = np.column_stack([x, np.cross(z, x), z])
+        return coal.Capsule(f["radius"][i], length), coal.Transform3s(R, 0.5 * (a + b))
+    if kind == "box":
+        T = f["pose"][i]
+        return coal.Box(*(2 * f["half_extents"][i])), coal.Transform3s(T[:3, :3], T[:3, 3])
+    return coal.Halfspace(f["normal"][i], f["offset"][i]), coal.Transform3s()
 
 
 # ------------------------------------------------------------------------------ a toy arm's collision geometry

@@ -1,6 +1,7 @@
 """Collision geometry and signed distances.
 
-Primitives (:class:`Sphere`, :class:`Capsule`, :class:`Box`, :class:`Plane`) and their signed
+Primitives (:class:`Sphere`, :class:`Capsule`, :class:`Box`, :class:`Cylinder`, :class:`Convex`,
+:class:`Plane`) and their signed
 :func:`distance` for every pair of kinds: positive between separated shapes, minus the penetration
 depth when they overlap; batched, float32/float64, differentiable where the closest features are
 unique. A robot's shapes from its URDF or MJCF file (:func:`load`, a :class:`Geometry`), obstacles
@@ -14,11 +15,13 @@ from diffkin.collision._geometry import Geometry, load
 from diffkin.collision._pairs import PairSample, sample_pairs
 from diffkin.collision._robot import World, clearance, self_distances, world_distances
 from diffkin.collision._scene import Scene, load_scene
-from diffkin.collision._shapes import Box, Capsule, Plane, Sphere
+from diffkin.collision._shapes import Box, Capsule, Convex, Cylinder, Plane, Sphere
 
 __all__ = [
     "Box",
     "Capsule",
+    "Convex",
+    "Cylinder",
     "Geometry",
     "PairSample",
     "Plane",

@@ -9,6 +9,11 @@ pair is computed exactly (to rounding):
 - A half-space against a convex shape: the lowest point of the shape along the normal.
 - Box-box and capsule-box: the separating-axis depth when overlapping, the closest features when
   apart (:mod:`diffkin.collision._boxes`).
+- A cylinder against a sphere: the point's distance to the cylinder (a rectangle in the axial
+  plane); against a half-space: the lowest rim point. Against a capsule, a box or a cylinder, and
+  a convex polytope against any solid: the general convex distance (:mod:`diffkin.collision._gjk`):
+  exact (to ``_gjk.TOLERANCE``) apart, never shallower than the truth when overlapping; a polytope
+  against a half-space: its lowest vertex.
 
 :func:`motion` also gives how a rigid motion of each shape changes the distance, from the witness
 points and the normal of the contact (far cheaper than differentiating :func:`distance`).
@@ -24,6 +29,7 @@ import jax.numpy as jnp
 
 from diffkin._xla import materialize
 from diffkin.collision import _closest as cl
+from diffkin.collision import _gjk
 from diffkin.collision._boxes import (
     box_box,
     box_box_bound,
@@ -33,7 +39,7 @@ from diffkin.collision._boxes import (
     capsule_box_contact,
     sphere_box_contact,
 )
-from diffkin.collision._shapes import SHAPES, Box, Capsule, Plane, Sphere
+from diffkin.collision._shapes import SHAPES, Box, Capsule, Convex, Cylinder, Plane, Sphere, unchecked
 
 
 def _local(box: Box, p: cl.Vec) -> cl.Vec:
@@ -73,6 +79,32 @@ def box_plane(a: Box, b: Plane) -> jax.Array:
     return cl.dot(n, cl.vec(a.pose[..., :3, 3])) - sum(jnp.abs(n_box[i]) * h[i] for i in range(3)) - b.offset
 
 
+def _cylinder_local(c: Cylinder, p: cl.Vec) -> tuple[jax.Array, jax.Array]:
+    """Of points ``p``: the distance from the cylinder's axis and the signed axial coordinate."""
+    local = cl.to_frame(cl.rotation(c.pose), cl.sub(p, cl.vec(c.pose[..., :3, 3])))
+    return cl.sqrt0(local[0] ** 2 + local[1] ** 2), local[2]
+
+
+def sphere_cylinder(a: Sphere, b: Cylinder) -> jax.Array:
+    rho, z = _cylinder_local(b, cl.vec(a.center))
+    dr, dz = rho - b.radius, jnp.abs(z) - b.half_length  # the rectangle (rho, z) of the axial plane
+    outside = cl.sqrt0(jnp.maximum(dr, 0) ** 2 + jnp.maximum(dz, 0) ** 2)
+    return outside + jnp.minimum(jnp.maximum(dr, dz), 0) - a.radius
+
+
+def cylinder_plane(a: Cylinder, b: Plane) -> jax.Array:
+    """The centre's height above the plane less the rim's extent below it (radial and axial parts)."""
+    n = cl.vec(b.normal)
+    along = cl.dot(n, cl.rotation(a.pose)[2])
+    low = a.radius * cl.sqrt0(jnp.maximum(1 - along * along, 0.0)) + a.half_length * jnp.abs(along)
+    return cl.dot(n, cl.vec(a.pose[..., :3, 3])) - low - b.offset
+
+
+def support_plane(a, b: Plane) -> jax.Array:
+    """Any solid against a half-space: its core's lowest point along the normal, less its rounding."""
+    return jnp.sum(b.normal * a.core_support(-b.normal), axis=-1) - b.offset - a.rounding()
+
+
 def plane_plane(a: Plane, b: Plane) -> jax.Array:
     """Two half-spaces overlap unless opposite: ``-(offset_a + offset_b)`` when ``n_a = -n_b`` (the gap,
     or minus the thickness of the common slab); otherwise they share an unbounded wedge and no
@@ -93,6 +125,17 @@ _PAIRS: dict[tuple[type, type], Callable[[Any, Any], jax.Array]] = {
     (Box, Box): box_box,
     (Box, Plane): box_plane,
     (Plane, Plane): plane_plane,
+    (Sphere, Cylinder): sphere_cylinder,
+    (Capsule, Cylinder): _gjk.distance,
+    (Box, Cylinder): _gjk.distance,
+    (Cylinder, Cylinder): _gjk.distance,
+    (Cylinder, Plane): cylinder_plane,
+    (Sphere, Convex): _gjk.distance,
+    (Capsule, Convex): _gjk.distance,
+    (Box, Convex): _gjk.distance,
+    (Cylinder, Convex): _gjk.distance,
+    (Convex, Convex): _gjk.distance,
+    (Convex, Plane): support_plane,
 }
 
 #: Each pair function compiled once per shape and dtype (``jax.jit``; inlined when the caller is
@@ -105,8 +148,9 @@ def distance(shape_a, shape_b) -> jax.Array:
     """Signed distance between two primitives: positive apart, minus the penetration depth when overlapping.
 
     Args:
-        shape_a, shape_b: a :class:`Sphere`, :class:`Capsule`, :class:`Box` or :class:`Plane`
-            each, of any kinds and order, in one frame (e.g. the world); their batch axes broadcast.
+        shape_a, shape_b: a :class:`Sphere`, :class:`Capsule`, :class:`Box`, :class:`Cylinder`,
+            :class:`Convex` or :class:`Plane` each, of any kinds and order, in one frame (e.g. the
+            world); their batch axes broadcast.
 
     Returns:
         ``(...,)`` the distance in metres, in the promoted dtype of the two shapes. Differentiable
@@ -115,12 +159,13 @@ def distance(shape_a, shape_b) -> jax.Array:
         number.
 
     Raises:
-        TypeError: an argument is not one of the four primitives.
+        TypeError: an argument is not one of the primitives.
     """
     for name, value in (("shape_a", shape_a), ("shape_b", shape_b)):
         if not isinstance(value, SHAPES):
             raise TypeError(
-                f"{name}: expected a Sphere, Capsule, Box or Plane of diffkin.collision, got {type(value).__name__}"
+                f"{name}: expected a Sphere, Capsule, Box, Cylinder, Convex or Plane of diffkin.collision, "
+                f"got {type(value).__name__}"
             )
     kinds = (type(shape_a), type(shape_b))
     if kinds in _TABLE:
@@ -128,13 +173,16 @@ def distance(shape_a, shape_b) -> jax.Array:
     return _TABLE[kinds[::-1]](shape_b, shape_a)
 
 
+#: the pairs whose distance is the general convex one (:mod:`diffkin.collision._gjk`)
+GENERAL = frozenset(kinds for kinds, fn in _PAIRS.items() for kinds in (kinds, kinds[::-1]) if fn is _gjk.distance)
 #: the pairs of kinds whose :func:`lower_bound` is cheaper than their :func:`distance`
-BOUNDED = frozenset({(Box, Box), (Capsule, Box), (Box, Capsule)})
+BOUNDED = frozenset({(Box, Box), (Capsule, Box), (Box, Capsule)}) | GENERAL
 
 
 def lower_bound(a, b) -> jax.Array:
     """A lower bound of :func:`distance` that is much cheaper for box-box and capsule-box (the face
-    axes' separation); the distance itself for the other pairs (already cheap)."""
+    axes' separation) and the general pairs (the distance of balls around the shapes); the
+    distance itself for the other pairs (already cheap)."""
     kinds = (type(a), type(b))
     if kinds == (Box, Box):
         return box_box_bound(a, b)
@@ -142,6 +190,9 @@ def lower_bound(a, b) -> jax.Array:
         return capsule_box_bound(a, b)
     if kinds == (Box, Capsule):
         return capsule_box_bound(b, a)
+    if kinds in GENERAL:  # the balls around them
+        gap = jnp.sqrt(jnp.sum((a.centre() - b.centre()) ** 2, axis=-1))
+        return gap - a.bounding_radius() - b.bounding_radius()
     return distance(a, b)
 
 
@@ -185,6 +236,9 @@ def motion(a, b) -> tuple[jax.Array, jax.Array, jax.Array]:
         return d, W_a, W_b
     if isinstance(b, Plane):
         n = cl.vec(b.normal)
+        if isinstance(a, (Cylinder, Convex)):  # its lowest point
+            d = _PAIRS[type(a), Plane](a, b)
+            return d, _wrench(n, cl.vec(a.core_support(-b.normal))), jnp.zeros(jnp.shape(d) + (6,), d.dtype)
         if isinstance(a, Sphere):
             p = cl.vec(a.center)
         elif isinstance(a, Capsule):
@@ -198,6 +252,23 @@ def motion(a, b) -> tuple[jax.Array, jax.Array, jax.Array]:
         radius = 0.0 if isinstance(a, Box) else a.radius
         d = cl.dot(n, p) - b.offset - radius
         return d, _wrench(n, p), jnp.zeros(jnp.shape(d) + (6,), d.dtype)
+    if (type(a), type(b)) in GENERAL and (type(a), type(b)) not in _PAIRS:
+        d, W_b, W_a = motion(b, a)
+        return d, W_a, W_b
+    if isinstance(a, Cylinder) and isinstance(b, Sphere):
+        d, W_b, W_a = motion(b, a)
+        return d, W_a, W_b
+    if (type(a), type(b)) in GENERAL or (type(a), type(b)) == (Sphere, Cylinder):
+        if isinstance(a, Sphere) and isinstance(b, Cylinder):  # along the outward normal (the closed form's gradient)
+            d = sphere_cylinder(a, b)
+            grad = jax.grad(lambda c: jnp.sum(sphere_cylinder(unchecked(Sphere, center=c, radius=a.radius), b)))
+            g = jnp.broadcast_to(jax.lax.stop_gradient(grad(a.center)), jnp.shape(d) + (3,))
+            u = cl.vec(-g)
+            p = q = cl.vec(jnp.broadcast_to(a.center, g.shape))
+        else:
+            d, normal, pa, pb = _gjk.contact(a, b)
+            u, p, q = cl.vec(normal), cl.vec(pa), cl.vec(pb)
+        return d, _wrench(tuple(-c for c in u), p), _wrench(u, q)
     if isinstance(a, Box) and not isinstance(b, Box):
         d, W_b, W_a = motion(b, a)
         return d, W_a, W_b

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -9,12 +11,8 @@ import numpy as np
 from diffkin._xla import blocks_joined, configurations_in_steps
 from diffkin.collision._distance import distance
 from diffkin.collision._geometry import KINDS, Geometry, placed
-from diffkin.collision._shapes import SHAPES, Box, Capsule, Plane, Sphere, unchecked
+from diffkin.collision._shapes import SHAPES, unchecked
 from diffkin.models.robot import Robot
-
-#: trailing rank of every shape field (its own axes after the batch axes)
-_TRAILING = {"center": 1, "radius": 0, "a": 1, "b": 1, "pose": 2, "half_extents": 1, "normal": 1, "offset": 0}
-_ORDER = (Sphere, Capsule, Box, Plane)
 
 #: Batches larger than this go through :func:`diffkin._xla.in_steps`, ``STEP`` configurations at a
 #: time: the memory then stays bounded whatever the batch (at 100,000 Panda configurations the
@@ -24,11 +22,13 @@ STEP = 1024
 
 
 def _fields(shape) -> dict[str, jax.Array]:
-    return {name: getattr(shape, name) for name in _TRAILING if hasattr(shape, name)}
+    return {name: getattr(shape, name) for name in type(shape).TRAILING}
 
 
 def batch_shape(shape) -> tuple[int, ...]:
-    return jnp.broadcast_shapes(*(jnp.shape(v)[: jnp.ndim(v) - _TRAILING[k]] for k, v in _fields(shape).items()))
+    return jnp.broadcast_shapes(
+        *(jnp.shape(v)[: jnp.ndim(v) - type(shape).TRAILING[k]] for k, v in _fields(shape).items())
+    )
 
 
 def flattened(shape, batch: tuple[int, ...]):
@@ -44,28 +44,32 @@ def flattened(shape, batch: tuple[int, ...]):
 
 def _map(shape, fn):
     """A shape of the same kind with ``fn(value, trailing_rank)`` applied to every field (unchecked)."""
-    return unchecked(type(shape), **{k: fn(v, _TRAILING[k]) for k, v in _fields(shape).items()})
+    return unchecked(type(shape), **{k: fn(v, type(shape).TRAILING[k]) for k, v in _fields(shape).items()})
 
 
 @jax.tree_util.register_pytree_node_class
 class World:
-    """Obstacles: every shape given, stacked per kind (spheres, capsules, boxes, half-spaces, in that order).
+    """Obstacles: every shape given, stacked per kind (spheres, capsules, boxes, cylinders, convex
+    polytopes, half-spaces, in that order: :data:`diffkin.collision._shapes.SHAPES`).
 
-    ``World(*shapes)``: each argument a :class:`Sphere`, :class:`Capsule`, :class:`Box` or
-    :class:`Plane` of any batch shape (flattened: a ``(4, 2)`` batch of boxes is 8 obstacles).
-    A world is a pytree of fixed shapes, so one compiled function serves any obstacles of the same
-    counts: to change the number of obstacles without recompiling, pad with far-away shapes.
+    ``World(*shapes)``: each argument a :class:`Sphere`, :class:`Capsule`, :class:`Box`,
+    :class:`Cylinder`, :class:`Convex` or :class:`Plane` of any batch shape (flattened: a ``(4, 2)`` batch of boxes
+    is 8 obstacles). A world is a pytree of fixed shapes, so one compiled function serves any
+    obstacles of the same counts: to change the number of obstacles without recompiling, pad with
+    far-away shapes.
 
     Attributes:
-        spheres, capsules, boxes, planes: each kind stacked, batch axis ``(n_kind,)`` (possibly 0).
+        spheres, capsules, boxes, cylinders, convexes, planes: each kind stacked, batch axis
+            ``(n_kind,)`` (possibly 0).
     """
 
     def __init__(self, *shapes):
-        groups: dict[type, list] = {cls: [] for cls in _ORDER}
+        groups: dict[type, list] = {cls: [] for cls in SHAPES}
         for i, shape in enumerate(shapes):
             if not isinstance(shape, SHAPES):
                 raise TypeError(
-                    f"World: argument {i}: expected a Sphere, Capsule, Box or Plane, got {type(shape).__name__}"
+                    f"World: argument {i}: expected a Sphere, Capsule, Box, Cylinder, Convex or Plane, "
+                    f"got {type(shape).__name__}"
                 )
             batch = batch_shape(shape)
             n = int(np.prod(batch, dtype=np.int64))
@@ -83,42 +87,44 @@ class World:
             if shapes
             else jnp.result_type(float)
         )
-        empty = {
-            Sphere: dict(center=(0, 3), radius=(0,)),
-            Capsule: dict(a=(0, 3), b=(0, 3), radius=(0,)),
-            Box: dict(pose=(0, 4, 4), half_extents=(0, 3)),
-            Plane: dict(normal=(0, 3), offset=(0,)),
-        }
-        stacked = []
-        for cls in _ORDER:
+        stacked: list[Any] = []
+        cls: Any
+        for cls in SHAPES:
             if groups[cls]:
-                names = list(_fields(groups[cls][0]))
                 stacked.append(
-                    unchecked(cls, **{k: jnp.concatenate([getattr(s, k) for s in groups[cls]]) for k in names})
+                    unchecked(cls, **{k: jnp.concatenate([getattr(s, k) for s in groups[cls]]) for k in cls.TRAILING})
                 )
             else:
-                stacked.append(unchecked(cls, **{k: jnp.zeros(v, dtype) for k, v in empty[cls].items()}))
-        self.spheres: Sphere
-        self.capsules: Capsule
-        self.boxes: Box
-        self.planes: Plane
-        self.spheres, self.capsules, self.boxes, self.planes = stacked  # type: ignore[assignment]
+                empty = {
+                    k: jnp.zeros((0,) + {"pose": (4, 4), "vertices": (1, 3)}.get(k, (3,) * r), dtype)
+                    for k, r in cls.TRAILING.items()
+                }
+                stacked.append(unchecked(cls, **empty))
+        self._kinds = tuple(stacked)
+
+    spheres = property(lambda self: self._kinds[0])
+    capsules = property(lambda self: self._kinds[1])
+    boxes = property(lambda self: self._kinds[2])
+    cylinders = property(lambda self: self._kinds[3])
+    convexes = property(lambda self: self._kinds[4])
+    planes = property(lambda self: self._kinds[5])
 
     @property
     def size(self) -> int:
         """The number of obstacles ``W``."""
         return sum(int(batch_shape(s)[0]) for s in self.kinds())
 
-    def kinds(self) -> tuple[Sphere, Capsule, Box, Plane]:
-        return (self.spheres, self.capsules, self.boxes, self.planes)
+    def kinds(self) -> tuple:
+        """Each kind stacked, in the order of :data:`diffkin.collision._shapes.SHAPES`."""
+        return self._kinds
 
     def tree_flatten(self):
-        return self.kinds(), None
+        return self._kinds, None
 
     @classmethod
     def tree_unflatten(cls, aux, children):
         obj = object.__new__(cls)
-        obj.spheres, obj.capsules, obj.boxes, obj.planes = children
+        obj._kinds = tuple(children)
         return obj
 
 
@@ -181,8 +187,8 @@ def pair_blocks(geom: Geometry) -> list[tuple[np.ndarray, int, int, np.ndarray, 
     pairs = geom.pairs
     kind_of = np.searchsorted(starts, np.arange(sum(counts)), side="right") - 1
     out = []
-    for ka in range(3):
-        for kb in range(ka, 3):
+    for ka in range(len(counts)):
+        for kb in range(ka, len(counts)):
             rows = np.flatnonzero((kind_of[pairs[:, 0]] == ka) & (kind_of[pairs[:, 1]] == kb)) if len(pairs) else None
             if rows is not None and len(rows):
                 out.append((rows, ka, kb, pairs[rows, 0] - starts[ka], pairs[rows, 1] - starts[kb]))

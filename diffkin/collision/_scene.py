@@ -1,4 +1,4 @@
-"""Obstacle scenes as JSON files (:func:`load_scene`): spheres, capsules, boxes and half-spaces,
+"""Obstacle scenes as JSON files (:func:`load_scene`): spheres, capsules, boxes, cylinders and half-spaces,
 checked on the host with errors that name the field (``boxes[1].half_extents``); the format is in
 :func:`load_scene` and ``docs/collision.md`` ("Scene files").
 """
@@ -17,13 +17,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin.collision._robot import World
-from diffkin.collision._shapes import Box, Capsule, Plane, Sphere
+from diffkin.collision._shapes import Box, Capsule, Cylinder, Plane, Sphere
 
 #: per kind, its fields: name -> number of values (0: one number), and whether the field may be left out
 _KINDS: dict[str, dict[str, tuple[int, bool]]] = {
     "spheres": {"center": (3, True), "radius": (0, True)},
     "capsules": {"a": (3, True), "b": (3, True), "radius": (0, True)},
     "boxes": {"position": (3, True), "quaternion": (4, False), "half_extents": (3, True)},
+    "cylinders": {"position": (3, True), "quaternion": (4, False), "radius": (0, True), "half_length": (0, True)},
     "planes": {"normal": (3, True), "offset": (0, True)},
 }
 _TOP = ("margin", "self_collision", *_KINDS)
@@ -100,7 +101,7 @@ def _entries(kind: str, items: Any) -> list[dict[str, Any]]:
                     raise ValueError(f"{where}: missing key {name!r}")
                 continue
             entry[name] = _vector(item[name], f"{where}.{name}", n) if n else _number(item[name], f"{where}.{name}")
-        for name in ("radius", "half_extents"):
+        for name in ("radius", "half_extents", "half_length"):
             if name in entry and np.any(entry[name] < 0):
                 raise ValueError(f"{where}.{name}: expected values >= 0, got {json.dumps(item[name])}")
         out.append(entry)
@@ -128,8 +129,17 @@ def _world(kinds: dict[str, list[dict[str, Any]]]) -> World:
     def array(values) -> jax.Array:
         return jnp.asarray(np.asarray(values), jnp.result_type(float))
 
-    shapes: list[Sphere | Capsule | Box | Plane] = []
-    spheres, capsules, boxes, planes = (kinds[k] for k in _KINDS)
+    def poses(kind: str, items: list[dict[str, Any]]) -> jax.Array:
+        """``(n, 4, 4)`` of each item's ``position`` and ``quaternion`` (default: no rotation)."""
+        T = np.tile(np.eye(4), (len(items), 1, 1))
+        for i, item in enumerate(items):
+            if "quaternion" in item:
+                T[i, :3, :3] = _rotation(item["quaternion"], f"{kind}[{i}].quaternion")
+            T[i, :3, 3] = item["position"]
+        return array(T)
+
+    shapes: list[Sphere | Capsule | Box | Cylinder | Plane] = []
+    spheres, capsules, boxes, cylinders, planes = (kinds[k] for k in _KINDS)
     if spheres:
         shapes.append(Sphere(array([s["center"] for s in spheres]), array([s["radius"] for s in spheres])))
     if capsules:
@@ -141,12 +151,10 @@ def _world(kinds: dict[str, list[dict[str, Any]]]) -> World:
             )
         )
     if boxes:
-        T = np.tile(np.eye(4), (len(boxes), 1, 1))
-        for i, box in enumerate(boxes):
-            if "quaternion" in box:
-                T[i, :3, :3] = _rotation(box["quaternion"], f"boxes[{i}].quaternion")
-            T[i, :3, 3] = box["position"]
-        shapes.append(Box(array(T), array([b["half_extents"] for b in boxes])))
+        shapes.append(Box(poses("boxes", boxes), array([b["half_extents"] for b in boxes])))
+    if cylinders:
+        radii, halves = (array([c[k] for c in cylinders]) for k in ("radius", "half_length"))
+        shapes.append(Cylinder(poses("cylinders", cylinders), radii, halves))
     if planes:
         norms = np.array([float(np.linalg.norm(p["normal"])) for p in planes])
         if np.any(norms < 1e-12):
@@ -175,7 +183,7 @@ def _parse(data: Any) -> Scene:
 
 
 def load_scene(source) -> Scene:
-    """The obstacles of a scene: a JSON file of spheres, capsules, boxes and half-spaces.
+    """The obstacles of a scene: a JSON file of spheres, capsules, boxes, cylinders and half-spaces.
 
     The format (lengths in metres, world frame; every key optional)::
 
@@ -183,9 +191,11 @@ def load_scene(source) -> Scene:
          "spheres": [{"center": [x, y, z], "radius": r}],
          "capsules": [{"a": [x, y, z], "b": [x, y, z], "radius": r}],
          "boxes": [{"position": [x, y, z], "quaternion": [w, x, y, z], "half_extents": [hx, hy, hz]}],
+         "cylinders": [{"position": [x, y, z], "quaternion": [w, x, y, z], "radius": r, "half_length": h}],
          "planes": [{"normal": [nx, ny, nz], "offset": d}]}
 
-    A box's ``quaternion`` (default ``[1, 0, 0, 0]``) is normalised (its norm must be within
+    A cylinder's axis is the z axis of its ``quaternion``'s rotation. A box's or cylinder's
+    ``quaternion`` (default ``[1, 0, 0, 0]``) is normalised (its norm must be within
     ``1e-3`` of 1); a plane is the half-space ``normal . x <= offset`` (the normal of any non-zero
     length). Use it as ``dk.ik.Avoid(geom, scene.world, scene.margin, scene.self_collision)``.
 
@@ -197,7 +207,7 @@ def load_scene(source) -> Scene:
 
     Raises:
         ValueError: invalid JSON (or nested too deeply), an unknown or missing key, a list of the wrong length, a value
-            that is not a finite number, a negative radius, half extent or margin, a quaternion
+            that is not a finite number, a negative radius, half extent, half length or margin, a quaternion
             whose norm is not 1, a zero plane normal; the message names the field (``boxes[1].
             half_extents``) and, for a file, starts with its path. A number beyond float64 is not finite.
         OSError: a file that cannot be read.

@@ -56,11 +56,12 @@ class Primitive:
 
     Attributes:
         name: its scene-tree path (``/obstacles/sphere0``, ``/obstacles/capsule1/a``, ...).
-        kind: ``"sphere"`` (``size``: radius), ``"cylinder"`` (radius, height along its z axis) or
-            ``"box"`` (edge lengths along its x, y, z axes).
+        kind: ``"sphere"`` (``size``: radius), ``"cylinder"`` (radius, height along its z axis),
+            ``"box"`` (edge lengths along its x, y, z axes) or ``"mesh"`` (``mesh``).
         position: ``(3,)`` centre in the world, metres.
         rotation: ``(3, 3)`` orientation ``R_world_shape``.
         size: as ``kind`` says, metres.
+        mesh: for ``"mesh"``: ``(vertices (n, 3), faces (m, 3))`` in the shape's frame.
     """
 
     name: str
@@ -68,19 +69,21 @@ class Primitive:
     position: np.ndarray
     rotation: np.ndarray
     size: tuple[float, ...]
+    mesh: tuple[np.ndarray, np.ndarray] | None = None
 
 
-def shape_primitives(spheres, capsules, boxes, names: list[str]) -> list[Primitive]:
-    """The primitives that draw spheres, capsules and boxes (``dk.collision`` shapes), in their own frame.
+def shape_primitives(shapes, names: list[str]) -> list[Primitive]:
+    """The primitives that draw solids (``dk.collision`` shapes: each kind stacked), in their own frame.
 
     A sphere is a sphere; a capsule a cylinder between its end points and a sphere at each end; a
-    box a box.
+    box a box; a cylinder a cylinder; a convex polytope the mesh of its hull.
 
     Args:
-        spheres, capsules, boxes: the shapes (a :class:`~diffkin.collision.World`'s, or a robot's
-            :class:`~diffkin.collision.Geometry`'s in the frames that carry them).
-        names: the scene-tree path of each shape: spheres, then capsules, then boxes (a capsule's
-            three primitives are ``<name>/axis``, ``<name>/a``, ``<name>/b``).
+        shapes: the stacked kinds in the order of ``dk.collision``'s solids (spheres, capsules, boxes,
+            cylinders, convex polytopes): a :class:`~diffkin.collision.World`'s, or a robot's
+            :class:`~diffkin.collision.Geometry`'s ``shapes`` in the frames that carry them.
+        names: the scene-tree path of each shape, in that order (a capsule's three primitives are
+            ``<name>/axis``, ``<name>/a``, ``<name>/b``).
     """
     out: list[Primitive] = []
     eye = np.eye(3)
@@ -88,6 +91,7 @@ def shape_primitives(spheres, capsules, boxes, names: list[str]) -> list[Primiti
     def host(x) -> np.ndarray:
         return np.asarray(x, dtype=np.float64)
 
+    spheres, capsules, boxes, cylinders, convexes = shapes
     paths = iter(names)
     for x, r in zip(host(spheres.center), host(spheres.radius), strict=True):
         out.append(Primitive(next(paths), "sphere", x, eye, (float(r),)))
@@ -98,7 +102,18 @@ def shape_primitives(spheres, capsules, boxes, names: list[str]) -> list[Primiti
         out.append(Primitive(f"{name}/b", "sphere", e, eye, (float(r),)))
     for T, h in zip(host(boxes.pose), host(boxes.half_extents), strict=True):
         out.append(Primitive(next(paths), "box", T[:3, 3], T[:3, :3], tuple(float(v) for v in 2 * h)))
+    for T, r, h in zip(host(cylinders.pose), host(cylinders.radius), host(cylinders.half_length), strict=True):
+        out.append(Primitive(next(paths), "cylinder", T[:3, 3], T[:3, :3], (float(r), 2 * float(h))))
+    for T, V in zip(host(convexes.pose), host(convexes.vertices), strict=True):
+        out.append(Primitive(next(paths), "mesh", T[:3, 3], T[:3, :3], (), _hull_mesh(V)))
     return out
+
+
+def _hull_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices, faces)`` of the convex hull of ``points`` (a flat or tiny set: no faces)."""
+    from diffkin.collision._fit import hull
+
+    return hull(points)
 
 
 def obstacle_primitives(world, center, extent: float) -> list[Primitive]:
@@ -111,10 +126,11 @@ def obstacle_primitives(world, center, extent: float) -> list[Primitive]:
         center: ``(3,)`` the point of the scene the slabs are centred on (projected on each plane).
         extent: edge length of the slabs, metres.
     """
-    counts = {"sphere": world.spheres.radius.shape[0], "capsule": world.capsules.radius.shape[0]}
-    counts["box"] = world.boxes.half_extents.shape[0]
-    names = [f"/obstacles/{kind}{i}" for kind, n in counts.items() for i in range(n)]
-    out = shape_primitives(world.spheres, world.capsules, world.boxes, names)
+    kinds = ("sphere", "capsule", "box", "cylinder", "convex")
+    solids = world.kinds()[:-1]
+    counts = [int(np.shape(getattr(shape, next(iter(type(shape).TRAILING))))[0]) for shape in solids]
+    names = [f"/obstacles/{kind}{i}" for kind, n in zip(kinds, counts, strict=True) for i in range(n)]
+    out = shape_primitives(solids, names)
     center = np.asarray(center, dtype=np.float64)
     normals, offsets = np.asarray(world.planes.normal, np.float64), np.asarray(world.planes.offset, np.float64)
     for i, (n, d) in enumerate(zip(normals, offsets, strict=True)):

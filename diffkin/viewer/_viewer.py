@@ -240,7 +240,7 @@ class Viewer:
         paths = [f"/robot/{_node(link)}/collision{k}" for k, link in enumerate(geom.shape_links)]
         index = {path: k for k, path in enumerate(paths)}
         self.collision = [[] for _ in paths]
-        for shape in _overlays.shape_primitives(geom.spheres, geom.capsules, geom.boxes, paths):
+        for shape in _overlays.shape_primitives(geom.shapes, paths):
             k = index[shape.name] if shape.name in index else index[shape.name.rsplit("/", 1)[0]]  # capsule: 3 parts
             self.collision[k].append(self._add_primitive(shape, CLEAR, opacity=0.5, visible=False))
         pairs = geom.pairs if avoid.self_collision else np.zeros((0, 2), np.int64)
@@ -280,6 +280,11 @@ class Viewer:
             radius, height = shape.size
             return scene.add_cylinder(
                 shape.name, radius, height, color, opacity=opacity, position=position, wxyz=wxyz, visible=visible
+            )
+        if shape.kind == "mesh" and shape.mesh is not None:
+            vertices, faces = shape.mesh
+            return scene.add_mesh_simple(
+                shape.name, vertices, faces, color=color, opacity=opacity, position=position, wxyz=wxyz, visible=visible
             )
         size = np.asarray(shape.size)
         return scene.add_box(shape.name, color, size, opacity=opacity, position=position, wxyz=wxyz, visible=visible)
@@ -370,6 +375,8 @@ class Viewer:
                     "spheres": world.spheres.radius,
                     "capsules": world.capsules.radius,
                     "boxes": world.boxes.half_extents,
+                    "cylinders": world.cylinders.radius,
+                    "convex polytopes": world.convexes.pose,
                     "planes": world.planes.offset,
                 }
             )

@@ -11,34 +11,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from _reference import SHAPE_PAIRS as PAIRS
-from _reference import random_fields, shape
+from _reference import coal_shape, random_fields, shape
 
 import diffkin as dk
 from diffkin.collision import Box, Capsule, Plane, Sphere, _boxes, distance
 from diffkin.collision import _closest as cl
 
 N = 10_000
-
-
-def _coal_shape(coal, kind: str, f: dict, i: int):
-    """The coal geometry and placement of shape ``i``."""
-    if kind == "sphere":
-        return coal.Sphere(f["radius"][i]), coal.Transform3s(np.eye(3), f["center"][i])
-    if kind == "capsule":
-        a, b = f["a"][i], f["b"][i]
-        axis = b - a
-        length = float(np.linalg.norm(axis))
-        R = np.eye(3)
-        if length > 0:
-            z = axis / length
-            x = np.cross([1.0, 0, 0] if abs(z[0]) < 0.9 else [0, 1.0, 0], z)
-            x /= np.linalg.norm(x)
-            R = np.column_stack([x, np.cross(z, x), z])
-        return coal.Capsule(f["radius"][i], length), coal.Transform3s(R, 0.5 * (a + b))
-    if kind == "box":
-        T = f["pose"][i]
-        return coal.Box(*(2 * f["half_extents"][i])), coal.Transform3s(T[:3, :3], T[:3, 3])
-    return coal.Halfspace(f["normal"][i], f["offset"][i]), coal.Transform3s()
 
 
 def coal_distances(kind_a: str, fa: dict, kind_b: str, fb: dict) -> np.ndarray:
@@ -49,8 +28,8 @@ def coal_distances(kind_a: str, fa: dict, kind_b: str, fb: dict) -> np.ndarray:
     request.gjk_tolerance = request.epa_tolerance = 1e-12
     out = np.empty(len(next(iter(fa.values()))))
     for i in range(out.size):
-        ga, Ta = _coal_shape(coal, kind_a, fa, i)
-        gb, Tb = _coal_shape(coal, kind_b, fb, i)
+        ga, Ta = coal_shape(coal, kind_a, fa, i)
+        gb, Tb = coal_shape(coal, kind_b, fb, i)
         out[i] = coal.distance(ga, Ta, gb, Tb, request, coal.DistanceResult())
     return out
 
