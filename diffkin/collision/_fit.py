@@ -47,6 +47,18 @@ def cylinder(radius: float, half_length: float) -> tuple[float, float]:
     return R, float(max(h - np.sqrt(max(R * R - r * r, 0.0)), 0.0))
 
 
+def cylinder_overshoot(radius: float, half_length: float, R: float, L: float) -> float:
+    """The largest distance from a point of the capsule (``R``, half length ``L``, on the axis) to the cylinder
+    (``radius``, ``half_length``): over the capsule's side and end caps, in the axial plane (sampled finely:
+    the distance is smooth there)."""
+    r, h = float(radius), float(half_length)
+    angle = np.linspace(0.0, np.pi / 2, 2001)
+    rho = np.concatenate([R * np.sin(angle), np.full(2001, R)])
+    z = np.concatenate([L + R * np.cos(angle), np.linspace(0.0, L, 2001)])
+    dr, dz = np.maximum(rho - r, 0.0), np.maximum(z - h, 0.0)
+    return float(np.max(np.hypot(dr, dz)))
+
+
 def ellipsoid(semi_axes) -> tuple[int, float, float]:
     """``(axis index, radius, half length)`` of a capsule containing an ellipsoid of ``semi_axes``.
 
@@ -158,6 +170,24 @@ def _search(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     _, a, b = min(candidates, key=lambda c: c[0])
     radius = float(np.max(_point_segment(P, a, b)))
     return a, b, radius + MARGIN * max(float(np.ptp(P, axis=0).max()), 1e-3)
+
+
+def hull(vertices) -> tuple[np.ndarray, np.ndarray]:
+    """``(points, faces)``: the convex hull of ``vertices (n, 3)``: its vertices and triangles (indices into them).
+
+    A flat or degenerate point set (no volume) keeps its points, with no faces.
+    """
+    P = np.unique(np.asarray(vertices, dtype=np.float64).reshape(-1, 3), axis=0)
+    try:
+        from scipy.spatial import ConvexHull
+
+        h = ConvexHull(P)
+    except Exception:  # fewer than 4 points, a flat set, or no scipy
+        return P, np.zeros((0, 3), np.int64)
+    keep = h.vertices
+    index = np.full(len(P), -1)
+    index[keep] = np.arange(len(keep))
+    return P[keep], index[h.simplices]
 
 
 def _perpendicular(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

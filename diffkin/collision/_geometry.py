@@ -22,41 +22,54 @@ import numpy as np
 
 from diffkin._pytree import pytree_dataclass, static
 from diffkin.collision import _sources
-from diffkin.collision._shapes import Box, Capsule, Sphere, unchecked
+from diffkin.collision._shapes import SOLIDS, Box, Capsule, Convex, Cylinder, Sphere
 from diffkin.models.robot import Robot
 
-KINDS = ("sphere", "capsule", "box")
+KINDS = ("sphere", "capsule", "box", "cylinder", "convex")  # a Spec's kind, per class of SOLIDS
 
 
 @pytree_dataclass
 class Geometry:
     """A robot's collision shapes in the frames that carry them, and its self-collision pairs.
 
-    Shapes are ordered by kind: every sphere, then every capsule, then every box (the order of
-    the ``S`` axis of :func:`diffkin.collision.world_distances`); :attr:`shape_names` names them.
+    Shapes are ordered by kind: every sphere, then every capsule, box, cylinder and convex polytope
+    (the order of the ``S`` axis of :func:`diffkin.collision.world_distances`); :attr:`shape_names`
+    names them.
 
     Attributes:
-        spheres: :class:`Sphere` ``(n_spheres,)``, centres in the frame of each shape.
-        capsules: :class:`Capsule` ``(n_capsules,)``, end points in the frame of each shape.
-        boxes: :class:`Box` ``(n_boxes,)``, poses ``T_frame_box``.
+        shapes: each kind stacked (:data:`diffkin.collision._shapes.SOLIDS` order, possibly 0 of a
+            kind), in the frame of each shape; also as :attr:`spheres`, :attr:`capsules`,
+            :attr:`boxes`, :attr:`cylinders`, :attr:`convexes`.
         shape_frames: static, per shape, the index of its frame in ``robot.frame_names``.
         shape_names: static, per shape, its name in the file.
         shape_bodies: static, per shape, the name of its moving body (the first frame of that body).
         shape_links: static, per shape, the frame (URDF link, MJCF body) that carries it.
         pair_list: static, the self-collision pairs ``(i, j)``, ``i < j`` (see :attr:`pairs`).
-        fits: static, per shape that was fitted (cylinders, ellipsoids, meshes): ``(name, source,
-            volume of the original (for a mesh: its convex hull), volume of the capsule)``.
+        fits: static, per shape that was fitted (meshes, ellipsoids): ``(name, source, volume of the
+            original (for a mesh: its convex hull), volume of the fit)``.
+        shape_overshoot: static, per shape, :attr:`overshoot`.
     """
 
-    spheres: Sphere
-    capsules: Capsule
-    boxes: Box
+    shapes: tuple
     shape_frames: tuple[int, ...] = static()
     shape_names: tuple[str, ...] = static()
     shape_bodies: tuple[str, ...] = static()
     shape_links: tuple[str, ...] = static()
     pair_list: tuple[tuple[int, int], ...] = static()
     fits: tuple[tuple[str, str, float, float], ...] = static(default=())
+    shape_overshoot: tuple[float, ...] = static(default=())
+
+    spheres = property(lambda self: self.shapes[0])
+    capsules = property(lambda self: self.shapes[1])
+    boxes = property(lambda self: self.shapes[2])
+    cylinders = property(lambda self: self.shapes[3])
+    convexes = property(lambda self: self.shapes[4])
+
+    @property
+    def overshoot(self) -> np.ndarray:
+        """``(S,)`` metres: per shape, how far its fit reaches beyond what it replaces (the largest distance
+        from a point of the fitted shape to the mesh or shape of the file); 0 for exact primitives."""
+        return np.array(self.shape_overshoot or (0.0,) * len(self.shape_names), dtype=np.float64)
 
     @property
     def pairs(self) -> np.ndarray:
@@ -69,9 +82,9 @@ class Geometry:
         return tuple((self.shape_bodies[i], self.shape_bodies[j]) for i, j in self.pair_list)
 
     @property
-    def counts(self) -> tuple[int, int, int]:
-        """Numbers of spheres, capsules and boxes."""
-        return (self.spheres.radius.shape[0], self.capsules.radius.shape[0], self.boxes.half_extents.shape[0])
+    def counts(self) -> tuple[int, ...]:
+        """Numbers of shapes of each kind (spheres, capsules, boxes, cylinders, convex polytopes)."""
+        return tuple(int(np.shape(shape.pose if hasattr(shape, "pose") else shape.radius)[0]) for shape in self.shapes)
 
     def volume_overhead(self) -> dict[str, float]:
         """Per link with fitted shapes: the fits' total volume over the originals' (a ratio minus one, ``>= 0``)."""
@@ -90,15 +103,29 @@ class Geometry:
         )
 
 
-def _stack(specs: list[_sources.Spec], kind: str, dtype):
-    width = {"sphere": 4, "capsule": 7, "box": 19}[kind]
-    P = np.array([s.params for s in specs], dtype=np.float64).reshape(len(specs), width)
-    f = lambda x: jnp.asarray(x, dtype)  # noqa: E731
-    if kind == "sphere":
-        return Sphere(f(P[:, :3].reshape(-1, 3)), f(P[:, 3].reshape(-1)))
-    if kind == "capsule":
-        return Capsule(f(P[:, :3].reshape(-1, 3)), f(P[:, 3:6].reshape(-1, 3)), f(P[:, 6].reshape(-1)))
-    return Box(f(P[:, :16].reshape(-1, 4, 4)), f(P[:, 16:19].reshape(-1, 3)))
+def _stack(specs: list[_sources.Spec], kind: type, dtype):
+    """The shapes of one kind stacked (none: an empty stack)."""
+    f = lambda x: jnp.asarray(np.asarray(x, dtype=np.float64), dtype)  # noqa: E731
+    P = [np.asarray(s.params, dtype=np.float64) for s in specs]
+    if kind is Sphere:
+        P_ = np.array(P).reshape(len(specs), 4)
+        return Sphere(f(P_[:, :3]), f(P_[:, 3]))
+    if kind is Capsule:
+        P_ = np.array(P).reshape(len(specs), 7)
+        return Capsule(f(P_[:, :3]), f(P_[:, 3:6]), f(P_[:, 6]))
+    if kind is Box:
+        P_ = np.array(P).reshape(len(specs), 19)
+        return Box(f(P_[:, :16].reshape(-1, 4, 4)), f(P_[:, 16:19]))
+    if kind is Cylinder:
+        P_ = np.array(P).reshape(len(specs), 18)
+        return Cylinder(f(P_[:, :16].reshape(-1, 4, 4)), f(P_[:, 16]), f(P_[:, 17]))
+    # convex: params are the vertices in the frame; padded to the most with copies of the first
+    most = max((len(p) // 3 for p in P), default=1)
+    V = np.zeros((len(specs), most, 3))
+    for i, p in enumerate(P):
+        v = p.reshape(-1, 3)
+        V[i] = np.concatenate([v, np.repeat(v[:1], most - len(v), axis=0)])
+    return Convex(f(np.tile(np.eye(4), (len(specs), 1, 1))), f(V))
 
 
 def _parent_bodies(robot: Robot) -> list[int | None]:
@@ -132,8 +159,13 @@ def load(source, robot: Robot, *, meshes: str = "capsules", srdf=None, dtype=Non
             of the world body itself are the environment and are left out, as are geoms with
             ``contype = conaffinity = 0``).
         robot: the :class:`diffkin.Robot`: shapes are placed on its frames.
-        meshes: ``"capsules"``: every mesh, cylinder and ellipsoid becomes one capsule that
-            contains all its vertices (the only fit for now).
+        meshes: the model's tightness. ``"capsules"`` (default): every mesh and cylinder becomes
+            one capsule that contains it (cheap distances, loose: :attr:`Geometry.overshoot`);
+            ``"hulls"``: every mesh becomes its convex hull (:class:`Convex`, as MuJoCo collides
+            meshes: as tight as the mesh where it is convex) and every cylinder an exact
+            :class:`Cylinder` (their distances go through the general convex distance, whose
+            programs take longer to compile). Spheres, capsules and boxes are exact; an ellipsoid
+            becomes a capsule that contains it.
         srdf: an SRDF (path or XML text) whose ``<disable_collisions>`` link pairs are not checked,
             or a list of them (the file's own and one from :func:`diffkin.collision.sample_pairs`).
         dtype: float dtype of the arrays (default: JAX's default float).
@@ -148,17 +180,17 @@ def load(source, robot: Robot, *, meshes: str = "capsules", srdf=None, dtype=Non
     """
     from diffkin.models import _xml
 
-    if meshes != "capsules":
-        raise ValueError(f"meshes: expected 'capsules', got {meshes!r}")
+    if meshes not in ("hulls", "capsules"):
+        raise ValueError(f"meshes: expected 'hulls' or 'capsules', got {meshes!r}")
     if not isinstance(robot, Robot):
         raise TypeError(f"robot: expected a diffkin.Robot (dk.load_robot), got {type(robot).__name__}")
     root, path = _xml.read(source)
     excludes: set[frozenset[str]] = set()
     filterparent, mjcf = True, root.tag == "mujoco"
     if root.tag == "robot":
-        specs = _sources.urdf_specs(root, os.path.dirname(path) if path else None)
+        specs = _sources.urdf_specs(root, os.path.dirname(path) if path else None, meshes)
     elif mjcf:
-        specs, excludes, filterparent = _sources.mjcf_specs(root, path)
+        specs, excludes, filterparent = _sources.mjcf_specs(root, path, meshes)
     else:
         raise ValueError(f"source: expected a <robot> (URDF) or <mujoco> (MJCF) root element, got <{root.tag}>")
     disabled = _srdf_disabled(srdf) if srdf is not None else set()
@@ -189,41 +221,33 @@ def load(source, robot: Robot, *, meshes: str = "capsules", srdf=None, dtype=Non
                 continue
             pairs.append((i, j))
     dtype = dtype or jnp.result_type(float)
-    by_kind = {k: [s for s in specs if s.kind == k] for k in KINDS}
     return Geometry(
-        _stack(by_kind["sphere"], "sphere", dtype),
-        _stack(by_kind["capsule"], "capsule", dtype),
-        _stack(by_kind["box"], "box", dtype),
+        tuple(
+            _stack([s for s in specs if s.kind == name], cls, dtype) for name, cls in zip(KINDS, SOLIDS, strict=True)
+        ),
         shape_frames=tuple(frames),
         shape_names=tuple(s.name for s in specs),
         shape_bodies=tuple(body_names[b] for b in bodies),
         shape_links=tuple(s.frame for s in specs),
         pair_list=tuple(pairs),
         fits=tuple((s.name, s.source, float(s.volume), float(s.fitted_volume)) for s in specs if s.source != s.kind),
+        shape_overshoot=tuple(float(s.overshoot) for s in specs),
     )
 
 
-def placed(robot: Robot, geom: Geometry, q, base=None) -> tuple[Sphere, Capsule, Box]:
+def placed(robot: Robot, geom: Geometry, q, base=None) -> tuple:
     """The shapes in the world at ``q``: each kind with batch axes ``(..., n_kind)``."""
     from diffkin.kinematics import link_poses
 
     return moved(geom, link_poses(robot, q, base=base), geom.shape_frames)
 
 
-def moved(geom: Geometry, T_world_frames: jax.Array, slots) -> tuple[Sphere, Capsule, Box]:
+def moved(geom: Geometry, T_world_frames: jax.Array, slots) -> tuple:
     """The shapes placed by their frames' poses ``T_world_frames`` ``(..., F, 4, 4)``, shape ``s`` by
     ``T_world_frames[..., slots[s]]``: each kind with batch axes ``(..., n_kind)``."""
-    T = T_world_frames
-    ns, nc, _ = geom.counts
     idx = np.asarray(slots, dtype=np.int64)
-    Ts, Tc, Tb = T[..., idx[:ns], :, :], T[..., idx[ns : ns + nc], :, :], T[..., idx[ns + nc :], :, :]
-
-    def move(T, p):
-        return jnp.einsum("...ij,...j->...i", T[..., :3, :3], p) + T[..., :3, 3]
-
-    s, c, b = geom.spheres, geom.capsules, geom.boxes
-    return (
-        unchecked(Sphere, center=move(Ts, s.center), radius=s.radius),
-        unchecked(Capsule, a=move(Tc, c.a), b=move(Tc, c.b), radius=c.radius),
-        unchecked(Box, pose=Tb @ b.pose, half_extents=b.half_extents),
+    starts = np.cumsum((0, *geom.counts))
+    return tuple(
+        shape.moved_by(T_world_frames[..., idx[lo:hi], :, :])
+        for shape, lo, hi in zip(geom.shapes, starts[:-1], starts[1:], strict=True)
     )

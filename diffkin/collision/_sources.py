@@ -1,9 +1,11 @@
 """Collision shapes of robot description files: URDF ``<collision>`` elements and MJCF ``<geom>``s (host).
 
-Each element becomes one :class:`Spec`: a sphere, capsule or box in the frame of the link (URDF)
-or body (MJCF) that carries it. Spheres, boxes and capsules are kept exactly; cylinders,
-ellipsoids and meshes become capsules that contain them (:mod:`diffkin.collision._fit`), with
-the volume of the original and of the fit recorded. Meshes are read with trimesh (the
+Each element becomes one :class:`Spec`: a sphere, capsule, box, cylinder or convex polytope in the
+frame of the link (URDF) or body (MJCF) that carries it. Spheres, boxes, capsules and cylinders are
+kept exactly; a mesh becomes its convex hull (``meshes="hulls"``) or a capsule that contains it
+(``meshes="capsules"``), an ellipsoid a capsule that contains it (:mod:`diffkin.collision._fit`),
+with the volume of the original and of the fit recorded and how far the fit reaches beyond the
+original (:mod:`diffkin.collision._overshoot`). Meshes are read with trimesh (the
 ``diffkin[collision]`` extra), imported only when a file has meshes.
 """
 
@@ -16,7 +18,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 
 from diffkin._meshfiles import resolve_mesh
-from diffkin.collision import _fit
+from diffkin.collision import _fit, _overshoot
 from diffkin.models.urdf import rpy_matrix
 
 _MJCF_KINDS = ("sphere", "capsule", "box", "cylinder", "ellipsoid", "mesh")
@@ -30,14 +32,16 @@ class Spec:
         name: the element's name (URDF ``<collision name=>``, else ``link_k``: the k-th collision
             element of the link, as Pinocchio names them; MJCF ``<geom name=>``, else ``geomN``).
         frame: the frame (URDF link, MJCF body) that carries it.
-        kind: ``"sphere"``, ``"capsule"`` or ``"box"`` (what it is now).
+        kind: ``"sphere"``, ``"capsule"``, ``"box"``, ``"cylinder"`` or ``"convex"`` (what it is now).
         source: what the file says (``"cylinder"``, ``"mesh"``, ... or the same as ``kind``).
         params: ``sphere``: centre (3), radius; ``capsule``: a (3), b (3), radius; ``box``: pose
-            ``T_frame_box`` (16, row major), half extents (3); all in the frame, metres.
+            ``T_frame_box`` (16, row major), half extents (3); ``cylinder``: pose (16), radius, half
+            length; ``convex``: its vertices (3 each); all in the frame, metres.
         volume: the original shape's volume (for a mesh: its convex hull's), m^3.
         fitted_volume: the volume of the shape kept (equal to ``volume`` when exact).
         contype, conaffinity: MJCF collision bits (URDF: 1, 1).
         body: MJCF body name (for ``<exclude>``), or the URDF link name.
+        overshoot: metres, how far the shape reaches beyond the original (0 when exact).
     """
 
     name: str
@@ -50,6 +54,7 @@ class Spec:
     contype: int = 1
     conaffinity: int = 1
     body: str = ""
+    overshoot: float = 0.0
 
 
 # --------------------------------------------------------------------------------------- shapes
@@ -67,9 +72,10 @@ def _capsule(name, frame, source, T, radius, half_length, volume, **kw) -> Spec:
     return Spec(name, frame, "capsule", source, (*a, *b, radius), volume, fitted, **kw)
 
 
-def _primitive(name: str, frame: str, kind: str, T: np.ndarray, size, **kw) -> Spec:
+def _primitive(name: str, frame: str, kind: str, T: np.ndarray, size, fit: str, **kw) -> Spec:
     """A shape centred at ``T`` (its axis z): sphere ``(r,)``, capsule/cylinder ``(r, half length)``,
-    box ``(3 half extents)``, ellipsoid ``(3 semi-axes)``."""
+    box ``(3 half extents)``, ellipsoid ``(3 semi-axes)``. A cylinder is exact when ``fit`` is
+    ``"hulls"`` (the tight model), else the smallest capsule on its axis that contains it."""
     size = np.asarray(size, dtype=np.float64)
     if np.any(size < 0) or not np.all(np.isfinite(size)):
         raise ValueError(f"collision shape {name!r} on {frame!r}: expected finite sizes >= 0, got {size.tolist()}")
@@ -84,14 +90,20 @@ def _primitive(name: str, frame: str, kind: str, T: np.ndarray, size, **kw) -> S
         return Spec(name, frame, "box", kind, (*T.reshape(-1), *size[:3]), v, v, **kw)
     if kind == "cylinder":
         r, h = float(size[0]), float(size[1])
+        v = 2 * np.pi * r * r * h
+        if fit == "hulls":
+            return Spec(name, frame, "cylinder", kind, (*T.reshape(-1), r, h), v, v, **kw)
         R, L = _fit.cylinder(r, h)
-        return _capsule(name, frame, kind, T, R, L, 2 * np.pi * r * r * h, **kw)
+        spec = _capsule(name, frame, kind, T, R, L, v, **kw)
+        return dataclasses.replace(spec, overshoot=_fit.cylinder_overshoot(r, h, R, L))
     if kind == "ellipsoid":
         k, R, L = _fit.ellipsoid(size[:3])
         axes = np.roll(np.eye(3), 2 - k, axis=1)  # columns: x, y, z of a frame whose z is axis k
         Tk = T.copy()
         Tk[:3, :3] = T[:3, :3] @ axes
-        return _capsule(name, frame, kind, Tk, R, L, 4 / 3 * np.pi * float(np.prod(size[:3])), **kw)
+        spec = _capsule(name, frame, kind, Tk, R, L, 4 / 3 * np.pi * float(np.prod(size[:3])), **kw)
+        # a bound: every point of the capsule is within R + L of the centre, the ball of the smallest semi-axis inside
+        return dataclasses.replace(spec, overshoot=R + L - float(np.min(size[:3])))
     raise AssertionError(kind)
 
 
@@ -101,26 +113,45 @@ def _fix_volume(spec: Spec) -> Spec:
     return spec
 
 
-def _mesh(name: str, frame: str, T: np.ndarray, path: str | None, reference: str, scale, **kw) -> Spec:
-    """A capsule containing every vertex of a mesh file, placed by ``T`` and scaled by ``scale``."""
-    if path is None:
-        raise ValueError(f"collision mesh {reference!r} of {name!r} on {frame!r}: file not found")
-    vertices = _read_vertices(path) * np.asarray(scale, dtype=np.float64)
-    vertices = _transform(T, vertices)
+def fitted(name: str, frame: str, vertices: np.ndarray, faces: np.ndarray | None, meshes: str, **kw) -> Spec:
+    """The fit of a mesh (``vertices (n, 3)`` in the frame, triangles ``faces (m, 3)``, or ``None``: the shape
+    is the hull of the points, as MuJoCo takes a mesh geom): its hull or a capsule, with its overshoot."""
+    hull_points, hull_faces = _fit.hull(vertices)
+    closed = faces is not None and len(faces) > 0 and len(hull_faces) > 0
+    if meshes == "hulls":
+        overshoot = 0.0
+        if closed and faces is not None:
+            bridging = _overshoot.new_faces(hull_points, hull_faces, vertices, faces)
+            if len(bridging):
+                samples = _overshoot.polytope_samples(hull_points, bridging)
+                overshoot = float(np.max(_overshoot.to_solid(samples, vertices, faces)))
+        volume = _hull_volume(hull_points)
+        return Spec(
+            name, frame, "convex", "mesh", tuple(hull_points.reshape(-1)), volume, volume, overshoot=overshoot, **kw
+        )
     a, b, r = _fit.points(vertices)
+    samples = _overshoot.capsule_samples(a, b, r)
+    if closed and faces is not None:
+        overshoot = float(np.max(_overshoot.to_solid(samples, vertices, faces)))
+    else:
+        overshoot = float(np.max(_overshoot.to_solid(samples, hull_points, hull_faces))) if len(hull_faces) else r
+    volume = _fit.capsule_volume(r, float(np.linalg.norm(b - a)))
     return Spec(
-        name,
-        frame,
-        "capsule",
-        "mesh",
-        (*a, *b, r),
-        _hull_volume(vertices),
-        _fit.capsule_volume(r, float(np.linalg.norm(b - a))),
-        **kw,
+        name, frame, "capsule", "mesh", (*a, *b, r), _hull_volume(hull_points), volume, overshoot=overshoot, **kw
     )
 
 
-def _read_vertices(path: str) -> np.ndarray:
+def _mesh(name: str, frame: str, T: np.ndarray, path: str | None, reference: str, scale, meshes: str, **kw) -> Spec:
+    """The fit of a mesh file (:func:`fitted`), placed by ``T`` and scaled by ``scale``."""
+    if path is None:
+        raise ValueError(f"collision mesh {reference!r} of {name!r} on {frame!r}: file not found")
+    vertices, faces = _read_mesh(path)
+    vertices = _transform(T, vertices * np.asarray(scale, dtype=np.float64))
+    return fitted(name, frame, vertices, faces, meshes, **kw)
+
+
+def _read_mesh(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices (n, 3), faces (m, 3))`` of a mesh file."""
     try:
         import trimesh
     except ImportError as err:
@@ -134,7 +165,8 @@ def _read_vertices(path: str) -> np.ndarray:
     vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
     if vertices.size == 0:
         raise ValueError(f"collision mesh {path!r}: no vertices")
-    return vertices
+    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
+    return vertices, faces
 
 
 def _hull_volume(vertices: np.ndarray) -> float:
@@ -160,7 +192,7 @@ def _numbers(el: ET.Element | None, attribute: str, count: int, default: str, wh
     return values
 
 
-def urdf_specs(root: ET.Element, base_dir: str | None) -> list[Spec]:
+def urdf_specs(root: ET.Element, base_dir: str | None, meshes: str) -> list[Spec]:
     """Every ``<link><collision>`` of a URDF (sphere, box, cylinder, capsule, mesh), in document order."""
     specs = []
     for link in root.findall("link"):
@@ -178,17 +210,18 @@ def urdf_specs(root: ET.Element, base_dir: str | None) -> list[Spec]:
                 raise ValueError(f"{where}: missing <geometry>")
             kw = {"body": frame}
             if shape.tag == "sphere":
-                spec = _primitive(name, frame, "sphere", T, _numbers(shape, "radius", 1, "", where), **kw)
+                spec = _primitive(name, frame, "sphere", T, _numbers(shape, "radius", 1, "", where), meshes, **kw)
             elif shape.tag == "box":
-                spec = _primitive(name, frame, "box", T, 0.5 * _numbers(shape, "size", 3, "", where), **kw)
+                spec = _primitive(name, frame, "box", T, 0.5 * _numbers(shape, "size", 3, "", where), meshes, **kw)
             elif shape.tag in ("cylinder", "capsule"):
                 r = _numbers(shape, "radius", 1, "", where)[0]
                 length = _numbers(shape, "length", 1, "", where)[0]
-                spec = _primitive(name, frame, shape.tag, T, (r, 0.5 * length), **kw)
+                spec = _primitive(name, frame, shape.tag, T, (r, 0.5 * length), meshes, **kw)
             elif shape.tag == "mesh":
                 reference = shape.get("filename", "")
                 path = resolve_mesh(reference, base_dir)
-                spec = _mesh(name, frame, T, path, reference, _numbers(shape, "scale", 3, "1 1 1", where), **kw)
+                scale = _numbers(shape, "scale", 3, "1 1 1", where)
+                spec = _mesh(name, frame, T, path, reference, scale, meshes, **kw)
             else:
                 raise ValueError(f"{where}: <{shape.tag}> is not a supported collision geometry")
             specs.append(_fix_volume(spec))
@@ -198,7 +231,7 @@ def urdf_specs(root: ET.Element, base_dir: str | None) -> list[Spec]:
 # ------------------------------------------------------------------------------------------ MJCF
 
 
-def mjcf_specs(root: ET.Element, path: str | None) -> tuple[list[Spec], set[frozenset[str]], bool]:
+def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec], set[frozenset[str]], bool]:
     """The geoms of an MJCF's bodies (world-body geoms are the environment, left out).
 
     Returns:
@@ -213,7 +246,7 @@ def mjcf_specs(root: ET.Element, path: str | None) -> tuple[list[Spec], set[froz
     base_dir = os.path.dirname(path) if path else None
     meshdir = compiler.get("meshdir", compiler.get("assetdir", "")) if compiler is not None else ""
     mesh_dir = os.path.join(base_dir, meshdir) if base_dir is not None else (meshdir or None)
-    meshes: dict[str, tuple[str | None, str, np.ndarray, np.ndarray | None]] = {}
+    assets: dict[str, tuple[str | None, str, np.ndarray, np.ndarray | None]] = {}
     for asset in root.findall("asset"):
         for mesh in asset.findall("mesh"):
             cls = reader._class(mesh, "main")
@@ -222,7 +255,7 @@ def mjcf_specs(root: ET.Element, path: str | None) -> tuple[list[Spec], set[froz
             scale = _numbers(None, "scale", 3, reader._get(mesh, "scale", cls, "1 1 1") or "1 1 1", "MJCF mesh")
             vertex = mesh.get("vertex")
             inline = np.array([float(x) for x in vertex.split()]).reshape(-1, 3) if vertex else None
-            meshes[name] = (resolve_mesh(file, mesh_dir) if file else None, file or name, scale, inline)
+            assets[name] = (resolve_mesh(file, mesh_dir) if file else None, file or name, scale, inline)
     specs: list[Spec] = []
     counter = {"body": 1, "geom": 0}
 
@@ -274,19 +307,15 @@ def mjcf_specs(root: ET.Element, path: str | None) -> tuple[list[Spec], set[froz
         kw: dict = {"contype": contype, "conaffinity": conaffinity, "body": body}
         if kind == "mesh":
             mesh_name = reader._get(el, "mesh", cls) or ""
-            if mesh_name not in meshes:
+            if mesh_name not in assets:
                 raise ValueError(f"{where}: unknown mesh {mesh_name!r}")
-            mesh_path, reference, scale, inline = meshes[mesh_name]
-            if inline is not None:
-                a, b, r = _fit.points(_transform(T, inline * scale))
-                V = _fit.capsule_volume(r, float(np.linalg.norm(b - a)))
-                spec = Spec(
-                    name, body, "capsule", "mesh", (*a, *b, r), _hull_volume(_transform(T, inline * scale)), V, **kw
-                )
+            mesh_path, reference, scale, inline = assets[mesh_name]
+            if inline is not None:  # MuJoCo collides with the hull of the points
+                spec = fitted(name, body, _transform(T, inline * scale), None, fit, **kw)
             else:
-                spec = _mesh(name, body, T, mesh_path, reference, scale, **kw)
+                spec = _mesh(name, body, T, mesh_path, reference, scale, fit, **kw)
         else:
-            spec = _primitive(name, body, kind, T, size, **kw)
+            spec = _primitive(name, body, kind, T, size, fit, **kw)
         specs.append(_fix_volume(spec))
 
     todo: list[tuple[ET.Element, str, str]] = []

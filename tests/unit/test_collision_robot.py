@@ -27,7 +27,7 @@ def toy():
 
 def test_urdf_shapes_and_pairs(toy):
     robot, geom = toy
-    assert geom.counts == (2, 2, 1)  # spheres, capsules (the cylinder fitted), box
+    assert geom.counts == (2, 2, 1, 0, 0)  # spheres, capsules (the cylinder fitted), box, cylinders, polytopes
     assert geom.shape_names == ("upper_1", "hand_0", "upper_0", "lower_0", "base_0")
     assert geom.shape_links == ("upper", "hand", "upper", "lower", "base")
     assert geom.shape_bodies == ("upper", "lower", "upper", "lower", "base")  # hand merged onto lower
@@ -40,6 +40,30 @@ def test_urdf_shapes_and_pairs(toy):
     ((name, source, volume, fitted),) = geom.fits
     assert (name, source) == ("upper_0", "cylinder") and fitted >= volume
     assert set(geom.volume_overhead()) == {"upper"}
+
+
+def test_overshoot_of_the_capsule_around_a_cylinder(toy):
+    """The toy's cylinder (radius 0.05, length 0.5) as a capsule: its overshoot is the largest distance from the
+    capsule's surface to the cylinder, here measured at 20,000 random surface points with the sphere-cylinder
+    distance; the exact shapes' overshoot is 0. With ``meshes="hulls"`` the cylinder is exact."""
+    robot, geom = toy
+    k = geom.shape_names.index("upper_0")
+    assert np.count_nonzero(geom.overshoot) == 1
+    a, b, r = (np.asarray(x[0]) for x in (geom.capsules.a, geom.capsules.b, geom.capsules.radius))
+    assert geom.shape_names[2] == "upper_0"
+    rng = np.random.default_rng(2)
+    t = rng.uniform(-r / np.linalg.norm(b - a), 1 + r / np.linalg.norm(b - a), 20_000)
+    direction = rng.normal(size=(20_000, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    core = a + np.clip(t, 0, 1)[:, None] * (b - a)
+    points = core + r * direction  # on the capsule's surface where the core point is the nearest: most of them
+    cylinder = dk.collision.Cylinder(jnp.eye(4).at[2, 3].set(0.25), 0.05, 0.25)
+    far = float(np.max(np.asarray(dk.collision.distance(dk.collision.Sphere(jnp.asarray(points), 0.0), cylinder))))
+    assert far <= geom.overshoot[k] + 1e-6 and far >= geom.overshoot[k] - 2e-3
+    tight = dk.collision.load(URDF, robot, meshes="hulls")
+    assert tight.counts == (2, 1, 1, 1, 0) and not tight.fits and np.all(tight.overshoot == 0)
+    np.testing.assert_allclose(tight.cylinders.radius, [0.05])
+    np.testing.assert_allclose(tight.cylinders.half_length, [0.25])
 
 
 @jax.jit
@@ -110,7 +134,7 @@ def test_mjcf_classes_filters_and_fits():
     robot = dk.load_robot(MJCF)
     geom = dk.collision.load(MJCF, robot)
     assert geom.shape_names == ("ga", "gb", "gc", "gd")  # no floor (the world's), no ghost (no contact bits)
-    assert geom.counts == (0, 3, 1)
+    assert geom.counts == (0, 3, 1, 0, 0)
     # a-b and b-c are parent and child, a-c excluded by <exclude>: no pair is left; without the exclude, a-c
     assert geom.pairs.shape == (0, 2)
     assert jax.jit(dk.collision.self_distances)(robot, geom, jnp.zeros(3)).shape == (0,)  # one compile (op by op: 65)

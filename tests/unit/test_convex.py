@@ -1,0 +1,140 @@
+"""Convex polytopes (``dk.collision.Convex``) and the tight robot model (``dk.collision.load(...,
+meshes="hulls")``): a cube given by its corners measures exactly as the ``Box`` it is, against every kind;
+hull fits of meshes and their overshoot against known values; robot distances through hulls."""
+
+from __future__ import annotations
+
+import itertools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from _reference import random_cylinders, random_fields, shape
+
+import diffkin as dk
+from diffkin.collision import Convex, _sources, distance
+
+CORNERS = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))
+
+
+def _as_convex(box_fields: dict) -> Convex:
+    """The boxes as polytopes of their 8 corners (pose and scaled corners)."""
+    return Convex(jnp.asarray(box_fields["pose"]), jnp.asarray(box_fields["half_extents"][:, None, :] * CORNERS))
+
+
+@pytest.mark.parametrize("other", ["sphere", "capsule", "box", "cylinder", "plane"])
+def test_a_cube_of_corners_is_the_box(other):
+    """1,000 random placements: the polytope of a box's corners has the box's distance (the closed forms and
+    the box-box separating axes; the cylinder's general distance) to 1e-9 where apart, the same sign where
+    overlapping (an overlap's depth may be reported deeper than the box's exact one: never shallower),
+    both orders."""
+    rng = np.random.default_rng(12)
+    n = 1000
+    fa = random_fields("box", rng, n)
+    fb = random_cylinders(rng, n) if other == "cylinder" else random_fields(other, rng, n)
+    b = shape(other, fb)
+    d_box, d_convex, d_swapped = jax.jit(
+        lambda box, convex, b: (distance(box, b), distance(convex, b), distance(b, convex) if other != "plane" else 0.0)
+    )(shape("box", fa), _as_convex(fa), b)
+    d_box, d_convex = np.asarray(d_box), np.asarray(d_convex)
+    apart = d_box > 1e-9
+    assert 0.2 < apart.mean() < 0.95 or other == "plane"
+    np.testing.assert_allclose(d_convex[apart], d_box[apart], rtol=0, atol=1e-9)
+    assert np.all(d_convex[d_box < -1e-9] < 0)
+    if other != "cylinder":  # the box's overlaps are exact (a cylinder's are the general distance's, as the polytope's)
+        assert np.all(d_convex[~apart] <= d_box[~apart] + 1e-9)
+    if other == "plane":  # the lowest vertex: exact, overlapping too
+        np.testing.assert_allclose(d_convex, d_box, rtol=0, atol=1e-12)
+    else:
+        np.testing.assert_allclose(np.asarray(d_swapped), d_convex, rtol=0, atol=1e-12)
+
+
+def test_gradient_through_a_polytope():
+    """A sphere above a cube's top face: the distance grows one for one with its height and with the sphere's
+    radius it falls; the cube's vertices are leaves too (raising the top face's corners closes the gap)."""
+    cube = Convex(jnp.eye(4), jnp.asarray(0.1 * CORNERS))
+
+    def d(z, r, vertices):
+        return distance(dk.collision.Sphere(jnp.array([0.01, 0.02, z]), r), cube.replace(vertices=vertices))
+
+    value, grads = jax.value_and_grad(d, argnums=(0, 1, 2))(0.5, 0.05, cube.vertices)
+    np.testing.assert_allclose(value, 0.35, atol=1e-12)
+    np.testing.assert_allclose(grads[0], 1.0, atol=1e-12)
+    np.testing.assert_allclose(grads[1], -1.0, atol=1e-12)
+    assert np.all(np.isfinite(np.asarray(grads[2])))
+
+
+def _prism(outline: np.ndarray, height: float) -> tuple[np.ndarray, np.ndarray]:
+    """A closed triangle mesh: the polygon ``outline (k, 2)`` (counter-clockwise, fan-triangulable from its
+    first corner's neighbours as below) extruded along z from 0 to ``height``."""
+    k = len(outline)
+    V = np.concatenate([np.column_stack([outline, np.zeros(k)]), np.column_stack([outline, np.full(k, height)])])
+    faces = []
+    for i in range(k):  # the sides
+        j = (i + 1) % k
+        faces += [[i, j, k + j], [i, k + j, k + i]]
+    return V, np.array(faces)
+
+
+def test_hull_overshoot_of_a_concave_mesh():
+    """An L-shaped prism (two unit squares' worth of the 2 x 2 square): its hull bridges the missing corner,
+    whose farthest point from the L (the middle of the bridging edge, (1.5, 1.5)) is 0.5 away."""
+    outline = np.array([[0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2]], dtype=np.float64)
+    V, side_faces = _prism(outline, 1.0)
+    # caps: the L as four triangles, bottom (downwards) and top (upwards)
+    cap = [[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5]]
+    faces = np.concatenate([side_faces, [[a, c, b] for a, b, c in cap], [[a + 6, b + 6, c + 6] for a, b, c in cap]])
+    spec = _sources.fitted("l", "base", V, faces, "hulls")
+    assert spec.kind == "convex" and len(spec.params) == 3 * 10  # the hull drops the inner corner (1, 1)
+    np.testing.assert_allclose(spec.overshoot, 0.5, atol=1e-12)
+    capsule = _sources.fitted("l", "base", V, faces, "capsules")
+    assert capsule.kind == "capsule" and capsule.overshoot > 0.5
+
+
+MJCF = """<mujoco><asset><mesh name="cube" vertex="{corners}"/></asset><worldbody>
+  <body name="link"><joint name="j" type="slide" axis="0 0 1" range="-1 1"/>
+    <geom name="{name}" {geom}/></body></worldbody></mujoco>"""
+
+
+@pytest.fixture(scope="module")
+def cube_robots():
+    """A slider carrying a 0.2 m cube: as a box geom, and as a mesh of its corners (hulls / capsules)."""
+    corners = " ".join(f"{v:g}" for v in (0.1 * CORNERS).reshape(-1))
+    box = MJCF.format(corners=corners, name="box", geom='type="box" size=".1 .1 .1"')
+    mesh = MJCF.format(corners=corners, name="mesh", geom='type="mesh" mesh="cube"')
+    robot = dk.load_robot(box)
+    return (
+        robot,
+        dk.collision.load(box, robot),
+        {m: dk.collision.load(mesh, robot, meshes=m) for m in ("hulls", "capsules")},
+    )
+
+
+def test_robot_distances_through_hulls(cube_robots):
+    """The mesh's hull is the cube: world distances and clearance equal the box geom's (apart), overshoot 0
+    for the hull and the box, the capsule's reaching past the cube."""
+    robot, box_geom, fits = cube_robots
+    hull = fits["hulls"]
+    assert hull.counts == (0, 0, 0, 0, 1) and box_geom.counts == (0, 0, 1, 0, 0)
+    assert hull.overshoot.tolist() == [0.0] and box_geom.overshoot.tolist() == [0.0]
+    assert fits["capsules"].overshoot[0] > 0.05
+    world = dk.collision.World(
+        dk.collision.Sphere(jnp.array([[0.3, 0.0, 0.0], [0.0, 0.0, 0.5]]), jnp.array([0.05, 0.1])),
+        dk.collision.Cylinder(jnp.eye(4).at[0, 3].set(-0.4), 0.1, 0.2),
+    )
+    q = jnp.array([[0.0], [0.05], [-0.1]])
+    d_box = np.asarray(dk.collision.world_distances(robot, box_geom, q, world))
+    d_hull = np.asarray(dk.collision.world_distances(robot, hull, q, world))
+    np.testing.assert_allclose(d_hull, d_box, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(d_box[:, 0, 0], 0.15, atol=1e-12)  # the small sphere, beside the cube
+    np.testing.assert_allclose(d_box[:, 0, 2], 0.2, atol=1e-12)  # the cylinder, beside the other face
+
+
+def test_bad_convex_input():
+    with pytest.raises(ValueError, match=r"Convex\.vertices: expected shape \(\.\.\., 3\)"):
+        Convex(jnp.eye(4), jnp.zeros((4, 2)))
+    with pytest.raises(ValueError, match=r"Convex\.vertices: expected shape \(\.\.\., V, 3\) with V >= 1"):
+        Convex(jnp.eye(4), jnp.zeros((0, 3)))
+    with pytest.raises(ValueError, match=r"meshes: expected 'hulls' or 'capsules'"):
+        dk.collision.load(MJCF.format(corners="0 0 0", name="m", geom='type="box" size=".1 .1 .1"'), None, meshes="x")
