@@ -141,13 +141,39 @@ def _parent_bodies(robot: Robot) -> list[int | None]:
     return out
 
 
-def _srdf_disabled(srdf) -> set[frozenset[str]]:
-    """Link pairs of ``<disable_collisions link1= link2=>`` of an SRDF (a path or the XML text), or of several."""
+def _srdf_disabled(srdf, links: set[str]) -> set[frozenset[str]]:
+    """Link pairs of ``<disable_collisions link1= link2=>`` of an SRDF (a path or the XML text), or of several.
+
+    Raises a ValueError naming the file for XML that does not parse, a root other than ``<robot>``, a
+    URDF given as the SRDF, an element without ``link1`` or ``link2``, and links the robot has no frame
+    of (``links``: a misspelt name would otherwise disable nothing, silently).
+    """
     if isinstance(srdf, (list, tuple)):
-        return set().union(*(_srdf_disabled(s) for s in srdf))
+        return set().union(*(_srdf_disabled(s, links) for s in srdf))
     text = os.fspath(srdf)
-    root = ET.fromstring(text) if text.lstrip().startswith("<") else ET.parse(text).getroot()
-    return {frozenset((el.get("link1", ""), el.get("link2", ""))) for el in root.iter("disable_collisions")}
+    inline = text.lstrip().startswith("<")
+    where = "srdf" if inline else f"srdf {text!r}"
+    try:
+        root = ET.fromstring(text) if inline else ET.parse(text).getroot()
+    except ET.ParseError as err:
+        raise ValueError(f"{where}: not well-formed XML ({err})") from None
+    if root.tag != "robot":
+        raise ValueError(f"{where}: expected a <robot> root element (SRDF), got <{root.tag}>")
+    if root.find("link") is not None or root.find("joint") is not None:
+        raise ValueError(f"{where}: has <link>/<joint> elements: a URDF, not an SRDF (pass the SRDF as srdf=)")
+    pairs = set()
+    for k, el in enumerate(root.iter("disable_collisions")):
+        names = (el.get("link1"), el.get("link2"))
+        if None in names:
+            raise ValueError(f"{where}: <disable_collisions> {k} needs link1 and link2, got {dict(el.attrib)}")
+        unknown = [n for n in names if n not in links]
+        if unknown:
+            raise ValueError(
+                f"{where}: <disable_collisions link1={names[0]!r} link2={names[1]!r}>: the robot has no link "
+                f"{unknown[0]!r} ({len(links)} links, e.g. {sorted(links)[:4]})"
+            )
+        pairs.add(frozenset((str(names[0]), str(names[1]))))
+    return pairs
 
 
 def load(source, robot: Robot, *, meshes: str = "capsules", srdf=None, dtype=None) -> Geometry:
@@ -193,7 +219,7 @@ def load(source, robot: Robot, *, meshes: str = "capsules", srdf=None, dtype=Non
         specs, excludes, filterparent = _sources.mjcf_specs(root, path, meshes)
     else:
         raise ValueError(f"source: expected a <robot> (URDF) or <mujoco> (MJCF) root element, got <{root.tag}>")
-    disabled = _srdf_disabled(srdf) if srdf is not None else set()
+    disabled = _srdf_disabled(srdf, set(robot.frame_names)) if srdf is not None else set()
     order = sorted(range(len(specs)), key=lambda i: KINDS.index(specs[i].kind))
     specs = [specs[i] for i in order]
     frames = [robot.frame_index(s.frame) for s in specs]

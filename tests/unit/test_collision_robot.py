@@ -207,9 +207,38 @@ def test_sampled_pairs_never_always_and_their_srdf():
         frozenset(("base", "swing")),
         frozenset(("l2", "swing")),
     }
-    both = dk.collision.load(PAIRS_URDF, robot, srdf=[srdf, SRDF])  # several SRDFs: the union of their pairs
-    assert both.pair_list == kept.pair_list
+    extra = '<robot><disable_collisions link1="l2" link2="swing"/></robot>'
+    both = dk.collision.load(PAIRS_URDF, robot, srdf=[srdf, extra])  # several SRDFs: the union of their pairs
+    assert {frozenset((geom.shape_links[i], geom.shape_links[j])) for i, j in both.pair_list} == {
+        frozenset(("base", "swing"))
+    }
     with pytest.raises(TypeError, match="n: expected a positive int"):
         dk.collision.sample_pairs(robot, geom, 10.5, key=jax.random.key(0))
     with pytest.raises(ValueError, match="margin: expected a finite distance"):
         dk.collision.sample_pairs(robot, geom, 10, key=jax.random.key(0), margin=float("nan"))
+
+
+@pytest.mark.parametrize(
+    "srdf, message",
+    [
+        ('<robot><disable_collisions link1="base" link2="hnad"/></robot>', "the robot has no link 'hnad'"),
+        ('<robot><disable_collisions link1="base"/></robot>', "needs link1 and link2"),
+        (URDF, "a URDF, not an SRDF"),
+        ('<robot><disable_collisions link1="base" link2="hand"></robot>', "not well-formed XML"),
+        ("<srdf/>", "expected a <robot> root element"),
+    ],
+    ids=["misspelt link", "missing link2", "the URDF", "malformed", "wrong root"],
+)
+def test_srdf_content_is_checked(toy, srdf, message):
+    """An SRDF that would silently disable nothing, or is not one, is a ValueError naming what is wrong."""
+    robot, _ = toy
+    with pytest.raises(ValueError, match=message):
+        dk.collision.load(URDF, robot, srdf=srdf)
+
+
+def test_srdf_file_errors_name_the_file(toy, tmp_path):
+    robot, _ = toy
+    path = tmp_path / "bad.srdf"
+    path.write_text("<robot><disable_collisions")
+    with pytest.raises(ValueError, match=r"srdf '.*bad\.srdf': not well-formed XML"):
+        dk.collision.load(URDF, robot, srdf=str(path))
