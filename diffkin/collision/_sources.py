@@ -6,7 +6,9 @@ kept exactly; a mesh becomes its convex hull (``meshes="hulls"``) or a capsule t
 (``meshes="capsules"``), an ellipsoid a capsule that contains it (:mod:`diffkin.collision._fit`),
 with the volume of the original and of the fit recorded and how far the fit reaches beyond the
 original (:mod:`diffkin.collision._overshoot`). Meshes are read with trimesh (the
-``diffkin[collision]`` extra), imported only when a file has meshes.
+``diffkin[collision]`` extra), imported only when a mesh file's fit is not in the cache on disk
+(:mod:`diffkin.collision._fitcache`: keyed by the file's bytes, scale, placement, the fit asked for
+and :func:`mesh_settings`).
 """
 
 from __future__ import annotations
@@ -18,10 +20,13 @@ import xml.etree.ElementTree as ET
 import numpy as np
 
 from diffkin._meshfiles import resolve_mesh
-from diffkin.collision import _fit, _overshoot
+from diffkin.collision import _fit, _fitcache, _overshoot
 from diffkin.models.urdf import rpy_matrix
 
 _MJCF_KINDS = ("sphere", "capsule", "box", "cylinder", "ellipsoid", "mesh")
+# The version of a mesh file's fit (:func:`fitted`, its overshoot, the mesh reader's use): part of each cached
+# mesh fit's key with :func:`mesh_settings`. Change it with any change there that changes results.
+MESH_VERSION = "mesh-1"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -142,12 +147,25 @@ def fitted(name: str, frame: str, vertices: np.ndarray, faces: np.ndarray | None
 
 
 def _mesh(name: str, frame: str, T: np.ndarray, path: str | None, reference: str, scale, meshes: str, **kw) -> Spec:
-    """The fit of a mesh file (:func:`fitted`), placed by ``T`` and scaled by ``scale``."""
+    """The fit of a mesh file (:func:`fitted`), placed by ``T`` and scaled by ``scale``: read from the cache on
+    disk when it holds this file's (no mesh read), else computed and stored (:func:`_fitcache.cached_mesh`)."""
     if path is None:
         raise ValueError(f"collision mesh {reference!r} of {name!r} on {frame!r}: file not found")
-    vertices, faces = _read_mesh(path)
-    vertices = _transform(T, vertices * np.asarray(scale, dtype=np.float64))
-    return fitted(name, frame, vertices, faces, meshes, **kw)
+    scale = np.asarray(scale, dtype=np.float64)
+
+    def fit() -> _fitcache.MeshFit:
+        vertices, faces = _read_mesh(path)
+        spec = fitted(name, frame, _transform(T, vertices * scale), faces, meshes)
+        return spec.kind, np.asarray(spec.params, np.float64), spec.volume, spec.fitted_volume, spec.overshoot
+
+    kind, params, volume, fitted_volume, overshoot = _fitcache.cached_mesh(path, scale, T, meshes, mesh_settings(), fit)
+    return Spec(name, frame, kind, "mesh", tuple(params.tolist()), volume, fitted_volume, overshoot=overshoot, **kw)
+
+
+def mesh_settings() -> str:
+    """What a mesh file's fit depends on besides the file, scale, placement and ``meshes``: :data:`MESH_VERSION`,
+    the overshoot's sampling and the capsule fit's settings (:func:`_fit.settings`: scipy's presence too)."""
+    return f"{MESH_VERSION} face_steps={_overshoot.FACE_STEPS} {_fit.settings()}"
 
 
 def _read_mesh(path: str) -> tuple[np.ndarray, np.ndarray]:
