@@ -105,7 +105,7 @@ class Geometry:
 
 def _stack(specs: list[_sources.Spec], kind: type, dtype):
     """The shapes of one kind stacked (none: an empty stack)."""
-    f = lambda x: jnp.asarray(np.asarray(x, dtype=np.float64), dtype)  # noqa: E731
+    f = lambda x: jnp.asarray(np.asarray(x, dtype=np.dtype(dtype)))  # noqa: E731  (cast on the host: no XLA program)
     P = [np.asarray(s.params, dtype=np.float64) for s in specs]
     if kind is Sphere:
         P_ = np.array(P).reshape(len(specs), 4)
