@@ -839,7 +839,7 @@ def test_the_robots_collision_shapes_are_drawn_and_coloured(viewer_of, arm_avoid
     robot, geom, avoid = arm_avoid
     viewer = viewer_of(robot, avoid=avoid)
     assert len(viewer.collision) == len(geom.shape_names)
-    spheres, capsules, _ = geom.counts
+    spheres, capsules, *_ = geom.counts
     for k, handles in enumerate(viewer.collision):
         assert len(handles) == (3 if spheres <= k < spheres + capsules else 1)
         assert all(h.name.startswith(f"/robot/{geom.shape_links[k]}/collision{k}") for h in handles)
@@ -862,3 +862,21 @@ def test_the_robots_collision_shapes_are_drawn_and_coloured(viewer_of, arm_avoid
         colours = [tuple(handles[0].color) for handles in viewer.collision]
         assert colours == [NEAR if gap < 0.02 else CLEAR for gap in viewer.shape_gaps]
     assert NEAR in colours
+
+
+def test_cylinders_and_polytopes_are_drawn():
+    """A world's cylinder is drawn as a cylinder of its length, a polytope as the mesh of its hull (a cube of
+    corners: 8 vertices, 12 triangles), named in the world's order."""
+    from diffkin.viewer import _overlays
+
+    corners = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)])
+    world = dk.collision.World(
+        dk.collision.Convex(np.eye(4), 0.1 * corners),
+        dk.collision.Cylinder(np.eye(4), 0.2, 0.5),
+    )
+    cylinder, cube = _overlays.obstacle_primitives(world, np.zeros(3), 1.0)
+    assert (cylinder.name, cylinder.kind, cylinder.size) == ("/obstacles/cylinder0", "cylinder", (0.2, 1.0))
+    assert (cube.name, cube.kind) == ("/obstacles/convex0", "mesh")
+    vertices, faces = cube.mesh
+    assert vertices.shape == (8, 3) and faces.shape == (12, 3)
+    np.testing.assert_allclose(np.abs(vertices), 0.1)
