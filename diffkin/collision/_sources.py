@@ -249,6 +249,29 @@ def urdf_specs(root: ET.Element, base_dir: str | None, meshes: str) -> list[Spec
 # ------------------------------------------------------------------------------------------ MJCF
 
 
+def _inline_vertices(text: str, where: str) -> np.ndarray:
+    """``(n, 3)`` the points of an MJCF mesh's ``vertex`` attribute: finite numbers, three per point, at least 4."""
+    words = text.split()
+    try:
+        values = np.array([float(x) for x in words], dtype=np.float64)
+    except ValueError:
+        bad = next(w for w in words if not _is_number(w))
+        raise ValueError(f"{where} vertex: expected numbers, got {bad[:40]!r}") from None
+    if values.size % 3 or values.size < 12:
+        raise ValueError(f"{where} vertex: expected at least 4 points of 3 numbers each, got {values.size} numbers")
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"{where} vertex: expected finite numbers, got {values[~np.isfinite(values)][0]}")
+    return values.reshape(-1, 3)
+
+
+def _is_number(word: str) -> bool:
+    try:
+        float(word)
+    except ValueError:
+        return False
+    return True
+
+
 def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec], set[frozenset[str]], bool]:
     """The geoms of an MJCF's bodies (world-body geoms are the environment, left out).
 
@@ -272,7 +295,11 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
             name = mesh.get("name") or (os.path.splitext(os.path.basename(file))[0] if file else "")
             scale = _numbers(None, "scale", 3, reader._get(mesh, "scale", cls, "1 1 1") or "1 1 1", "MJCF mesh")
             vertex = mesh.get("vertex")
-            inline = np.array([float(x) for x in vertex.split()]).reshape(-1, 3) if vertex else None
+            inline = (
+                _inline_vertices(vertex, f"MJCF <mesh name={name!r}>{f' of {path!r}' if path else ''}")
+                if vertex
+                else None
+            )
             assets[name] = (resolve_mesh(file, mesh_dir) if file else None, file or name, scale, inline)
     specs: list[Spec] = []
     counter = {"body": 1, "geom": 0}

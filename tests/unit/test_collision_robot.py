@@ -242,3 +242,25 @@ def test_srdf_file_errors_name_the_file(toy, tmp_path):
     path.write_text("<robot><disable_collisions")
     with pytest.raises(ValueError, match=r"srdf '.*bad\.srdf': not well-formed XML"):
         dk.collision.load(URDF, robot, srdf=str(path))
+
+
+INLINE_MESH = (
+    '<mujoco><asset><mesh name="m" vertex="{v}"/></asset><worldbody><body name="b"><joint name="j" type="slide"/>'
+    '<geom type="mesh" mesh="m"/></body></worldbody></mujoco>'
+)
+
+
+@pytest.mark.parametrize(
+    "vertex, message",
+    [
+        ("0 0 0 1 0 0 0 1 0 0 0 nan", "expected finite numbers, got nan"),
+        ("0 0 0 1 0 0 0 1 0 0 0", "expected at least 4 points of 3 numbers each, got 11 numbers"),
+        ("0 0 0 1 0 x 0 1 0 0 0 1", "expected numbers, got 'x'"),
+    ],
+    ids=["nan", "not a multiple of 3", "a word"],
+)
+def test_bad_inline_mesh_names_the_mesh(vertex, message):
+    """An MJCF inline mesh's bad ``vertex`` is a ValueError naming the mesh (NumPy's messages before)."""
+    robot = dk.load_robot(INLINE_MESH.format(v="0 0 0 1 0 0 0 1 0 0 0 1"))
+    with pytest.raises(ValueError, match=rf"MJCF <mesh name='m'> vertex: {message}"):
+        dk.collision.load(INLINE_MESH.format(v=vertex), robot)
