@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import functools
 import os
-import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -134,8 +133,6 @@ def robot_with_geometry(spec: str, srdf: Sequence[str] | None = None):
     path, mtime = robot_key(spec, None, None)[:2]
     try:
         geom = _geometry_for(path, mtime, srdf_key(srdf))
-    except ET.ParseError as e:
-        raise CLIError(f"--srdf: not an XML file: {e}") from None
     except ImportError:
         raise CLIError(
             f"--avoid: the collision meshes of {spec!r} need trimesh, which is not installed: "

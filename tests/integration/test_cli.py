@@ -575,7 +575,17 @@ def test_ik_avoid_user_errors(capsys, arm_scene, tmp_path):
     assert_user_error(capsys, "ik", urdf, *target, "--srdf", scene, match="--srdf goes with --avoid")
     missing = tmp_path / "no.srdf"
     assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--srdf", missing, match="--srdf: no such")
-    assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--srdf", scene, match="--srdf: not an XML file")
+    assert_user_error(
+        capsys,
+        "ik",
+        urdf,
+        *target,
+        "--avoid",
+        scene,
+        "--srdf",
+        scene,
+        match="scene.json': not well-formed XML",
+    )
     assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--margin", -1, match="non-negative")
     assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--q0", 0, 0, match="--q0: arm has 3 joints")
     assert_user_error(capsys, "ik", urdf, *target, "--avoid", scene, "--end-link", "hnd", match="--end-link")
