@@ -251,7 +251,9 @@ def _witnesses(a, b) -> tuple[jax.Array, jax.Array, jax.Array]:
     pa, pb, apart = _gjk(a, b, dtype)
     fallback = jnp.array([1.0, 0.0, 0.0], dtype)
     n_apart = _unit(pb - pa, fallback)
-    n = jnp.where(apart[..., None], n_apart, _overlap_direction(a, b, n_apart, dtype))
+    # the overlap search only where some pair overlaps (a clear batch, the common case, skips it)
+    overlap = jax.lax.cond(jnp.all(apart), lambda: n_apart, lambda: _overlap_direction(a, b, n_apart, dtype))
+    n = jnp.where(apart[..., None], n_apart, overlap)
     sa, sb = core_supports(a, b, n)
     return n, jnp.where(apart[..., None], pa, sa), jnp.where(apart[..., None], pb, sb)
 
