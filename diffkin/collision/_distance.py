@@ -252,14 +252,12 @@ def motion(a, b) -> tuple[jax.Array, jax.Array, jax.Array]:
         radius = 0.0 if isinstance(a, Box) else a.radius
         d = cl.dot(n, p) - b.offset - radius
         return d, _wrench(n, p), jnp.zeros(jnp.shape(d) + (6,), d.dtype)
-    if (type(a), type(b)) in GENERAL and (type(a), type(b)) not in _PAIRS:
+    kinds = (type(a), type(b))
+    if kinds not in _PAIRS and (Cylinder in kinds or Convex in kinds):  # the pair table's order
         d, W_b, W_a = motion(b, a)
         return d, W_a, W_b
-    if isinstance(a, Cylinder) and isinstance(b, Sphere):
-        d, W_b, W_a = motion(b, a)
-        return d, W_a, W_b
-    if (type(a), type(b)) in GENERAL or (type(a), type(b)) == (Sphere, Cylinder):
-        if isinstance(a, Sphere) and isinstance(b, Cylinder):  # along the outward normal (the closed form's gradient)
+    if kinds in GENERAL or kinds == (Sphere, Cylinder):
+        if kinds == (Sphere, Cylinder):  # along the outward normal (the closed form's gradient)
             d = sphere_cylinder(a, b)
             grad = jax.grad(lambda c: jnp.sum(sphere_cylinder(unchecked(Sphere, center=c, radius=a.radius), b)))
             g = jnp.broadcast_to(jax.lax.stop_gradient(grad(a.center)), jnp.shape(d) + (3,))

@@ -200,7 +200,7 @@ def _gjk(a, b, dtype) -> tuple[jax.Array, jax.Array, jax.Array]:
     return pa, pb, apart
 
 
-def _axes(shape, dtype) -> list[jax.Array]:
+def _axes(shape) -> list[jax.Array]:
     """Directions worth trying as a separating axis of an overlap: the shape's own axes (if posed)."""
     if hasattr(shape, "pose"):
         return [shape.pose[..., :3, k] for k in range(3)]
@@ -213,7 +213,7 @@ def _overlap_direction(a, b, hint: jax.Array, dtype) -> jax.Array:
     """The best separating direction of overlapping shapes among candidates, refined by projected ascent."""
     batch = jnp.broadcast_shapes(hint.shape, a.centre().shape, b.centre().shape)
     spread = jnp.asarray(_SPREAD, dtype).reshape((len(_SPREAD),) + (1,) * (len(batch) - 1) + (3,))
-    own = [hint, b.centre() - a.centre()] + _axes(a, dtype) + _axes(b, dtype)
+    own = [hint, b.centre() - a.centre()] + _axes(a) + _axes(b)
     fallback = jnp.array([1.0, 0.0, 0.0], dtype)
     tries = jnp.stack([jnp.broadcast_to(_unit(c, fallback), batch) for c in own])  # (K, ..., 3)
     tries = jnp.concatenate([tries, jnp.broadcast_to(spread, (len(_SPREAD),) + batch)])
@@ -242,10 +242,10 @@ def _overlap_direction(a, b, hint: jax.Array, dtype) -> jax.Array:
     return n
 
 
-def _witnesses(a, b) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """``(n, p_a, p_b)`` without gradients: the unit direction from ``a`` to ``b`` whose separation is the
-    signed distance, and the cores' witness points: apart, their closest points; overlapping, their
-    support points along ``n`` (``a``) and ``-n`` (``b``)."""
+def _witnesses(a, b) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+    """``(n, p_a, p_b, s)`` without gradients: the unit direction from ``a`` to ``b`` whose separation is the
+    signed distance, the cores' witness points (apart, their closest points; overlapping, their support
+    points along ``n`` (``a``) and ``-n`` (``b``)) and the cores' separation along ``n``."""
     a, b = jax.lax.stop_gradient((a, b))
     dtype = jnp.result_type(*jax.tree.leaves((a, b)))
     pa, pb, apart = _gjk(a, b, dtype)
@@ -255,7 +255,7 @@ def _witnesses(a, b) -> tuple[jax.Array, jax.Array, jax.Array]:
     overlap = jax.lax.cond(jnp.all(apart), lambda: n_apart, lambda: _overlap_direction(a, b, n_apart, dtype))
     n = jnp.where(apart[..., None], n_apart, overlap)
     sa, sb = core_supports(a, b, n)
-    return n, jnp.where(apart[..., None], pa, sa), jnp.where(apart[..., None], pb, sb)
+    return n, jnp.where(apart[..., None], pa, sa), jnp.where(apart[..., None], pb, sb), _dot(n, sb - sa)
 
 
 def contact(a, b) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
@@ -267,12 +267,11 @@ def contact(a, b) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
     coordinates in their shapes held fixed. Moving ``b`` by a twist ``[v; w]`` changes
     ``d`` by ``n . v + (p_b x n) . w``, and ``a`` likewise with ``-n`` and ``p_a``.
     """
-    n, pa, pb = _witnesses(a, b)
+    n, pa, pb, s = _witnesses(a, b)
     ua, ub = jax.lax.stop_gradient((a.coords(pa), b.coords(pb)))
     pa, pb = a.point(ua), b.point(ub)
-    sa, sb = core_supports(*jax.lax.stop_gradient((a, b)), n)
     gap = _dot(n, pb - pa)
-    below = jax.lax.stop_gradient(_dot(n, sb - sa) - gap)  # 0 but for GJK's last step: the value is s(n)
+    below = jax.lax.stop_gradient(s - gap)  # 0 but for GJK's last step: the value is s(n)
     return gap + below - a.rounding() - b.rounding(), n, pa, pb
 
 
