@@ -52,7 +52,7 @@ def _compilation_cache() -> str | None:
 # that changed (keys hold the program, the flags and the versions, not source lines). Every program is
 # kept, the small ones too (eager operations): they are read back faster than they compile. JAX's own size
 # limit stays off: with one, each write lists the folder and reads every entry's access time (its LRU
-# bookkeeping), which cost a run from an empty folder more than the cache saved (CONTRIBUTING.md); the
+# bookkeeping), which cost a run from an empty folder more than the cache saved (docs/performance.md); the
 # controller bounds the folder instead, once per run, before any worker starts.
 CACHE_MAX_BYTES = 4 * 2**30
 
@@ -78,7 +78,7 @@ if (_cache := _compilation_cache()) is not None:
 
 # The tests check values, not speed, so this process compiles for compile time: LLVM at -O0
 # (``jax_disable_most_optimizations``) and XLA's classic CPU emitter (``dk.ik.solve``'s solvers use it
-# anyway, ``diffkin._xla.SOLVER_COMPILE``): about a third of the compile time (CONTRIBUTING.md). The same
+# anyway, ``diffkin._xla.SOLVER_COMPILE``): about a third of the compile time (docs/install.md). The same
 # computations: no fast math, results within the last bits. XLA reads ``XLA_FLAGS`` once, at the first
 # compile, so the user's ``XLA_FLAGS`` come back after it: subprocesses (the CLI, the docs' examples,
 # the benchmarks) run with the options users get. ``DIFFKIN_TEST_FAST_COMPILE=off``: users' options here too.
