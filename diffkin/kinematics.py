@@ -14,7 +14,6 @@ from diffkin import _rigid as rg
 from diffkin._static import is_concrete
 from diffkin._xla import configurations_in_steps, materialize
 from diffkin.models import forward
-from diffkin.models._scanned import ScannedPass
 from diffkin.models.forward import Model
 from diffkin.models.robot import Robot
 
@@ -98,14 +97,14 @@ def link_poses(model: Model, q: ArrayLike, *, base=None) -> jax.Array:
         A robot: ``(..., len(robot.frame_names), 4, 4)`` in ``robot.frame_names`` order, in the world.
     """
     kin, shape, dtype = _pass(model, q, base)
-    if isinstance(kin, ScannedPass):
+    if isinstance(kin, forward.StackedPass):
         return _matrices(kin, list(range(kin.frames)), shape, dtype)
     return rg.to_matrices(kin.poses(), shape, dtype)
 
 
 def _matrices(kin, frames: list, shape: tuple[int, ...], dtype) -> jax.Array:
-    """``shape + (len(frames), 4, 4)``: the poses of ``frames``, a scanned pass's as one stacked pose."""
-    if isinstance(kin, ScannedPass):
+    """``shape + (len(frames), 4, 4)``: the poses of ``frames``, a stacked pass's as one stacked pose."""
+    if isinstance(kin, forward.StackedPass):
         return jnp.moveaxis(rg.to_matrix(kin.stacked_poses(frames), (len(frames), *shape), dtype), 0, -3)
     return rg.to_matrices([kin.pose(f) for f in frames], shape, dtype)
 
@@ -113,7 +112,8 @@ def _matrices(kin, frames: list, shape: tuple[int, ...], dtype) -> jax.Array:
 def _analytic(model: Model, q, frame: str, f: int | None, base, include_base: bool) -> jax.Array:
     kin, shape, dtype = _pass(model, q, base)
     T = kin.pose(f)
-    if isinstance(kin, ScannedPass):  # one twist whose entries have a leading axis of columns
+    stacked = isinstance(kin, forward.StackedPass)
+    if stacked:  # one twist whose entries have a leading axis of columns
         columns = [kin.stacked_columns(f)]
         if include_base:
             columns = [_stacked_twists(rg.root_screws(_base(model, base)), shape, dtype), *columns]
@@ -126,7 +126,7 @@ def _analytic(model: Model, q, frame: str, f: int | None, base, include_base: bo
     if frame == "body":
         Rt = tuple(rg.column(T.R, j) for j in range(3))
         columns = [(rg.rotate(Rt, v), rg.rotate(Rt, w)) for v, w in columns]
-    if isinstance(kin, ScannedPass):
+    if stacked:
         blocks = [rg.stack([*v, *w], (jnp.shape(v[0])[0], *shape), dtype, axis=0) for v, w in columns]  # (6, n) + shape
         return jnp.moveaxis(jnp.concatenate(blocks, axis=1), (0, 1), (-2, -1))
     return _stack_columns(columns, shape, dtype)

@@ -151,8 +151,6 @@ def close(robot, connects: list[Connect], passive: set[str], stiff: set[str], wh
         stiff: names of the joints with stiffness (taken last).
         where: the description's name, for errors.
     """
-    from diffkin.models.robot import Robot
-
     q_ref = -np.asarray(robot.offsets, np.float64)  # MuJoCo's qpos0: every joint angle zero
     q_ref_actuated = np.zeros(robot.dof)
     for j, s in enumerate(robot.sources):
@@ -213,16 +211,14 @@ def close(robot, connects: list[Connect], passive: set[str], stiff: set[str], wh
         raise ValueError(f"{where}: the loops {[c.where for c in connects]} have no joint left to solve (all actuated)")
     keep = [i for i in range(robot.dof) if i not in chosen]
     new_index = {old: k for k, old in enumerate(keep)} | {old: len(keep) + d for d, old in enumerate(chosen)}
-    return Robot(
-        **{
-            **{f.name: getattr(open_robot, f.name) for f in dataclasses.fields(Robot)},
-            "sources": tuple(new_index[s] for s in robot.sources),
-            "joint_names": tuple(robot.joint_names[i] for i in keep),
-            "lower": robot.lower[jnp.asarray(keep, jnp.int32)],
-            "upper": robot.upper[jnp.asarray(keep, jnp.int32)],
-            "dependent_names": tuple(robot.joint_names[i] for i in chosen),
-            "dependent_home": jnp.asarray(q_ref_actuated[chosen]),
-        }
+    return dataclasses.replace(
+        open_robot,
+        sources=tuple(new_index[s] for s in robot.sources),
+        joint_names=tuple(robot.joint_names[i] for i in keep),
+        lower=robot.lower[jnp.asarray(keep, jnp.int32)],
+        upper=robot.upper[jnp.asarray(keep, jnp.int32)],
+        dependent_names=tuple(robot.joint_names[i] for i in chosen),
+        dependent_home=jnp.asarray(q_ref_actuated[chosen]),
     )
 
 

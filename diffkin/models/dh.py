@@ -11,6 +11,7 @@ import numpy as np
 from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._xla import segment_end
+from diffkin.models import _scanned
 from diffkin.models import _validate as check
 from diffkin.models.forward import ChainPass, Pass
 
@@ -140,10 +141,10 @@ class DHChain:
     def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> Pass:
         """The forward pass (:mod:`diffkin.models.forward`): the DH product, frame ``i`` after joint ``i`` (more than
         :data:`~diffkin.models._scanned.LONG` joints: scanned, :func:`~diffkin.models._scanned.chain_forward`)."""
-        from diffkin.models import _scanned  # it builds on the Robot, which builds on the chains
-
         if self.dof > _scanned.LONG:
-            return _scanned.chain_forward(self, q, base)
+            with jax.ensure_compile_time_eval():  # a concrete chain's PoE form is a constant
+                screws, home, link_homes = poe_arrays(self)
+            return _scanned.chain_forward(screws, link_homes, home, q, base, first=self.base)
         return self.product(q, base)
 
     def product(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> ChainPass:
@@ -177,3 +178,15 @@ class DHChain:
                 T = rg.checkpoint(T)
             links.append(T)
         return ChainPass(links, rg.compose(T, rg.from_matrix(self.tool)), screws)
+
+
+def poe_arrays(chain: DHChain) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """The chain at ``q = 0`` in product-of-exponentials form, ``(screws, home, link_homes)`` as
+    :class:`~diffkin.PoEChain` holds them (:func:`~diffkin.to_poe`): its joint axes in the world
+    frame ``(dof, 6)``, its end-effector pose ``(4, 4)`` and its DH frames ``(dof, 4, 4)``, the DH
+    ``base`` folded in, all computed with JAX operations on the chain's arrays (differentiable)."""
+    dtype = jnp.result_type(chain.a)
+    at_zero = chain.product([jnp.zeros((), dtype) for _ in range(chain.dof)])
+    screws = jnp.stack([rg.stack([*v, *w], (), dtype) for v, w in at_zero.columns()])
+    home = rg.to_matrix(at_zero.pose(), (), dtype)
+    return screws, home, jnp.stack([rg.to_matrix(T, (), dtype) for T in at_zero.poses()[1:]])

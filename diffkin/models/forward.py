@@ -52,6 +52,27 @@ class Pass(Protocol):
 
 
 @runtime_checkable
+class StackedPass(Pass, Protocol):
+    """A pass that also gives many frames or columns at once, as one pose or twist whose entries have a
+    leading axis (a scanned pass's: a thousand frames sliced into entries and stacked again would compile
+    for minutes). :mod:`diffkin.kinematics` takes these methods where a pass has them.
+
+    Attributes:
+        frames: the number of frames of :meth:`poses`.
+    """
+
+    frames: int
+
+    def stacked_poses(self, frames: Sequence[int | None]) -> rg.Rigid:
+        """The world poses of ``frames``: entries ``(len(frames),) + batch``."""
+        ...
+
+    def stacked_columns(self, frame: int | None) -> Twist:
+        """The columns of ``frame`` (as :meth:`columns`): one twist with entries ``(dof,) + batch``."""
+        ...
+
+
+@runtime_checkable
 class Model(Protocol):
     """What every model provides: :meth:`forward` and the joint space of ``q``."""
 

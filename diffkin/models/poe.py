@@ -13,8 +13,9 @@ from diffkin._checks import instance
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._static import host
 from diffkin._xla import segment_end
+from diffkin.models import _scanned
 from diffkin.models import _validate as check
-from diffkin.models.dh import DHChain
+from diffkin.models.dh import DHChain, poe_arrays
 from diffkin.models.forward import ChainPass, Pass
 
 
@@ -148,10 +149,8 @@ class PoEChain:
     def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> Pass:
         """The forward pass (:mod:`diffkin.models.forward`): the product of exponentials (more than
         :data:`~diffkin.models._scanned.LONG` joints: scanned, :func:`~diffkin.models._scanned.chain_forward`)."""
-        from diffkin.models import _scanned  # it builds on the Robot, which builds on this module
-
         if self.dof > _scanned.LONG:
-            return _scanned.chain_forward(self, q, base)
+            return _scanned.chain_forward(self.screws, self.link_homes, self.home, q, base)
         S, L = host(self.screws), host(self.link_homes)
         T = base
         links, screws = [T], []
@@ -202,13 +201,11 @@ def to_poe(chain: DHChain) -> PoEChain:
     The DH ``base`` is folded into the screws and poses: the PoE base frame is the world frame.
     """
     instance(chain, DHChain, "chain", "a DHChain")
-    dtype = jnp.result_type(chain.a)
-    at_zero = chain.product([jnp.zeros((), dtype) for _ in range(chain.dof)])
-    screws = jnp.stack([rg.stack([*v, *w], (), dtype) for v, w in at_zero.columns()])
+    screws, home, link_homes = poe_arrays(chain)
     return PoEChain(
         screws=screws,
-        home=rg.to_matrix(at_zero.pose(), (), dtype),
-        link_homes=jnp.stack([rg.to_matrix(T, (), dtype) for T in at_zero.poses()[1:]]),
+        home=home,
+        link_homes=link_homes,
         lower=chain.lower,
         upper=chain.upper,
         joint_types=chain.joint_types,

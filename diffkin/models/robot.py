@@ -28,9 +28,9 @@ from diffkin import _rigid as rg
 from diffkin import _xla
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._static import host, is_concrete
-from diffkin._xla import materialize
-from diffkin.models import _ball
+from diffkin.models import _ball, _loops, _scanned
 from diffkin.models import _validate as check
+from diffkin.models._passes import RobotPass
 from diffkin.models.poe import PoEChain, _screw_types
 
 
@@ -213,8 +213,6 @@ class Robot:
         """
         if not self.loop_bodies:
             return self.tree_pass(q, base)
-        from diffkin.models import _loops
-
         dependent, (fold, gap) = _loops.solve(self, list(q))
         kin = self.tree_pass(list(q) + dependent, base)
         kin.dependent, kin.fold, kin.loop_gap = dependent, fold, gap
@@ -223,8 +221,6 @@ class Robot:
     def tree_pass(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> RobotPass:
         """The pass of the tree at the values ``q`` of ``q``'s entries and then of the dependent joints
         (:attr:`dependent_names`, solved by :meth:`forward`)."""
-        from diffkin.models import _scanned  # it builds on this module's RobotPass
-
         if _scanned.longest_path(self.parents) > _scanned.LONG:
             if self.loop_bodies:
                 raise ValueError(
@@ -332,104 +328,3 @@ class Robot:
             joint_names=tuple(self.joint_names[i] for i in sources),
             name=self.name,
         )
-
-
-class RobotPass:
-    """The :class:`~diffkin.models.forward.Pass` of a robot: body poses and joint screws, frames on demand."""
-
-    def __init__(self, robot: Robot, bodies: list[rg.Rigid], screws: list, multipliers: list):
-        self.robot, self.bodies, self.screws, self.multipliers = robot, bodies, screws, multipliers
-        self._poses: dict[int, rg.Rigid] = {}
-        self.dependent: list[rg.Entry] = []  # the dependent joints' values of a robot with loops (Robot.forward)
-        self.fold: list[list[rg.Entry]] = []  # their d q_dep / d q
-        self.loop_gap: rg.Entry = 0.0  # the largest gap of its loops (metres)
-
-    def pose(self, frame: int | None = None) -> rg.Rigid:
-        """World pose of frame ``frame`` (an index into ``robot.frame_names``)."""
-        if frame is None:
-            raise TypeError("frame: a robot has no single end effector; give a frame index")
-        if frame not in self._poses:
-            T_body_frame = rg.from_matrix(host(self.robot.frame_poses)[frame])
-            self._poses[frame] = rg.compose(self.bodies[self.robot.frame_bodies[frame]], T_body_frame)
-        return self._poses[frame]
-
-    def columns(self, frame: int | None = None) -> list[tuple[rg.Vec3, rg.Vec3]]:
-        """Per entry of ``q``, the space twist of frame ``frame`` per unit ``q_i``: the sum over the joints
-        on the frame's path that ``q_i`` drives of ``multiplier * screw`` (zero if none)."""
-        if frame is None:
-            raise TypeError("frame: a robot has no single end effector; give a frame index")
-        robot, zero = self.robot, (0.0, 0.0, 0.0)
-        columns: list = [(zero, zero)] * (robot.dof + len(robot.dependent_names))
-        for j in robot.ancestors(robot.frame_bodies[frame]):
-            v, w = self.screws[j]
-            i, m = robot.sources[j], self.multipliers[j]
-            columns[i] = (rg.vadd(columns[i][0], rg.scale(m, v)), rg.vadd(columns[i][1], rg.scale(m, w)))
-        vs, ws = [v for v, _ in columns], [w for _, w in columns]
-        return [(self._folded(vs, i), self._folded(ws, i)) for i in range(robot.dof)]
-
-    def _folded(self, columns: list[rg.Vec3], i: int) -> rg.Vec3:
-        """Column ``i`` of ``q`` plus the dependent joints' columns times ``d q_dep / d q_i`` (loops)."""
-        out = columns[i]
-        for d, row in enumerate(self.fold):
-            out = rg.vadd(out, rg.scale(row[i], columns[self.robot.dof + d]))
-        return out
-
-    def poses(self) -> list[rg.Rigid]:
-        """Every frame, in ``robot.frame_names`` order."""
-        return [self.pose(f) for f in range(len(self.robot.frame_names))]
-
-    def com(self, velocities: bool = True) -> tuple[rg.Vec3, list[rg.Vec3]]:
-        """The centre of mass in the world, and per entry of ``q`` its velocity per unit ``q_i``
-        (empty without ``velocities``).
-
-        Joint ``j`` carries the bodies below it, of mass ``M_j`` and first moment ``S_j = sum m p``
-        (world); its space screw ``(v_j, w_j)`` moves the centre by ``(M_j v_j + w_j x S_j) / M``.
-        """
-        robot = self.robot
-        masses = rg.per_joint(host(robot.masses), snap=False)  # tiny masses still weigh
-        c = host(robot.body_coms)
-        moments = [
-            rg.scale(masses[b], rg.vadd(rg.rotate(T.R, rg.vector(c[b])), T.p)) for b, T in enumerate(self.bodies)
-        ]
-        screws = self.screws
-        if velocities:  # every column reads them: computed once, not inside each column's kernel
-            moments, screws = _computed_once(moments, screws)
-        for j in reversed(range(len(robot.parents))):  # subtree sums, leaves first (children follow parents)
-            parent = robot.parents[j]
-            masses[parent] = rg.add(masses[parent], masses[j + 1])
-            moments[parent] = rg.vadd(moments[parent], moments[j + 1])
-        inverse = _reciprocal(masses[0])
-        zero = (0.0, 0.0, 0.0)
-        columns: list[rg.Vec3] = [zero] * (robot.dof + len(robot.dependent_names)) if velocities else []
-        for j, (v, w) in enumerate(screws if velocities else []):
-            i, k = robot.sources[j], rg.mul(self.multipliers[j], inverse)
-            moved = rg.vadd(rg.scale(masses[j + 1], v), rg.cross(w, moments[j + 1]))
-            columns[i] = rg.vadd(columns[i], rg.scale(k, moved))
-        columns = [self._folded(columns, i) for i in range(robot.dof)] if velocities else []
-        return rg.scale(inverse, moments[0]), columns
-
-
-def _computed_once(moments: list[rg.Vec3], screws: list) -> tuple[list[rg.Vec3], list]:
-    """Body moments and joint screws behind one barrier (:func:`diffkin._xla.materialize`): XLA's CPU
-    fusion would otherwise recompute the forward pass inside the kernel of every centre-of-mass
-    column (Talos: 1.4x faster)."""
-    flat = [e for m in moments for e in m] + [e for v, w in screws for e in (*v, *w)]
-    arrays = [i for i, e in enumerate(flat) if not isinstance(e, float)]
-    if arrays:
-        done = materialize([flat[i] for i in arrays])
-        for k, i in enumerate(arrays):
-            flat[i] = done[k]
-    nb = len(moments)
-    rest = flat[3 * nb :]
-    return (
-        [tuple(flat[3 * b : 3 * b + 3]) for b in range(nb)],
-        [(tuple(rest[6 * j : 6 * j + 3]), tuple(rest[6 * j + 3 : 6 * j + 6])) for j in range(len(screws))],
-    )
-
-
-def _reciprocal(total: rg.Entry) -> rg.Entry:
-    """``1 / total`` of a total mass, 0 for a massless robot (finite under ``jit``; the host refuses it)."""
-    if isinstance(total, float):
-        return 1.0 / total if total > 0.0 else 0.0
-    positive = total > 0
-    return jnp.where(positive, 1.0 / jnp.where(positive, total, 1.0), 0.0)
