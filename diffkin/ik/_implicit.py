@@ -22,11 +22,10 @@ from diffkin.ik._problem import Problem
 
 
 def _problem(spec, model, targets: tuple, base) -> Problem:
-    """The problem of ``targets`` (``n`` each) at one copy, for its residual (no limits are needed)."""
-    bound = tuple(term.bind(t) for term, t in zip(spec.terms, targets, strict=True))
+    """The problem of the targets alone (``n`` each; not the constraints: the derivative is the targets'),
+    for its residual (no limits are needed)."""
     root = rg.IDENTITY if base is None else rg.from_matrix(base)
-    none = jnp.zeros(0)
-    return Problem(model, spec.terms, bound, none, none, none, False, spec.locked, none, root, spec.solve_base)
+    return spec._replace(constraints=()).problem(model, targets, (), root)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
@@ -34,7 +33,7 @@ def implicit(spec, model, targets: tuple, base, x: jax.Array) -> jax.Array:
     """``x`` unchanged; its derivative is that of the solution of the problem's terms.
 
     Args:
-        spec: static: the terms, locked joints, whether the root is solved.
+        spec: static: the terms (:class:`~diffkin.ik._problem.Spec`), locked joints, whether the root is solved.
         model: the model (its numbers are differentiable).
         targets: per term, ``(n, 4, 4)`` poses or ``(n, 3)`` positions.
         base: ``(n, 4, 4)`` the given root pose (differentiable when the root is not solved), or ``None``.

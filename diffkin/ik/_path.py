@@ -20,21 +20,22 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin._checks import instance
-from diffkin._static import ModelKey, combine, partition
+from diffkin._static import ModelKey, partition
+from diffkin._xla import solver_jit
 from diffkin.ik import _args, _search
 from diffkin.ik._implicit import implicit
+from diffkin.ik._keywords import KEYWORDS, terms_of
 from diffkin.ik._methods import METHODS
-from diffkin.ik._prepare import cast, detach, inward, valid_targets
-from diffkin.ik._problem import Kinematics, Problem
-from diffkin.ik._solve import Spec, plan, result, solve, terms_of
-from diffkin.ik._terms.avoid import AvoidTerm
+from diffkin.ik._prepare import detach, prepare
+from diffkin.ik._problem import Spec
+from diffkin.ik._solve import constraints_at, plan, result, solve, target_errors
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain
 from diffkin.models.robot import Robot
 
-# Arguments of solve that a path passes on (secondary objectives and a rest pose are not: a path's
-# later waypoints move by the targets only).
-_PASSED = (
+# Settings of solve that a path passes on (secondary objectives and a rest pose are not: a path's
+# later waypoints move by the targets only), and then every keyword that adds terms.
+_SETTINGS = (
     "key",
     "num_seeds",
     "method",
@@ -47,10 +48,8 @@ _PASSED = (
     "locked",
     "solve_base",
     "base",
-    "relative",
-    "com",
-    "avoid",
 )
+_PASSED = _SETTINGS + tuple(keyword.name for keyword in KEYWORDS)
 
 
 class PathResult(NamedTuple):
@@ -135,28 +134,37 @@ def solve_path(model, targets, *, q0=None, max_step=None, **solve_kwargs) -> Pat
     if unknown:
         raise TypeError(f"solve_path: unexpected arguments {unknown}; expected those of dk.ik.solve: {list(_PASSED)}")
     defaults = {name: p.default for name, p in inspect.signature(solve).parameters.items() if name in _PASSED}
-    kw = {name: solve_kwargs.get(name, defaults[name]) for name in _PASSED}
-    _, arrays, path_batch = terms_of(model, targets, kw["relative"], kw["weights"], kw["com"])
+    kw = {name: solve_kwargs.get(name, defaults[name]) for name in _SETTINGS}
+    given = {k.name: solve_kwargs.get(k.name) for k in KEYWORDS}
+    terms = terms_of(model, targets, given, kw["weights"])
+    path_batch = terms.batch
     if not path_batch or path_batch[-1] == 0:
         raise ValueError(
             f"targets: expected a path axis with at least one waypoint before the pose axes ((..., T, 4, 4) or "
             f"(..., T, 3)), got batch shape {path_batch}"
         )
     bound = _max_step(max_step, model.dof)
-    first_kw = dict(kw, relative=_waypoint(kw["relative"], 0), com=_waypoint(kw["com"], 0))
-    del first_kw["key"], first_kw["respect_limits"]  # (not arguments of plan)
-    checked = plan(model, _waypoint(targets, 0), q0=q0, rest=None, secondary=None, **first_kw)
-    first = solve(model, _waypoint(targets, 0), q0=q0, key=kw["key"], respect_limits=kw["respect_limits"], **first_kw)
+    first_given = {k.name: _waypoint(given[k.name], 0) if k.per_target else given[k.name] for k in KEYWORDS}
+    first_kw = {name: value for name, value in kw.items() if name not in ("key", "respect_limits")}  # plan's
+    checked = plan(model, _waypoint(targets, 0), first_given, q0=q0, rest=None, secondary=None, **first_kw)
+    first = solve(
+        model,
+        _waypoint(targets, 0),
+        q0=q0,
+        key=kw["key"],
+        respect_limits=kw["respect_limits"],
+        **first_kw,
+        **first_given,
+    )
     dtype = checked.dtype
     static, traced = partition(model)
     return _follow(
         traced,
-        tuple(arrays),
+        tuple(terms.data),
         first,
         None if kw["base"] is None else jnp.asarray(kw["base"], dtype),
         None if checked.locked_q is None else jnp.asarray(checked.locked_q, dtype),
         jnp.asarray(bound, dtype),
-        kw["avoid"],
         _args.tolerance(kw["pos_tol"], dtype),
         _args.tolerance(kw["rot_tol"], dtype),
         static=static,
@@ -183,17 +191,16 @@ def _max_step(max_step, dof: int) -> np.ndarray:
 
 
 @functools.partial(
-    jax.jit,
+    solver_jit,
     static_argnames=("static", "spec", "method", "max_iters", "respect_limits", "optimizer", "batch"),
 )
 def _follow(
     traced,
-    targets: tuple,
+    data: tuple,
     first,
     base,
     locked_q,
     bound,
-    avoid,
     pos_tol,
     rot_tol,
     *,
@@ -206,34 +213,20 @@ def _follow(
     batch: tuple[int, ...],
 ) -> PathResult:
     """Waypoints ``1 .. T-1`` from waypoint 0's solution ``first`` (an :class:`IKResult`), scanned."""
-    model_in = combine(static, traced)
-    dtype, dof = targets[0].dtype, model_in.dof
     paths, T = batch[:-1], batch[-1]
+    s = prepare(static, traced, data, spec, batch, paths, locked_q, None if spec.solve_base else base)
+    dtype, dof, k = data[0].dtype, s.model.dof, len(spec.targets)
     n = int(np.prod(paths, dtype=np.int64))
-    model = cast(detach(model_in), dtype)
-    lower, upper = inward(detach(model_in.lower), dtype, -1), inward(detach(model_in.upper), dtype, 1)
+    lower, upper = s.lower, s.upper
     if not respect_limits:
         lower, upper = jnp.full_like(lower, -jnp.inf), jnp.full_like(upper, jnp.inf)
-    # per waypoint (T, n, ...), in term order; non-finite targets fail (finite stand-ins solved)
-    per_waypoint = [jnp.moveaxis(a.reshape((n, T) + a.shape[len(batch) :]), 1, 0) for a in targets]
-    checked = [
-        jax.vmap(lambda a, term=term: valid_targets(a, term.position_only))(a)
-        for a, term in zip(per_waypoint, spec.terms, strict=True)
-    ]
-    valid = jnp.all(jnp.stack([v for v, _ in checked]), axis=0)  # (T, n)
-    safe = [s for _, s in checked]
-    fixed = [detach(s) for s in safe]
-    locked_values = (
-        jnp.broadcast_to(locked_q, paths + (dof,)).reshape(n, dof).T if locked_q is not None else jnp.zeros((dof, 1))
-    )
-    root = rg.IDENTITY
-    base_flat = None
-    if base is not None and not spec.solve_base:  # a non-finite root pose fails (as in solve), the identity solved
-        base_flat = jnp.broadcast_to(base, paths + (4, 4)).reshape(n, 4, 4)
-        base_ok = jnp.all(jnp.isfinite(base_flat.reshape(n, 16)), axis=-1)
-        valid = valid & base_ok
-        base_flat = jnp.where(base_ok[:, None, None], base_flat, jnp.eye(4, dtype=dtype))
+    valid = s.valid.reshape(n, T).T  # (T, n)
+    root, base_flat = rg.IDENTITY, None
+    if s.base is not None and not spec.solve_base:  # a non-finite root pose fails (as in solve), the identity solved
+        valid = valid & s.base_ok
+        base_flat = s.base
         root = rg.from_matrix(detach(base_flat))
+    locked_values = s.locked_q.T if s.locked_q is not None else jnp.zeros((dof, 1))
     x0 = jax.lax.stop_gradient(first.q.reshape(n, dof).T)
     if spec.solve_base:
         B = jax.lax.stop_gradient(first.base.reshape(n, 4, 4))
@@ -241,54 +234,41 @@ def _follow(
     no_wrap = jnp.zeros(dof, bool)
     steps = METHODS[method].steps(optimizer)
     settings = _search.Settings(1, max_iters, 0, pos_tol, rot_tol)
-    k = len(spec.terms)
-    avoid_term = None if avoid is None else AvoidTerm.of(avoid)
-    avoid_arrays = None if avoid is None else detach(avoid.cast(dtype))
-    terms = spec.terms + (() if avoid_term is None else (avoid_term,))  # the targets' terms, then clearance
 
     def step(x_prev, waypoint):
         q_prev = x_prev[:dof]
         lo = jnp.maximum(lower[:, None], q_prev - bound[:, None])
         hi = jnp.minimum(upper[:, None], q_prev + bound[:, None])
-        bound_terms = tuple(term.bind(t) for term, t in zip(spec.terms, waypoint, strict=True))
-        if avoid_arrays is not None:
-            bound_terms = bound_terms + (avoid_arrays,)
-        problem = Problem(
-            model, terms, bound_terms, lo, hi, no_wrap, True, spec.locked, locked_values, root, spec.solve_base
-        )
+        problem = spec.problem(s.model, waypoint, s.data, root, locked_values, (lo, hi, no_wrap, True))
         best = _search.follow(problem, x_prev, steps, settings)
-        success, clearance = best.success, jnp.zeros_like(best.ev.cost)
-        if avoid_term is not None and avoid_arrays is not None:  # exactly, at the returned states
-            clearance = avoid_term.clearance(Kinematics(problem, best.x), avoid_arrays)
-            success = success & (clearance >= avoid_arrays.margin)
-        return best.x, (best.x, success, best.ev.pos_err[:k], best.ev.rot_err[:k], best.iters, clearance)
+        values, met = constraints_at(spec, problem, best.x)  # exactly, at the returned states
+        return best.x, (best.x, best.success & met, best.ev.pos_err[:k], best.ev.rot_err[:k], best.iters, values)
 
-    later = [w[1:] for w in fixed]
-    _, (xs, success, pos_err, rot_err, iters, clearance) = jax.lax.scan(step, x0, later)
+    # per waypoint (T, n, ...), in term order
+    later = [jnp.moveaxis(t.reshape((n, T) + t.shape[1:]), 1, 0)[1:] for t in s.targets]
+    _, (xs, success, pos_err, rot_err, iters, values) = jax.lax.scan(step, x0, later)
     # every waypoint's state (T, n_state, n), its derivative by the implicit function theorem
     xs = jnp.concatenate([x0[None], xs])
     flat = lambda a: jnp.moveaxis(a, 0, -1).reshape(a.shape[1:-1] + (n * T,))  # noqa: E731  (..., n, T) order
     x_all = implicit(
-        spec,
-        cast(model_in, dtype),
-        tuple(jnp.moveaxis(s, 0, 1).reshape((n * T,) + s.shape[2:]) for s in safe),
-        None if base_flat is None else jnp.repeat(base_flat, T, axis=0),
-        flat(xs),
+        spec, s.differentiable, s.safe, None if base_flat is None else jnp.repeat(base_flat, T, axis=0), flat(xs)
     )
-    first_rows = lambda e: e.reshape(n, -1).T[None]  # noqa: E731  (n[, k]) -> (1, k, n)
-    ok0, first_errors = first.success.reshape(1, n), first_rows(_all_errors(first, k, n))
-    errors = jnp.concatenate([first_errors, jnp.concatenate([pos_err, rot_err], axis=1)])  # (T, 2k, n)
-    success = jnp.concatenate([ok0, success & valid[1:]])
+    first_pos, first_rot = target_errors(spec, first, n)
+    pos_err = jnp.concatenate([first_pos[None], pos_err])  # (T, k, n)
+    rot_err = jnp.concatenate([first_rot[None], rot_err])
+    success = jnp.concatenate([first.success.reshape(1, n), success & valid[1:]])
     iters = jnp.concatenate([first.iters.reshape(1, n), iters])
+    values = {name: jnp.concatenate([getattr(first, name).reshape(1, n), v]) for name, v in values.items()}
     out = result(
         spec,
         x_all,
-        flat(errors[:, :k]),
-        flat(errors[:, k:]),
+        flat(pos_err),
+        flat(rot_err),
         flat(valid),
         flat(success),
         flat(iters),
         paths + (T,),
+        {name: flat(v) for name, v in values.items()},
     )
     q = out.q
     moves = jnp.abs(jnp.diff(q, axis=-2))  # (..., T - 1, dof)
@@ -304,18 +284,5 @@ def _follow(
         rot_err=out.rot_err,
         base=out.base,
         com_err=out.com_err,
-        clearance=None
-        if first.clearance is None
-        else jnp.concatenate([first.clearance.reshape(1, n), clearance]).T.reshape(paths + (T,)),
+        clearance=out.clearance,
     )
-
-
-def _all_errors(first, k: int, n: int) -> jax.Array:
-    """Waypoint 0's per-term errors ``(n, 2k)``: position errors (the centre of mass last), then rotation
-    errors (0 for the centre of mass), as the terms report them."""
-    pos, rot = first.pos_err.reshape(n, -1), first.rot_err.reshape(n, -1)
-    if first.com_err is not None:
-        pos = jnp.concatenate([pos, first.com_err.reshape(n, 1)], axis=-1)
-        rot = jnp.concatenate([rot, jnp.zeros((n, 1), rot.dtype)], axis=-1)
-    assert pos.shape[-1] == k
-    return jnp.concatenate([pos, rot], axis=-1)

@@ -16,6 +16,7 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin._xla import materialize
+from diffkin.ik._terms import Term
 from diffkin.models._ranges import into_cones
 
 BASE_ROWS = 12  # state rows of a solved root pose: p (3), then R row by row (9)
@@ -90,6 +91,54 @@ class Kinematics:
         return c, joints + [v for v, _ in rg.world_from_space(self.root_columns, c)]
 
 
+class Spec(NamedTuple):
+    """The static part of a problem: its terms, locked joints, secondary objectives, solved root.
+
+    Attributes:
+        targets: the terms that report errors (:class:`~diffkin.ik._terms.Target`), in ``IKResult`` order.
+        constraints: the terms that report their own value (:class:`~diffkin.ik._terms.Constraint`).
+        locked: per joint, whether it is locked.
+        secondary: the secondary objectives ``(name, weight)`` (:mod:`diffkin.ik._secondary`).
+        solve_base: the root pose is part of the state.
+        errors_per_term: ``IKResult`` errors ``(..., k)`` (a robot) or ``(...)`` (a chain).
+    """
+
+    targets: tuple
+    constraints: tuple
+    locked: tuple[bool, ...]
+    secondary: tuple[tuple[str, float], ...]
+    solve_base: bool
+    errors_per_term: bool
+
+    @property
+    def terms(self) -> tuple:
+        """The targets, then the constraints (deferred terms come last: :meth:`Problem.padded`)."""
+        return self.targets + self.constraints
+
+    def problem(self, model, targets: tuple, data: tuple, root=rg.IDENTITY, locked_q=None, limits=None) -> Problem:
+        """The :class:`Problem` of these terms bound to ``targets`` (per target, ``(P, 4, 4)`` or ``(P, 3)``)
+        and ``data`` (per constraint), with root pose ``root`` (entries ``(P,)`` or constants),
+        locked values ``locked_q`` ``(dof, P)`` (``None``: none are read) and ``limits``
+        ``(lower, upper, wrap, respect_limits)`` (``None``: none, for a residual only)."""
+        bound = tuple(t.bind(a) for t, a in zip(self.targets, targets, strict=True))
+        bound += tuple(c.bind(d) for c, d in zip(self.constraints, data, strict=True))
+        none = jnp.zeros(0)
+        lower, upper, wrap, respect_limits = (none, none, none, False) if limits is None else limits
+        return Problem(
+            model,
+            self.terms,
+            bound,
+            lower,
+            upper,
+            wrap,
+            respect_limits,
+            self.locked,
+            none if locked_q is None else locked_q,
+            root,
+            self.solve_base,
+        )
+
+
 class Problem(NamedTuple):
     """A flat batch of ``P`` problems of one model: its terms, limits, locked joints and root, in one dtype.
 
@@ -108,7 +157,7 @@ class Problem(NamedTuple):
     """
 
     model: Any
-    terms: tuple
+    terms: tuple[Term, ...]
     bound: tuple
     lower: jax.Array
     upper: jax.Array
@@ -183,17 +232,17 @@ class Problem(NamedTuple):
         """Whether a term is deferred: its rows cost more than every other term's together (the
         clearance), so a search may first iterate without it (:meth:`undeferred`) and check it after
         (:meth:`deferred_met`)."""
-        return any(getattr(t, "deferred", False) for t in self.terms)
+        return any(t.deferred for t in self.terms)
 
     def undeferred(self) -> Problem:
         """The problem without its deferred terms."""
-        keep = [i for i, t in enumerate(self.terms) if not getattr(t, "deferred", False)]
+        keep = [i for i, t in enumerate(self.terms) if not t.deferred]
         return self._replace(terms=tuple(self.terms[i] for i in keep), bound=tuple(self.bound[i] for i in keep))
 
     def deferred_met(self, x: jax.Array) -> jax.Array:
         """``(P,)`` bool: every deferred term holds at ``x`` (``met(kin, bound)``, exactly)."""
         kin = Kinematics(self, x)
-        met = [t.met(kin, b) for t, b in zip(self.terms, self.bound, strict=True) if getattr(t, "deferred", False)]
+        met = [t.met(kin, b) for t, b in zip(self.terms, self.bound, strict=True) if t.deferred]
         return jnp.all(jnp.stack(met), axis=0)
 
     def padded(self, x: jax.Array, ev: Eval, met: jax.Array) -> Eval:
@@ -201,7 +250,7 @@ class Problem(NamedTuple):
         the deferred terms' rows: those rows zero, their errors 0 where ``met`` ``(P,)`` and the largest
         float elsewhere, and the cost ``inf`` where not ``met`` (such a state ranks below any evaluated
         one). The deferred terms come last (their rows and errors trail the others')."""
-        deferred = [getattr(t, "deferred", False) for t in self.terms]
+        deferred = [t.deferred for t in self.terms]
         if sorted(deferred) != deferred:
             raise ValueError("deferred terms must come after the others")
         shape = jax.eval_shape(self.evaluate, x)

@@ -4,7 +4,6 @@ its terms, locked joints, a root), and runs the one compiled solver of every pro
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 from collections.abc import Mapping
 from typing import Any, NamedTuple
@@ -16,18 +15,15 @@ import numpy as np
 from diffkin import _rigid as rg
 from diffkin._checks import instance
 from diffkin._sharding import automatic_axes
-from diffkin._static import ModelKey, combine, partition
+from diffkin._static import ModelKey, partition
 from diffkin._xla import solver_jit
-from diffkin.collision._robot import check_geometry
 from diffkin.ik import _args, _search, _secondary
 from diffkin.ik._implicit import implicit
+from diffkin.ik._keywords import terms_of
 from diffkin.ik._methods import METHODS
-from diffkin.ik._prepare import cast, detach, inward, valid_targets
-from diffkin.ik._problem import BASE_ROWS, Kinematics, Problem
+from diffkin.ik._prepare import detach, flat, prepare
+from diffkin.ik._problem import BASE_ROWS, Kinematics, Problem, Spec
 from diffkin.ik._result import IKResult
-from diffkin.ik._terms import pose, relative
-from diffkin.ik._terms.avoid import Avoid, AvoidTerm
-from diffkin.ik._terms.com import ComTarget, from_target
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain
 from diffkin.models.robot import Robot
@@ -35,16 +31,6 @@ from diffkin.models.robot import Robot
 #: Success margins, in units of the dtype's epsilon: metres (about eight roundings of a position of
 #: a metre or two) and radians. float32: 9.5e-7 m and 1.9e-6 rad; float64: ~2e-15 and ~4e-15.
 ROUNDING_POS, ROUNDING_ROT = 8.0, 16.0
-
-
-class Spec(NamedTuple):
-    """The static part of a problem: its terms, locked joints, secondary objectives, solved root."""
-
-    terms: tuple
-    locked: tuple[bool, ...]
-    secondary: tuple[tuple[str, float], ...]
-    solve_base: bool
-    errors_per_term: bool  # IKResult errors (..., k) (a robot) or (...) (a chain)
 
 
 def solve(
@@ -178,6 +164,7 @@ def solve(
     p = plan(
         chain,
         target,
+        {"relative": relative, "com": com, "avoid": avoid},
         q0=q0,
         num_seeds=num_seeds,
         method=method,
@@ -191,36 +178,20 @@ def solve(
         secondary=secondary,
         solve_base=solve_base,
         base=base,
-        relative=relative,
-        com=com,
-        avoid=avoid,
     )
-    spec, arrays, batch, dtype, max_iters, locked_q = p
+    spec, data, batch, dtype, max_iters, locked_q = p
     if 0 in batch:  # no targets: empty results of the batch's shape
-        empty = lambda *shape, dt=dtype: jnp.zeros(batch + shape, dt)  # noqa: E731
-        has_com = isinstance(spec.terms[-1], ComTarget)
-        errors = (len(spec.terms) - has_com,) if spec.errors_per_term else ()
-        return IKResult(
-            empty(chain.dof),
-            empty(dt=bool),
-            empty(*errors),
-            empty(*errors),
-            empty(dt=jnp.int32),
-            empty(4, 4) if solve_base else None,
-            empty() if has_com else None,
-            empty() if avoid is not None else None,
-        )
+        return _empty(spec, chain.dof, batch, dtype)
     static, traced = partition(chain)
     as_dtype = lambda x: None if x is None else jnp.asarray(x, dtype)  # noqa: E731
-    return automatic_axes(_solve, arrays[0], len(batch))(
+    return automatic_axes(_solve, data[0], len(batch))(
         traced,
-        tuple(arrays),
+        tuple(data),
         _args.default_key() if key is None else key,
         as_dtype(q0),
         as_dtype(rest),
         as_dtype(base),
         as_dtype(locked_q),
-        avoid,
         _args.tolerance(pos_tol, dtype),
         _args.tolerance(rot_tol, dtype),
         static=static,
@@ -235,28 +206,21 @@ def solve(
 
 
 class Plan(NamedTuple):
-    """A checked call of :func:`solve`: its static problem, target arrays (in term order), batch shape,
-    dtype, iterations per seed and locked values (``None``: none, or all from ``q0``)."""
+    """A checked call of :func:`solve`: its static problem, what its terms bind (in term order), the
+    targets' batch shape, dtype, iterations per seed and locked values (``None``: none, or all from ``q0``)."""
 
     spec: Spec
-    arrays: list
+    data: list
     batch: tuple[int, ...]
     dtype: Any
     max_iters: int
     locked_q: Any
 
 
-def terms_of(chain, target, relative, weights, com) -> tuple[tuple, list, tuple[int, ...]]:
-    """The terms of a call's targets, their arrays and their batch shape (checked on the host)."""
-    if isinstance(chain, Robot):
-        return _robot_terms(chain, target, relative, weights, com)
-    array, position_only, batch = _args.check_target(target)
-    return (pose.PoseTarget(None, position_only),), [array], batch
-
-
 def plan(
     chain,
     target,
+    given: Mapping[str, Any],
     *,
     q0,
     num_seeds,
@@ -271,11 +235,9 @@ def plan(
     secondary,
     solve_base,
     base,
-    relative,
-    com,
-    avoid=None,
 ) -> Plan:
-    """Check every argument of :func:`solve` on the host (see its Raises) and build its :class:`Plan`."""
+    """Check every argument of :func:`solve` on the host (see its Raises) and build its :class:`Plan`;
+    ``given``: the keywords of :data:`~diffkin.ik._keywords.KEYWORDS` (``{name: value}``, ``None`` for absent)."""
     instance(chain, (DHChain, PoEChain, Robot), "chain", "a DHChain, PoEChain or Robot")
     is_robot = isinstance(chain, Robot)
     facts = METHODS.get(method)
@@ -289,22 +251,21 @@ def plan(
             ("rest", rest),
             ("secondary", secondary),
             ("base", base),
-            ("relative", relative),
-            ("com", com),
-            ("avoid", avoid),
+            *given.items(),
         ):
             if value is not None:
                 raise ValueError(f"{name}: only for a Robot (solve dk.load_robot(...) with a mapping of targets)")
         if solve_base:
             raise ValueError("solve_base: only for a floating Robot")
-    terms, arrays, batch = terms_of(chain, target, relative, weights, com)
-    dtypes = {a.dtype for a in arrays}
+    terms = terms_of(chain, target, given, weights)
+    batch = terms.batch
+    dtypes = {a.dtype for a in terms.data[: len(terms.targets)]}
     if len(dtypes) > 1:
         raise TypeError(
             "target: every target needs one dtype (the solver and its tolerances follow it), "
             f"got {sorted(map(str, dtypes))}"
         )
-    dtype = arrays[0].dtype
+    dtype = terms.data[0].dtype
     what = f"for a {chain.dof}-joint {'robot' if is_robot else 'chain'}"
     for name, value in (("q0", q0), ("rest", rest)):
         if value is not None:
@@ -321,45 +282,10 @@ def plan(
     mask, locked_q = _args.locked_joints(chain, locked, q0, batch) if is_robot else ((False,) * chain.dof, None)
     if chain.dof == 0 and not solve_base:
         raise ValueError(f"robot: {chain.name!r} has no joints to solve")
-    if avoid is not None:
-        instance(avoid, Avoid, "avoid", "a dk.ik.Avoid(geom, world, margin)")
-        check_geometry(chain, avoid.geom)
     assert max_iters is not None  # (checked by check_settings)
-    spec = Spec(terms, mask, _args.secondary_spec(secondary, rest), bool(solve_base), is_robot)
-    return Plan(spec, arrays, batch, dtype, max_iters, locked_q)
-
-
-def _robot_terms(robot: Robot, targets, relative_targets, weights, com) -> tuple[tuple, list, tuple[int, ...]]:
-    """The terms of a robot's targets (world, relative, then the centre of mass), their arrays and their
-    batch shape."""
-    if weights is not None and not isinstance(weights, Mapping):
-        raise TypeError(f"weights: expected a mapping from target frame names to weights, got {type(weights).__name__}")
-    weights = {} if weights is None else weights
-    found: list[tuple[Any, Any, str]] = list(pose.from_mapping(robot, targets, weights))
-    if relative_targets is not None:
-        found += relative.from_mapping(robot, relative_targets, weights)
-    if com is not None:
-        found.append((*from_target(robot, com), "'com'"))
-    if not found:
-        raise TypeError(f"target: for a Robot, expected a non-empty mapping frame name -> target, got {targets!r}")
-    keys = set(targets) | set(relative_targets or ())
-    for name in weights:
-        if name not in keys:
-            raise ValueError(f"weights: {name!r} is not one of the targets {list(keys)}")
-    batch = None
-    for term, array, label in found:
-        b = tuple(array.shape[:-1] if term.position_only else array.shape[:-2])
-        if batch is not None and b != batch:
-            raise ValueError(f"target[{label}]: batch shape {b} differs from target[{found[0][2]}]'s {batch}")
-        batch = b
-    assert batch is not None
-    # Only the weights' ratios matter: scaled so that the largest is 1 (LM's damping floor and stall
-    # test are absolute; weights of 1e-5 would otherwise stall every seed).
-    scale = max(max(t.weights[: 3 if t.position_only else 6]) for t, _, _ in found)
-    terms = tuple(
-        t if scale == 1.0 else dataclasses.replace(t, weights=tuple(w / scale for w in t.weights)) for t, _, _ in found
-    )
-    return terms, [a for _, a, _ in found], batch
+    secondary_spec = _args.secondary_spec(secondary, rest)
+    spec = Spec(terms.targets, terms.constraints, mask, secondary_spec, bool(solve_base), is_robot)
+    return Plan(spec, terms.data, batch, dtype, max_iters, locked_q)
 
 
 def _moves(model, terms: tuple) -> np.ndarray:
@@ -378,27 +304,18 @@ def _moves(model, terms: tuple) -> np.ndarray:
     return out
 
 
-def _flat(x, batch, tail, n, dtype):
-    """``x`` broadcast to ``batch + tail``, flattened to ``(n,) + tail``, detached, non-finite entries 0."""
-    if x is None:
-        return None
-    x = jnp.broadcast_to(x, batch + tail).reshape((n,) + tail).astype(dtype)
-    return detach(jnp.where(jnp.isfinite(x), x, 0.0))
-
-
 @functools.partial(
     solver_jit,
     static_argnames=("static", "spec", "num_seeds", "method", "max_iters", "respect_limits", "optimizer", "batch"),
 )
 def _solve(
     traced: tuple,
-    targets: tuple,
+    data: tuple,
     key,
     q0,
     rest,
     base,
     locked_q,
-    avoid,
     pos_tol,
     rot_tol,
     *,
@@ -416,61 +333,27 @@ def _solve(
     Every closure (problems, ranks) is built here, inside the trace, so that repeated eager
     calls of :func:`solve` hit jit's cache instead of retracing and recompiling.
     """
-    model_in = combine(static, traced)
-    dtype, dof, k = targets[0].dtype, model_in.dof, len(spec.terms)
+    s = prepare(static, traced, data, spec, batch, batch, locked_q, base)
+    dtype, dof, k = data[0].dtype, s.model.dof, len(spec.targets)
     n = int(np.prod(batch, dtype=np.int64))
-    checked = [
-        valid_targets(t.reshape((n,) + t.shape[len(batch) :]), term.position_only)
-        for t, term in zip(targets, spec.terms, strict=True)
-    ]
-    valid = checked[0][0] if k == 1 else jnp.all(jnp.stack([v for v, _ in checked]), axis=0)
-    safe = tuple(s for _, s in checked)
-    fixed = [detach(s) for s in safe]
-    model = cast(detach(model_in), dtype)
-    lower, upper = inward(detach(model_in.lower), dtype, -1), inward(detach(model_in.upper), dtype, 1)
-    wrap = jnp.asarray([t == "R" for t in model_in.actuated_types]) & ~jnp.isfinite(lower) & ~jnp.isfinite(upper)
-    q0_flat = _flat(q0, batch, (dof,), n, dtype)
-    rest_flat = _flat(rest, batch, (dof,), n, dtype)
-    locked_flat = _flat(locked_q, batch, (dof,), n, dtype)
-    for given in (rest, None if locked_q is None else jnp.where(jnp.asarray(spec.locked), locked_q, 0.0)):
-        if given is not None:  # traced non-finite values (the host rejects concrete ones): no success
-            finite = jnp.all(jnp.isfinite(jnp.broadcast_to(given, batch + (dof,)).reshape(n, dof)), axis=-1)
-            valid = valid & finite
-    base_in, base_ok = None, None
-    if base is not None or spec.solve_base:
-        eye = jnp.eye(4, dtype=dtype)
-        base_in = jnp.broadcast_to(eye if base is None else base, batch + (4, 4)).reshape(n, 4, 4)
-        base_ok = jnp.all(jnp.isfinite(base_in.reshape(n, -1)), axis=-1)
-        base_in = jnp.where(base_ok[:, None, None], base_in, eye)
-    base_flat = None if base_in is None else detach(base_in)
-    avoid_term = None if avoid is None else AvoidTerm.of(avoid)
-    terms = spec.terms + (() if avoid_term is None else (avoid_term,))  # the targets' terms, then clearance
-    avoid_arrays = None if avoid is None else detach(avoid.cast(dtype))
-    avoid_bound = () if avoid_arrays is None else (avoid_arrays,)
+    valid = s.valid
+    q0_flat = flat(q0, batch, (dof,), n, dtype)
+    rest_flat = flat(rest, batch, (dof,), n, dtype)
+    if rest is not None:  # traced non-finite values (the host rejects concrete ones): no success
+        valid = valid & jnp.all(jnp.isfinite(jnp.broadcast_to(rest, batch + (dof,)).reshape(n, dof)), axis=-1)
+    base_flat = None if s.base is None else detach(s.base)
+    limits = (s.lower, s.upper, s.wrap, respect_limits)
 
     def build(idx, copies: int) -> Problem:
         def tile(x):  # (n, ...) -> (copies * m, ...)
             x = x[idx]
             return jnp.broadcast_to(x, (copies,) + x.shape).reshape((copies * idx.shape[0],) + x.shape[1:])
 
-        bound = tuple(term.bind(tile(T)) for term, T in zip(spec.terms, fixed, strict=True)) + avoid_bound
         root = rg.IDENTITY if base_flat is None else rg.from_matrix(tile(base_flat))
-        locked_values = tile(locked_flat).T if locked_flat is not None else jnp.zeros((dof, 1), dtype)
-        return Problem(
-            model,
-            terms,
-            bound,
-            lower,
-            upper,
-            wrap,
-            respect_limits,
-            spec.locked,
-            locked_values,
-            root,
-            spec.solve_base,
-        )
+        locked_values = tile(s.locked_q).T if s.locked_q is not None else jnp.zeros((dof, 1), dtype)
+        return spec.problem(s.model, tuple(tile(t) for t in s.targets), s.data, root, locked_values, limits)
 
-    moves = _moves(model_in, terms)
+    moves = _moves(s.model, spec.terms)
     still = ~np.any(moves, axis=1)  # joints that move no target
 
     if base_flat is not None:  # the root's guess as state rows (n, 12), for a solved root
@@ -488,7 +371,7 @@ def _solve(
     def h_of(idx):
         def h(x):  # x (n_state, ...) -> (h, Newton step)
             r = None if rest_flat is None else rest_flat[idx].T.reshape((dof,) + (1,) * (x.ndim - 2) + (-1,))
-            return _secondary.cost_and_step(spec.secondary, x[:dof], r, lower, upper, free)
+            return _secondary.cost_and_step(spec.secondary, x[:dof], r, s.lower, s.upper, free)
 
         return h
 
@@ -514,37 +397,52 @@ def _solve(
         rank,
         key,
         n,
-        lower,
-        upper,
+        s.lower,
+        s.upper,
         first,
         facts.steps(optimizer),
         settings,
-        moves=jnp.asarray(moves) if len(terms) > 1 else None,
+        moves=jnp.asarray(moves) if len(spec.terms) > 1 else None,
     )
     x, ev = best.x, best.ev
     if spec.secondary:
         everything = jnp.arange(n)
         x, ev = _secondary.refine(build(everything, 1), x, ev, best.success, h_of(everything), pos_tol, rot_tol)
-    solved_root = base_in if base is not None and not spec.solve_base else None
-    x = implicit(spec, cast(model_in, dtype), safe, solved_root, x)
-    success = best.success & valid if base_ok is None else best.success & valid & base_ok
-    clearance = None
-    if avoid_term is not None and avoid_arrays is not None:  # recomputed at the returned states, exactly
-        clearance = avoid_term.clearance(Kinematics(build(jnp.arange(n), 1), x), avoid_arrays)
-        success = success & (clearance >= avoid_arrays.margin)
-    return result(spec, x, ev.pos_err[:k], ev.rot_err[:k], valid, success, best.iters, batch, clearance)
+    solved_root = s.base if base is not None and not spec.solve_base else None
+    x = implicit(spec, s.differentiable, s.safe, solved_root, x)
+    success = best.success & valid if s.base_ok is None else best.success & valid & s.base_ok
+    values, met = constraints_at(spec, build(jnp.arange(n), 1), x)
+    return result(spec, x, ev.pos_err[:k], ev.rot_err[:k], valid, success & met, best.iters, batch, values)
+
+
+def constraints_at(spec: Spec, problem: Problem, x: jax.Array) -> tuple[dict[str, jax.Array], jax.Array | bool]:
+    """The constraint's value at the returned states ``x`` ``(n_state, P)``, exactly (``{"clearance": (P,)}``,
+    empty without a constraint), and ``(P,)`` whether it is met (``True`` without one). ``IKResult`` has
+    one field for a constraint's value: one constraint (``avoid``'s) at most."""
+    if not spec.constraints:
+        return {}, True
+    kin = Kinematics(problem, x)
+    ((constraint, bound),) = zip(spec.constraints, problem.bound[len(spec.targets) :], strict=True)
+    return {"clearance": constraint.clearance(kin, bound)}, constraint.met(kin, bound)
 
 
 def result(
-    spec: Spec, x: jax.Array, pos_err, rot_err, valid, success, iters, batch: tuple[int, ...], clearance=None
+    spec: Spec, x: jax.Array, pos_err, rot_err, valid, success, iters, batch: tuple[int, ...], values: Mapping
 ) -> IKResult:
-    """The :class:`IKResult` of states ``x`` ``(n_state, n)`` with per-term errors ``(k, n)`` (the largest
-    float where the targets were not ``valid``), ``success``, ``iters`` and ``clearance`` (or ``None``)
-    ``(n,)``, shaped ``batch``."""
-    dtype, dof, k = x.dtype, x.shape[0] - (BASE_ROWS if spec.solve_base else 0), len(spec.terms)
+    """The :class:`IKResult` of states ``x`` ``(n_state, n)`` with per-target errors ``(k, n)`` (the largest
+    float where the targets were not ``valid``), ``success``, ``iters`` and the constraints' ``values``
+    (:func:`constraints_at`) ``(n,)``, shaped ``batch``.
+
+    A target's errors are a column of ``pos_err``/``rot_err`` or, with a ``result_field``, that field
+    (its position error); :func:`target_errors` reads them back."""
+    dtype, dof = x.dtype, x.shape[0] - (BASE_ROWS if spec.solve_base else 0)
     n = x.shape[1]
     big = jnp.finfo(dtype).max
     pos_err, rot_err = (jnp.where(valid, e, big).T for e in (pos_err, rot_err))  # (n, k)
+    own = {t.result_field: pos_err[:, i].reshape(batch) for i, t in enumerate(spec.targets) if t.result_field}
+    columns = [i for i, t in enumerate(spec.targets) if t.result_field is None]
+    if len(columns) < len(spec.targets):
+        pos_err, rot_err = pos_err[:, columns], rot_err[:, columns]
     if not spec.errors_per_term:
         pos_err, rot_err = pos_err[:, 0], rot_err[:, 0]
     T_world_root = None
@@ -559,11 +457,7 @@ def result(
             .at[:, 3, 3]
             .set(1.0)
         )
-    com_err = None
-    if isinstance(spec.terms[-1], ComTarget):  # the centre of mass: its own field
-        com_err, pos_err, rot_err = pos_err[:, -1].reshape(batch), pos_err[:, :-1], rot_err[:, :-1]
-        k -= 1
-    tail = (k,) if spec.errors_per_term else ()
+    tail = (len(columns),) if spec.errors_per_term else ()
     return IKResult(
         q=x[:dof].T.reshape(batch + (dof,)),
         success=success.reshape(batch),
@@ -571,6 +465,42 @@ def result(
         rot_err=rot_err.reshape(batch + tail),
         iters=iters.reshape(batch),
         base=None if T_world_root is None else T_world_root.reshape(batch + (4, 4)),
-        com_err=com_err,
-        clearance=None if clearance is None else clearance.reshape(batch),
+        **own,
+        **{name: value.reshape(batch) for name, value in values.items()},
+    )
+
+
+def target_errors(spec: Spec, res, n: int) -> tuple[jax.Array, jax.Array]:
+    """The per-target errors ``(k, n)`` (position, rotation) of ``res`` (an :class:`IKResult` of ``n``
+    targets, as :func:`result` writes them): a column of ``pos_err``/``rot_err``, or a target's own field
+    (its rotation error 0)."""
+    pos, rot = res.pos_err.reshape(n, -1), res.rot_err.reshape(n, -1)
+    column = iter(range(pos.shape[1]))
+    pos_rows, rot_rows = [], []
+    for t in spec.targets:
+        if t.result_field is None:
+            i = next(column)
+            pos_rows.append(pos[:, i])
+            rot_rows.append(rot[:, i])
+        else:
+            pos_rows.append(getattr(res, t.result_field).reshape(n))
+            rot_rows.append(jnp.zeros((n,), rot.dtype))
+    return jnp.stack(pos_rows), jnp.stack(rot_rows)
+
+
+def _empty(spec: Spec, dof: int, batch: tuple[int, ...], dtype) -> IKResult:
+    """The :class:`IKResult` of no targets: every field empty, of the batch's shape."""
+    empty = lambda *shape, dt=dtype: jnp.zeros(batch + shape, dt)  # noqa: E731
+    columns = sum(t.result_field is None for t in spec.targets)
+    errors = (columns,) if spec.errors_per_term else ()
+    own = {t.result_field: empty() for t in spec.targets if t.result_field}
+    return IKResult(
+        empty(dof),
+        empty(dt=bool),
+        empty(*errors),
+        empty(*errors),
+        empty(dt=jnp.int32),
+        empty(4, 4) if spec.solve_base else None,
+        **own,
+        **({"clearance": empty()} if spec.constraints else {}),
     )

@@ -15,6 +15,7 @@ from _reference import dh_fk, random_q
 
 import diffkin as dk
 import diffkin.ik as ik
+from diffkin.ik._keywords import KEYWORDS
 
 
 def test_planar_2r_matches_closed_form():
@@ -59,6 +60,9 @@ def test_bad_arguments_raise_before_tracing():
             ik.solve(chain, **kwargs)
     with pytest.raises(TypeError, match="chain"):
         ik.solve("ur5", T)
+    for keyword in KEYWORDS:  # every keyword of the registry reaches solve's checks
+        with pytest.raises(ValueError, match=f"{keyword.name}: only for a Robot"):
+            ik.solve(chain, T, **{keyword.name: 0.0})
 
 
 def test_rigid_check_on_the_host_equals_the_traced_check():

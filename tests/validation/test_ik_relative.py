@@ -1,6 +1,7 @@
 """Targets between two frames (``relative={(a, b): T_a_b}``): Baxter's two hands holding a box while one
 hand reaches a pose, a quadruped's feet at fixed distances with its root solved; every success
-re-checked by Pinocchio (float64). And every IK term's Jacobian against autodiff of its residual."""
+re-checked by Pinocchio (float64). And the Jacobian of every kind of target (the targets' mapping and each
+keyword of the registry, ``ik/_keywords.py``) against autodiff of its residual."""
 
 import jax
 import jax.numpy as jnp
@@ -24,11 +25,9 @@ from _reference import random_q as _random_q
 from _reference import success_rate as _rate
 
 import diffkin as dk
-from diffkin import _rigid as rg
 from diffkin._xla import solver_jit  # compiled as dk.ik.solve compiles itself
-from diffkin.ik._problem import Problem
-from diffkin.ik._terms.pose import PoseTarget
-from diffkin.ik._terms.relative import RelativeTarget
+from diffkin.ik._keywords import KEYWORDS, terms_of
+from diffkin.ik._problem import Spec
 
 pytestmark = pytest.mark.skipif(not ERD, reason="example-robot-data is not installed (pip install -e '.[test]')")
 N = 64
@@ -103,26 +102,39 @@ def test_relative_target_arguments_are_checked():
         dk.ik.solve(dk.robots.iiwa14(), T, relative={("a", "b"): T})
 
 
-TERMS = {
-    "pose": lambda f: PoseTarget(f[1], False),
-    "position": lambda f: PoseTarget(f[1], True),
-    "weighted pose": lambda f: PoseTarget(f[1], False, (1.0, 0.5, 0.0, 2.0, 1.0, 0.0)),
-    "relative pose": lambda f: RelativeTarget(f[0], f[1], False),
-    "relative position": lambda f: RelativeTarget(f[0], f[1], True),
-    "weighted relative pose": lambda f: RelativeTarget(f[0], f[1], False, (0.0, 1.0, 2.0, 1.0, 0.0, 0.5)),
+# Per kind of target: (its keyword, or "target" for the targets' mapping; its value, weights) from
+# the two frames' world poses T (P, 2, 4, 4) and the centre of mass c (P, 3), each met at the state.
+CASES = {
+    "pose": ("target", lambda f, T, c: ({f[1]: T[:, 1]}, None)),
+    "position": ("target", lambda f, T, c: ({f[1]: T[:, 1, :3, 3]}, None)),
+    "weighted pose": ("target", lambda f, T, c: ({f[1]: T[:, 1]}, {f[1]: (1.0, 0.5, 0.0, 2.0, 1.0, 0.0)})),
+    "relative pose": ("relative", lambda f, T, c: ({f: _relative_pose(T)}, None)),
+    "relative position": ("relative", lambda f, T, c: ({f: _relative_pose(T)[:, :3, 3]}, None)),
+    "weighted relative pose": (
+        "relative",
+        lambda f, T, c: ({f: _relative_pose(T)}, {f: (0.0, 1.0, 2.0, 1.0, 0.0, 0.5)}),
+    ),
+    "com": ("com", lambda f, T, c: (c, None)),
+    "horizontal com": ("com", lambda f, T, c: (c[:, :2], None)),
 }
 
 
+def test_every_keyword_has_a_jacobian_case():
+    """A keyword added to the registry needs a case in CASES (avoid's rows are a constraint's, checked
+    against finite differences in tests/integration/test_ik_avoid.py)."""
+    assert {k.name for k in KEYWORDS if k.per_target} == {keyword for keyword, _ in CASES.values()} - {"target"}
+    assert [k.name for k in KEYWORDS if not k.per_target] == ["avoid"]
+
+
 @pytest.mark.parametrize("solve_base", [False, True], ids=["fixed root", "root solved"])
-@pytest.mark.parametrize("kind", TERMS)
+@pytest.mark.parametrize("kind", CASES)
 def test_term_jacobian_equals_autodiff_of_its_residual(kind, solve_base):
-    """``J = d(-r)/dx`` of every term, with a locked joint and a solved root, against forward-mode
-    autodiff of its residual at its target (float64, Panda with its mimic finger). (Away from the
-    target the rotation rows are the angular velocity, not the derivative of the SO(3) log: LM's
-    Gauss-Newton model, exact where the implicit gradient is taken.)"""
+    """``J = d(-r)/dx`` of every kind of target, built as ``dk.ik.solve`` builds it, with a locked joint
+    and a solved root, against forward-mode autodiff of its residual at its target (float64, Panda
+    with its mimic finger). (Away from the target the rotation rows are the angular velocity, not the
+    derivative of the SO(3) log: LM's Gauss-Newton model, exact where the implicit gradient is taken.)"""
     panda = dk.load_robot(PANDA, floating=True)
     names = ("panda_link3", "panda_rightfinger")
-    term = TERMS[kind](tuple(panda.frame_index(f) for f in names))
     rng = np.random.default_rng(23)
     P, dof = 5, panda.dof
     q = _random_q(panda, P, seed=24)
@@ -134,13 +146,12 @@ def test_term_jacobian_equals_autodiff_of_its_residual(kind, solve_base):
         base[:, :3, 3] = rng.normal(size=(P, 3))
         x = jnp.concatenate([x, jnp.asarray(np.concatenate([base[:, :3, 3], base[:, :3, :3].reshape(P, 9)], -1).T)])
     T = np.asarray(dk.fk(panda, q, names, base=base))
-    T = _relative_pose(T) if isinstance(term, RelativeTarget) else T[:, 1]
-    target = jnp.asarray(T[:, :3, 3] if term.position_only else T)  # the residual is 0 at x
-    none = jnp.zeros(0)
+    keyword, case = CASES[kind]
+    value, weights = case(names, T, np.asarray(dk.com(panda, q, base=base)))  # the residual is 0 at x
+    targets, given = (value, {}) if keyword == "target" else ({}, {keyword: value})
+    terms = terms_of(panda, targets, given, weights)
     locked = tuple(i == 2 for i in range(dof))
-    problem = Problem(
-        panda, (term,), (term.bind(target),), none, none, none, False, locked, none, rg.IDENTITY, solve_base
-    )
+    problem = Spec(terms.targets, (), locked, (), solve_base, True).problem(panda, tuple(terms.data), ())
     J = np.asarray(problem.evaluate(x).J)  # (m, n, P)
 
     def residual(step):  # (n, P) -> (m, P): joints moved by q + dq, the root by T exp([dv; dw])

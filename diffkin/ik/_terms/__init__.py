@@ -2,13 +2,23 @@
 
 A problem is a list of terms; the solver sums their squared residuals and knows nothing of their
 kinds. A term is static (hashable: a field of the compiled solver's static arguments): the frames
-it reads, its kind, its weights. Its numbers (a target per problem) are arrays passed beside it.
+it reads, its kind, its weights. Its numbers are arrays passed beside it. There are two kinds (as
+mink's tasks and limits):
+
+- a :class:`Target` reports errors (metres, radians) and binds one target per problem: a frame's
+  pose (:mod:`~diffkin.ik._terms.pose`), one frame's pose in another
+  (:mod:`~diffkin.ik._terms.relative`), the centre of mass (:mod:`~diffkin.ik._terms.com`);
+- a :class:`Constraint` reports its own value and whether it is met, and binds data every problem
+  shares: the clearance (:mod:`~diffkin.ik._terms.avoid`).
 
 Every term provides:
 
 - ``frames``: the frames whose motion it reads (which joints can move it, for the seeds).
-- ``bind(target)``: its target entries from an array whose leading axis is the problem
-  (``(P, 4, 4)`` poses or ``(P, 3)`` positions): what :meth:`rows` and :meth:`screen` read.
+- ``deferred``: its rows cost more than every other term's together, so a search may first
+  iterate without it and check :meth:`Constraint.met` after (:meth:`diffkin.ik._problem.Problem.undeferred`).
+- ``bind(data)``: its entries, what :meth:`rows` and :meth:`screen` read: a target's from an array
+  whose leading axis is the problem (``(P, 4, 4)`` poses or ``(P, 3)`` positions), a constraint's
+  from its data in the solver's dtype.
 - ``rows(kin, bound, jacobian) -> Rows``: its residual entries ``r``, the rows of
   ``J = d(-r)/dx`` (one entry per column of the state; empty without ``jacobian``) and its
   errors, from the state's kinematics ``kin`` (``kin.pose(frame)``: the frame's world pose,
@@ -16,15 +26,13 @@ Every term provides:
   :class:`diffkin.ik._problem.Kinematics`).
 - ``screen(kin, bound)``: a cheap cost (no Jacobian) for choosing among seeds.
 
-Entries are arrays of the problem shape or folded Python floats (:mod:`diffkin._rigid`).
-The kinds: :class:`~diffkin.ik._terms.pose.PoseTarget` (a frame's pose or position in the world,
-weighted per axis), :class:`~diffkin.ik._terms.relative.RelativeTarget` (the pose of one frame in
-another).
+Entries are arrays of the problem shape or folded Python floats (:mod:`diffkin._rigid`). Which
+keyword of :func:`diffkin.ik.solve` makes which terms: :mod:`diffkin.ik._keywords`.
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple, Protocol
+from typing import ClassVar, NamedTuple, Protocol
 
 import jax
 
@@ -46,13 +54,41 @@ class Rows(NamedTuple):
 
 
 class Term(Protocol):
-    """What the solver asks of a term (see the package docstring)."""
+    """What the solver asks of every term (see the package docstring)."""
 
-    @property
-    def frames(self) -> tuple[int | None, ...]: ...
+    deferred: ClassVar[bool]
+    frames: tuple[int | None, ...]
 
-    def bind(self, target) -> tuple: ...
+    def bind(self, data) -> tuple: ...
 
-    def rows(self, kin, bound: tuple, jacobian: bool) -> Rows: ...
+    def rows(self, kin, bound, jacobian: bool) -> Rows: ...
 
-    def screen(self, kin, bound: tuple) -> rg.Entry: ...
+    def screen(self, kin, bound) -> rg.Entry: ...
+
+
+class Target(Term, Protocol):
+    """A term that reports errors: its ``Rows.pos_err``/``rot_err`` are ``IKResult.pos_err``/``rot_err``
+    (one column per target, in the order of the keywords), or, with a ``result_field``, that field of
+    :class:`~diffkin.ik.IKResult` alone (its position error: the centre of mass's ``com_err``).
+
+    ``bind(target)`` takes ``(P, 4, 4)`` poses or ``(P, 3)`` positions (``position_only``), one per
+    problem; success needs the errors within the tolerances on the axes its ``weights`` keep.
+    """
+
+    deferred: ClassVar[bool] = False
+    result_field: ClassVar[str | None] = None
+    position_only: bool
+    weights: tuple[float, ...]
+
+
+class Constraint(Term, Protocol):
+    """A term that reports its own value, ``clearance(kin, bound) -> (P,)`` (``IKResult.clearance``),
+    computed exactly at the returned states, and ``met(kin, bound) -> (P,)`` bool, which success needs.
+
+    ``bind(data)`` takes data every problem shares (a pytree in the solver's dtype); its
+    ``Rows.pos_err`` is 0 where it is met and the largest float elsewhere.
+    """
+
+    def clearance(self, kin, bound) -> jax.Array: ...
+
+    def met(self, kin, bound) -> jax.Array: ...

@@ -15,7 +15,7 @@ import jax.numpy as jnp
 
 from diffkin import _rigid as rg
 from diffkin._checks import real_array
-from diffkin.ik._terms import Rows
+from diffkin.ik._terms import Rows, Target
 from diffkin.ik._terms.pose import ONES, error_rows, screen_cost, target_entries
 from diffkin.kinematics import massive
 
@@ -23,17 +23,20 @@ HORIZONTAL = (1.0, 1.0, 0.0, 1.0, 1.0, 1.0)  # weights of a horizontal target: t
 
 
 @dataclasses.dataclass(frozen=True)
-class ComTarget:
+class ComTarget(Target):
     """The centre of mass at a target ``(P, 3)`` (a horizontal target carries ``z = 0``, unweighted).
 
     Attributes:
         frames: every frame of the robot (every joint can move the centre of mass).
         weights: the weights of ``[x, y, z]`` (then three unused): :data:`HORIZONTAL` or ones.
+
+    Its error is ``IKResult.com_err`` (``result_field``), not a column of ``pos_err``.
     """
 
     frames: tuple[int, ...]
     weights: tuple[float, ...] = ONES
     position_only: bool = True
+    result_field = "com_err"
 
     def bind(self, target: jax.Array) -> tuple:
         return target_entries(target, True)
@@ -50,13 +53,16 @@ class ComTarget:
         return screen_cost(rg.Rigid(rg.IDENTITY.R, kin.com(False)[0]), p_t, None, self.weights, kin.dtype)
 
 
-def from_target(robot, com) -> tuple[ComTarget, jax.Array]:
-    """The term of ``dk.ik.solve(robot, ..., com=c)`` and its ``(..., 3)`` target, checked on the host."""
+def from_target(robot, com, weights) -> list[tuple[ComTarget, jax.Array, str]]:
+    """The term of ``dk.ik.solve(robot, ..., com=c)``: ``[(term, (..., 3) target, label)]``, checked on
+    the host (``weights`` are the other targets': a centre of mass takes none)."""
     massive(robot)
     target = real_array(com, "com", "centre-of-mass positions")
     if target.ndim < 1 or target.shape[-1] not in (2, 3):
         raise ValueError(f"com: expected shape (..., 3) (a point) or (..., 2) (horizontal: x, y), got {target.shape}")
     frames = tuple(range(len(robot.frame_names)))
     if target.shape[-1] == 3:
-        return ComTarget(frames), target
-    return ComTarget(frames, HORIZONTAL), jnp.concatenate([target, jnp.zeros_like(target[..., :1])], axis=-1)
+        return [(ComTarget(frames), target, "'com'")]
+    return [
+        (ComTarget(frames, HORIZONTAL), jnp.concatenate([target, jnp.zeros_like(target[..., :1])], axis=-1), "'com'")
+    ]

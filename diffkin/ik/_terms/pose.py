@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin import _rigid as rg
-from diffkin.ik._terms import Rows
+from diffkin.ik._terms import Rows, Target
 
 #: Metres per radian in the residual: the rotation error enters as ``ROT_WEIGHT * angle``, so a
 #: 1e-4 rad rotation error counts like a 2e-5 m position error (about a tenth of an arm's reach).
@@ -96,7 +96,7 @@ def _norm(entries: list, dtype) -> jax.Array:
 
 
 @dataclasses.dataclass(frozen=True)
-class PoseTarget:
+class PoseTarget(Target):
     """The pose (or the position) of ``frame`` in the world.
 
     Attributes:

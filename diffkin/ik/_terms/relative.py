@@ -16,7 +16,7 @@ from collections.abc import Mapping
 import jax
 
 from diffkin import _rigid as rg
-from diffkin.ik._terms import Rows
+from diffkin.ik._terms import Rows, Target
 from diffkin.ik._terms.pose import ONES, error_rows, screen_cost, target_entries, weights_of
 
 
@@ -29,7 +29,7 @@ def _relative(kin, a: int, b: int) -> tuple[rg.Rigid, tuple]:
 
 
 @dataclasses.dataclass(frozen=True)
-class RelativeTarget:
+class RelativeTarget(Target):
     """The pose (or the position) of frame ``b`` in frame ``a``.
 
     Attributes:
