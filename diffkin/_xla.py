@@ -233,27 +233,42 @@ def blocks_joined(blocks: list[list[jax.Array]], n: int) -> jax.Array:
 LAST_STEPPED = 64
 
 
-def configurations_in_steps(fn: Callable, q, base, step: int, last: bool = False, halves: bool = False) -> jax.Array:
+def configurations_in_steps(
+    fn: Callable, q, base, step: int, last: bool = False, halves: bool = False, extra=None, extra_batch=()
+) -> jax.Array:
     """``fn(q, base)`` for a batch of configurations, ``step`` at a time when the batch is large (:func:`in_steps`).
 
-    The batch axes of ``q (..., dof)`` and ``base (..., 4, 4)`` (or ``None``) are broadcast and
-    flattened to ``(N,)``; ``fn`` takes them so and returns one array with the configurations first,
-    ``(N, ...)``, or last, ``(..., N)``, with ``last``. Batches of at most ``2 step`` go in one call
-    (with ``last``, only those below :data:`LAST_STEPPED`); ``halves``: as :func:`in_steps`.
-    The memory then stays bounded whatever the batch, and a step's intermediates stay in cache (a
-    whole robot's pass over 100,000 configurations is memory-bound). Values and derivatives are
-    those of ``fn``.
+    The batch axes of ``q (..., dof)``, ``base (..., 4, 4)`` (or ``None``) and ``extra_batch`` are
+    broadcast and flattened to ``(N,)``; ``fn`` takes them so and returns one array with the
+    configurations first, ``(N, ...)``, or last, ``(..., N)``, with ``last``. ``extra``: a pytree
+    of arrays with leading axes ``extra_batch`` (per-problem data: a world of obstacles each), then
+    broadcast and flattened with the configurations and passed as a third argument. Batches of at
+    most ``2 step`` go in one call (with ``last``, only those below :data:`LAST_STEPPED`);
+    ``halves``: as :func:`in_steps`. The memory then stays bounded whatever the batch, and a step's
+    intermediates stay in cache (a whole robot's pass over 100,000 configurations is memory-bound).
+    Values and derivatives are those of ``fn``.
 
     Returns:
         ``(*batch, ...)``.
     """
     q = jnp.asarray(q)
-    batch = jnp.broadcast_shapes(q.shape[:-1], jnp.shape(base)[:-2] if base is not None else ())
+    batch = jnp.broadcast_shapes(q.shape[:-1], jnp.shape(base)[:-2] if base is not None else (), tuple(extra_batch))
     n = int(np.prod(batch, dtype=np.int64))
     inputs = [jnp.broadcast_to(q, (*batch, q.shape[-1])).reshape(n, q.shape[-1])]
     if base is not None:
         inputs.append(jnp.broadcast_to(jnp.asarray(base), (*batch, 4, 4)).reshape(n, 4, 4))
-    call = lambda q_, base_=None: fn(q_, base_)  # noqa: E731
+    leaves, tree = jax.tree.flatten(extra)
+    for leaf in leaves:
+        tail = jnp.shape(leaf)[len(extra_batch) :]
+        inputs.append(jnp.broadcast_to(leaf, (*batch, *tail)).reshape(n, *tail))
+    has_base = base is not None
+
+    def call(q_, *rest):
+        base_ = rest[0] if has_base else None
+        if extra is None:
+            return fn(q_, base_)
+        return fn(q_, base_, jax.tree.unflatten(tree, rest[has_base:]))
+
     stepped = last and n >= LAST_STEPPED
     if stepped:
         step = min(step, 2 * -(-n // 4))  # at least two steps, of an even size (halves)

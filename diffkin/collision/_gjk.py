@@ -242,7 +242,7 @@ def _overlap_direction(a, b, hint: jax.Array, dtype) -> jax.Array:
     return n
 
 
-def _witnesses(a, b) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+def witnesses(a, b) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
     """``(n, p_a, p_b, s)`` without gradients: the unit direction from ``a`` to ``b`` whose separation is the
     signed distance, the cores' witness points (apart, their closest points; overlapping, their support
     points along ``n`` (``a``) and ``-n`` (``b``)) and the cores' separation along ``n``."""
@@ -260,14 +260,14 @@ def _witnesses(a, b) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
 
 def contact(a, b) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
     """``(d, n, p_a, p_b)``: the signed distance, the unit direction from ``a`` to ``b`` and the witness points
-    of the cores (:func:`_witnesses`), which move with their shapes (``coords``/``point`` of each kind).
+    of the cores (:func:`witnesses`), which move with their shapes (``coords``/``point`` of each kind).
 
     ``d`` is ``s(n)`` (a lower bound of the distance, within GJK's tolerance of it) and differentiable: by
     Danskin's theorem its derivative is that of ``n . (p_b - p_a)`` with ``n`` and the witnesses'
     coordinates in their shapes held fixed. Moving ``b`` by a twist ``[v; w]`` changes
     ``d`` by ``n . v + (p_b x n) . w``, and ``a`` likewise with ``-n`` and ``p_a``.
     """
-    n, pa, pb, s = _witnesses(a, b)
+    n, pa, pb, s = witnesses(a, b)
     ua, ub = jax.lax.stop_gradient((a.coords(pa), b.coords(pb)))
     pa, pb = a.point(ua), b.point(ub)
     gap = _dot(n, pb - pa)

@@ -53,14 +53,18 @@ class World:
     polytopes, half-spaces, in that order: :data:`diffkin.collision._shapes.SHAPES`).
 
     ``World(*shapes)``: each argument a :class:`Sphere`, :class:`Capsule`, :class:`Box`,
-    :class:`Cylinder`, :class:`Convex` or :class:`Plane` of any batch shape (flattened: a ``(4, 2)`` batch of boxes
-    is 8 obstacles). A world is a pytree of fixed shapes, so one compiled function serves any
-    obstacles of the same counts: to change the number of obstacles without recompiling, pad with
-    far-away shapes.
+    :class:`Cylinder`, :class:`Convex` or :class:`Plane` whose last batch axis lists obstacles (a
+    shape without batch axes is one obstacle). Leading batch axes ``(...)`` before it make a world
+    per problem: ``Box(pose (100, 11, 4, 4), ...)`` is 11 boxes for each of 100 problems, and
+    problem ``i`` (of configurations or IK targets of batch shape ``(100,)``) sees only its own. The
+    leading axes of all arguments broadcast (a shared floor beside per-problem boxes). A world is a
+    pytree of fixed shapes, so one compiled function serves any obstacles of the same counts: to
+    change the number of obstacles without recompiling, pad with far-away shapes.
 
     Attributes:
-        spheres, capsules, boxes, cylinders, convexes, planes: each kind stacked, batch axis
-            ``(n_kind,)`` (possibly 0).
+        spheres, capsules, boxes, cylinders, convexes, planes: each kind stacked, batch axes
+            ``(..., n_kind)`` (``n_kind`` possibly 0).
+        batch: the problem axes ``(...)``, ``()`` for one world shared by every problem.
     """
 
     def __init__(self, *shapes):
@@ -71,17 +75,14 @@ class World:
                     f"World: argument {i}: expected a Sphere, Capsule, Box, Cylinder, Convex or Plane, "
                     f"got {type(shape).__name__}"
                 )
-            batch = batch_shape(shape)
-            n = int(np.prod(batch, dtype=np.int64))
-            groups[type(shape)].append(
-                _map(
-                    shape,
-                    lambda v, r, batch=batch, n=n: jnp.reshape(
-                        jnp.broadcast_to(v, batch + jnp.shape(v)[jnp.ndim(v) - r :]),
-                        (n, *jnp.shape(v)[jnp.ndim(v) - r :]),
-                    ),
-                )
-            )
+            groups[type(shape)].append(shape)
+        leading = [batch_shape(s)[:-1] for group in groups.values() for s in group]
+        try:
+            lead = tuple(jnp.broadcast_shapes(*leading)) if leading else ()
+        except ValueError:
+            raise ValueError(
+                f"World: the shapes' problem axes (all batch axes but the last) do not broadcast: {leading}"
+            ) from None
         dtype = (
             jnp.result_type(*(v for g in groups.values() for s in g for v in _fields(s).values()))
             if shapes
@@ -91,12 +92,16 @@ class World:
         cls: Any
         for cls in SHAPES:
             if groups[cls]:
+                parts = [_obstacles_of(s, lead) for s in groups[cls]]
                 stacked.append(
-                    unchecked(cls, **{k: jnp.concatenate([getattr(s, k) for s in groups[cls]]) for k in cls.TRAILING})
+                    unchecked(
+                        cls,
+                        **{k: jnp.concatenate([getattr(s, k) for s in parts], axis=len(lead)) for k in cls.TRAILING},
+                    )
                 )
             else:
                 empty = {
-                    k: jnp.zeros((0,) + {"pose": (4, 4), "vertices": (1, 3)}.get(k, (3,) * r), dtype)
+                    k: jnp.zeros(lead + (0,) + {"pose": (4, 4), "vertices": (1, 3)}.get(k, (3,) * r), dtype)
                     for k, r in cls.TRAILING.items()
                 }
                 stacked.append(unchecked(cls, **empty))
@@ -110,9 +115,14 @@ class World:
     planes = property(lambda self: self._kinds[5])
 
     @property
+    def batch(self) -> tuple[int, ...]:
+        """The problem axes ``(...)``: ``()`` for a world shared by every problem."""
+        return batch_shape(self._kinds[0])[:-1]
+
+    @property
     def size(self) -> int:
-        """The number of obstacles ``W``."""
-        return sum(int(batch_shape(s)[0]) for s in self.kinds())
+        """The number of obstacles ``W`` (of each problem)."""
+        return sum(int(batch_shape(s)[-1]) for s in self.kinds())
 
     def kinds(self) -> tuple:
         """Each kind stacked, in the order of :data:`diffkin.collision._shapes.SHAPES`."""
@@ -126,6 +136,14 @@ class World:
         obj = object.__new__(cls)
         obj._kinds = tuple(children)
         return obj
+
+
+def _obstacles_of(shape, lead: tuple[int, ...]):
+    """The obstacles of one ``World`` argument, every field broadcast to batch axes ``lead + (n,)`` (one
+    obstacle, ``n = 1``, for a shape without batch axes)."""
+    batch = batch_shape(shape)
+    n = batch[-1] if batch else 1
+    return _map(shape, lambda v, r: jnp.broadcast_to(v, lead + (n,) + jnp.shape(v)[jnp.ndim(v) - r :]))
 
 
 def check_geometry(robot, geom) -> None:
@@ -143,12 +161,6 @@ def check_geometry(robot, geom) -> None:
             )
 
 
-def _in_steps(fn, q, base) -> jax.Array:
-    """``fn(q, base)`` of flat configurations (distances with the configurations last), :data:`STEP` at
-    a time when the batch is large; ``(*batch, ...)``."""
-    return configurations_in_steps(fn, q, base, STEP, last=True, halves=True)
-
-
 def self_distances(robot: Robot, geom: Geometry, q, base=None) -> jax.Array:
     """Signed distances of the robot's self-collision pairs.
 
@@ -162,7 +174,7 @@ def self_distances(robot: Robot, geom: Geometry, q, base=None) -> jax.Array:
         ``(..., P)``, metres, in ``geom.pairs`` order.
     """
     check_geometry(robot, geom)
-    return _in_steps(lambda q_, base_: _self_distances(robot, geom, q_, base_), q, base)
+    return per_problem(lambda q_, base_, _: _self_distances(robot, geom, q_, base_), q, base, None, last=True)
 
 
 def batch_last(shapes) -> list:
@@ -227,26 +239,52 @@ def world_distances(robot: Robot, geom: Geometry, q, world: World, base=None) ->
 
     Args:
         robot, geom, q, base: as :func:`self_distances`.
-        world: the obstacles (:class:`World`), in the world frame.
+        world: the obstacles (:class:`World`), in the world frame; a world per problem when it has
+            problem axes (:attr:`World.batch`, broadcast with those of ``q``).
 
     Returns:
         ``(..., S, W)``, metres: shapes in :attr:`Geometry.shape_names` order, obstacles in the
-        world's order (spheres, capsules, boxes, half-spaces).
+        world's order (spheres, capsules, boxes, cylinders, convex polytopes, half-spaces).
     """
     check_geometry(robot, geom)
-    if not isinstance(world, World):
-        raise TypeError(f"world: expected a diffkin.collision.World, got {type(world).__name__}")
-    return _in_steps(lambda q_, base_: _world_distances(robot, geom, q_, world, base_), q, base)
+    _check_world(world, required=True)
+    return per_problem(
+        lambda q_, base_, world_: world_of_placed(batch_last(placed(robot, geom, q_, base_)), world_, q_.shape[0]),
+        q,
+        base,
+        world,
+        last=True,
+    )
 
 
-def _world_distances(robot: Robot, geom: Geometry, q, world: World, base) -> jax.Array:
-    """``(S, W, N)`` for ``q (N, dof)``."""
-    return world_of_placed(batch_last(placed(robot, geom, q, base)), world, q.shape[0])
+def _check_world(world, required: bool) -> None:
+    if (world is not None or required) and not isinstance(world, World):
+        expected = "a diffkin.collision.World" + ("" if required else " or None")
+        raise TypeError(f"world: expected {expected}, got {type(world).__name__}")
+
+
+def per_problem(fn, q, base, world: World | None, last: bool = False) -> jax.Array:
+    """``fn(q, base, world)`` of flat configurations ``(N, dof)``, :data:`STEP` at a time when the batch
+    is large (:func:`configurations_in_steps`), with the world of each configuration: a shared one
+    as it is, per-problem ones flattened with the configurations (:func:`obstacles_last` reads both)."""
+    if world is None or not world.batch:
+        return configurations_in_steps(lambda q_, base_: fn(q_, base_, world), q, base, STEP, last, halves=True)
+    return configurations_in_steps(fn, q, base, STEP, last, halves=True, extra=world, extra_batch=world.batch)
+
+
+def obstacles_last(world: World) -> list:
+    """Each kind of obstacles laid out to broadcast against robot shapes ``(n_kind, 1, N, ...)``
+    (:func:`batch_last`, :func:`expanded`): a shared world's ``(n_obstacles, 1, ...)``, a world per
+    configuration (batch ``(N,)``) as ``(n_obstacles, N, ...)``."""
+    if not world.batch:
+        return [expanded(o) for o in world.kinds()]
+    return [_map(o, lambda v, r: jnp.moveaxis(v, 0, 1)) for o in world.kinds()]
 
 
 def world_of_placed(shapes, world: World, n: int) -> jax.Array:
-    """``(S, W, n)`` the distances of shapes placed batch-last (:func:`batch_last`) to the obstacles."""
-    obstacles = [expanded(o) for o in world.kinds()]  # (n_obstacles, 1, ...)
+    """``(S, W, n)`` the distances of shapes placed batch-last (:func:`batch_last`) to the obstacles
+    (:func:`obstacles_last`)."""
+    obstacles = obstacles_last(world)
     blocks = []
     for shape in shapes:
         blocks.append([distance(expanded(shape), o) for o in obstacles])  # (n_kind, n_obstacles, N) each
@@ -254,14 +292,14 @@ def world_of_placed(shapes, world: World, n: int) -> jax.Array:
 
 
 def clearance(robot: Robot, geom: Geometry, q, world: World | None = None, base=None) -> jax.Array:
-    """The smallest signed distance: of the self-collision pairs and, if ``world`` is given, of the shapes to it.
+    """The smallest signed distance: of the self-collision pairs and, if ``world`` is given, of the shapes
+    to it (a world per problem when it has problem axes, as :func:`world_distances`).
 
     Returns:
         ``(...,)``, metres (``inf`` if there is nothing to measure).
     """
     check_geometry(robot, geom)
-    if world is not None and not isinstance(world, World):
-        raise TypeError(f"world: expected a diffkin.collision.World or None, got {type(world).__name__}")
+    _check_world(world, required=False)
     return smallest_distance(robot, geom, q, world, base)
 
 
@@ -270,17 +308,17 @@ def smallest_distance(robot: Robot, geom: Geometry, q, world: World | None, base
 
     One pass per step gives both the self and the world distances, reduced within the step."""
 
-    def smallest(q_, base_):
+    def smallest(q_, base_, world_):
         n = q_.shape[0]
         shapes = batch_last(placed(robot, geom, q_, base_))
         parts = [self_of_placed(geom, shapes, n)] if self_pairs else []
-        if world is not None:
-            parts.append(world_of_placed(shapes, world, n).reshape(-1, n))
+        if world_ is not None:
+            parts.append(world_of_placed(shapes, world_, n).reshape(-1, n))
         if not parts:
             return jnp.full((n,), jnp.inf, q_.dtype)
         return jnp.min(jnp.concatenate(parts, axis=0), axis=0, initial=jnp.inf)
 
-    return configurations_in_steps(smallest, q, base, STEP, halves=True)
+    return per_problem(smallest, q, base, world)
 
 
 __all__ = ["KINDS", "World", "clearance", "self_distances", "world_distances"]

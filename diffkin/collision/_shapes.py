@@ -141,6 +141,14 @@ class Sphere:
         """Coordinates of core points ``p`` that move with the shape (:meth:`point` inverts them)."""
         return jnp.zeros(p.shape[:-1], p.dtype)
 
+    def solid(self) -> Solid:
+        return Solid(
+            _translation(self.center),
+            jnp.zeros(self.radius.shape + (1, 3), self.radius.dtype),
+            0.0 * self.radius,
+            self.radius,
+        )
+
     def moved_by(self, T: jax.Array) -> Sphere:
         """The shape in the outer frame of poses ``T (..., 4, 4)`` (the shape given in their inner frame)."""
         return unchecked(Sphere, center=_apply(T, self.center), radius=self.radius)
@@ -190,6 +198,10 @@ class Capsule:
     def point(self, coords: jax.Array) -> jax.Array:
         return self.a + coords[..., None] * (self.b - self.a)
 
+    def solid(self) -> Solid:
+        c = self.centre()
+        return Solid(_translation(c), jnp.stack([self.a - c, self.b - c], axis=-2), 0.0 * self.radius, self.radius)
+
     def moved_by(self, T: jax.Array) -> Capsule:
         return unchecked(Capsule, a=_apply(T, self.a), b=_apply(T, self.b), radius=self.radius)
 
@@ -234,6 +246,10 @@ class Box:
 
     def point(self, coords: jax.Array) -> jax.Array:
         return _posed_point(self.pose, coords, self.half_extents)
+
+    def solid(self) -> Solid:
+        corners = self.half_extents[..., None, :] * jnp.asarray(_CORNERS, self.half_extents.dtype)
+        return Solid(self.pose, corners, self.rounding(), self.rounding())
 
     def moved_by(self, T: jax.Array) -> Box:
         return unchecked(Box, pose=T @ self.pose, half_extents=self.half_extents)
@@ -292,6 +308,10 @@ class Cylinder:
     def point(self, coords: jax.Array) -> jax.Array:
         return _posed_point(self.pose, coords, self._extents())
 
+    def solid(self) -> Solid:
+        caps = jnp.stack(jnp.broadcast_arrays(0.0 * self.half_length, 0.0 * self.half_length, self.half_length), -1)
+        return Solid(self.pose, jnp.stack([-caps, caps], axis=-2), self.radius, self.rounding())
+
     def moved_by(self, T: jax.Array) -> Cylinder:
         return unchecked(Cylinder, pose=T @ self.pose, radius=self.radius, half_length=self.half_length)
 
@@ -341,6 +361,9 @@ class Convex:
     def point(self, coords: jax.Array) -> jax.Array:
         return jnp.einsum("...ij,...j->...i", self.pose[..., :3, :3], coords) + self.pose[..., :3, 3]
 
+    def solid(self) -> Solid:
+        return Solid(self.pose, self.vertices, self.rounding(), self.rounding())
+
     def moved_by(self, T: jax.Array) -> Convex:
         return unchecked(Convex, pose=T @ self.pose, vertices=self.vertices)
 
@@ -368,6 +391,59 @@ class Plane:
             if np.any(err > _tolerance(self.normal)):
                 bad = tuple(int(i) for i in np.argwhere(err > _tolerance(self.normal))[0])
                 raise ValueError(f"Plane.normal: expected unit vectors, got norm {1 + err[bad]:.6g} at index {bad}")
+
+
+@pytree_dataclass
+class Solid:
+    """Any convex solid in one form, for the general distance of many kinds in one batch
+    (:mod:`diffkin.collision._near`): a core, the convex hull of ``vertices`` plus a disc of radius
+    ``disc`` in the local xy plane (a cylinder's rim), swept by a ball of ``radius``. Each kind's
+    ``solid()`` gives its own; not a shape of the public API.
+
+    Attributes:
+        pose: ``(..., 4, 4)`` rigid pose of the frame of the vertices and the disc.
+        vertices: ``(..., V, 3)`` the core's points in that frame.
+        disc: ``(...,)`` radius of the disc summed with the points' hull (0: none).
+        radius: ``(...,)`` the rounding.
+    """
+
+    pose: jax.Array
+    vertices: jax.Array
+    disc: jax.Array
+    radius: jax.Array
+
+    TRAILING: ClassVar[dict[str, int]] = {"pose": 2, "vertices": 2, "disc": 0, "radius": 0}
+
+    def core_support(self, n: jax.Array) -> jax.Array:
+        R = self.pose[..., :3, :3]
+        m = jnp.einsum("...ji,...j->...i", R, n)
+        scores = jnp.einsum("...vi,...i->...v", self.vertices, m)
+        points = jnp.broadcast_to(self.vertices, scores.shape + (3,))
+        local = jnp.take_along_axis(points, jnp.argmax(scores, axis=-1)[..., None, None], axis=-2)[..., 0, :]
+        rho_sq = m[..., 0] ** 2 + m[..., 1] ** 2
+        ok = rho_sq > 0
+        scale = jnp.where(ok, self.disc / jnp.sqrt(jnp.where(ok, rho_sq, 1.0)), 0.0)
+        rim = jnp.stack([scale * m[..., 0], scale * m[..., 1], jnp.zeros_like(scale)], axis=-1)
+        return jnp.einsum("...ij,...j->...i", R, local + rim) + self.pose[..., :3, 3]
+
+    def rounding(self) -> jax.Array:
+        return self.radius
+
+    def centre(self) -> jax.Array:
+        return self.pose[..., :3, 3]
+
+    def bounding_radius(self) -> jax.Array:
+        return jnp.sqrt(jnp.max(jnp.sum(self.vertices**2, axis=-1), axis=-1)) + self.disc + self.radius
+
+
+#: the corners of the unit box ``[-1, 1]^3``
+_CORNERS = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)])
+
+
+def _translation(p: jax.Array) -> jax.Array:
+    """``(..., 4, 4)`` poses of no rotation at points ``p (..., 3)``."""
+    T = jnp.broadcast_to(jnp.eye(4, dtype=p.dtype), p.shape[:-1] + (4, 4))
+    return T.at[..., :3, 3].set(p)
 
 
 def _apply(T: jax.Array, p: jax.Array) -> jax.Array:

@@ -94,6 +94,34 @@ def test_distances_closed_form(toy):
     np.testing.assert_allclose(c, min(d.min(), w.min()))
 
 
+def test_per_problem_worlds_equal_a_loop_of_single_worlds(toy):
+    """A world with problem axes: problem ``i`` sees only its own obstacles (here 2 spheres and a box
+    each, beside one shared floor), and its distances are those of its world alone (to rounding: two
+    programs, fused differently); configurations ``(3, 5, dof)`` broadcast against problems ``(5,)``."""
+    robot, geom = toy
+    rng = np.random.default_rng(4)
+    n = 5
+    spheres = Sphere(rng.uniform(-0.6, 0.6, (n, 2, 3)), rng.uniform(0.02, 0.1, (n, 2)))
+    T = np.tile(np.eye(4), (n, 1, 1))
+    T[:, :3, 3] = rng.uniform(-0.6, 0.6, (n, 3))
+    boxes = dk.collision.Box(T[:, None], rng.uniform(0.02, 0.1, (n, 1, 3)))  # (n, 1): one box per problem
+    floor = Plane(jnp.array([0.0, 0, 1]), -1.0)
+    world = World(spheres, boxes, floor)
+    assert world.batch == (n,) and world.size == 4
+    q = jnp.asarray(rng.uniform(-2, 2, (3, n, 2)))
+    d, w, c = (np.asarray(x) for x in _distances(robot, geom, q, world))
+    assert w.shape == (3, n, 5, 4) and c.shape == (3, n)
+    for i in range(n):
+        alone = World(
+            Sphere(spheres.center[i], spheres.radius[i]), dk.collision.Box(boxes.pose[i], boxes.half_extents[i]), floor
+        )
+        d_i, w_i, c_i = (np.asarray(x) for x in _distances(robot, geom, q[:, i], alone))
+        for batched, alone in ((w[:, i], w_i), (c[:, i], c_i), (d[:, i], d_i)):
+            np.testing.assert_allclose(batched, alone, rtol=0, atol=1e-15)
+    with pytest.raises(ValueError):
+        dk.collision.world_distances(robot, geom, q[:, :4], world)
+
+
 def test_bad_input():
     robot = dk.load_robot(URDF)
     with pytest.raises(ValueError, match="meshes"):

@@ -26,26 +26,22 @@ import numpy as np
 from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._xla import blocks_joined
-from diffkin.collision._distance import BOUNDED, distance, lower_bound, motion
 from diffkin.collision._geometry import Geometry, moved
+from diffkin.collision._near import near_motions
 from diffkin.collision._robot import (
     World,
     batch_last,
-    batch_shape,
     check_geometry,
     expanded,
-    flattened,
+    obstacles_last,
     pair_blocks,
     smallest_distance,
     take,
-    world_of_placed,
 )
 from diffkin.ik._terms import Rows
 
 #: metres above the margin where the residual starts (a centimetre: the size of a gripper finger).
 BAND = 0.01
-#: the exact motion of box pairs is computed for the near ones only, gathered 1 / NEAR_SHARE of the pairs at a time.
-NEAR_SHARE = 8
 
 
 @pytree_dataclass
@@ -78,6 +74,11 @@ class Avoid:
             raise ValueError(f"Avoid.margin: expected a scalar (metres), got shape {jnp.shape(self.margin)}")
         if concrete and not (np.isfinite(float(self.margin)) and float(self.margin) >= 0):
             raise ValueError(f"Avoid.margin: expected a finite distance >= 0 (metres), got {float(self.margin)}")
+        if self.world is not None and self.world.batch:
+            raise ValueError(
+                f"Avoid.world: a world per problem (problem axes {self.world.batch}) is not accepted by IK yet; "
+                "solve the problems with a world each"
+            )
         if _obstacles(self) is None and not (self.self_collision and len(self.geom.pairs)):
             raise ValueError("Avoid: nothing to keep clear (no obstacles in world and no self-collision pairs)")
 
@@ -95,39 +96,6 @@ class Avoid:
 def _obstacles(avoid: Avoid) -> World | None:
     """The world of ``avoid`` if it has obstacles (at least one shape), else ``None``."""
     return avoid.world if avoid.world is not None and avoid.world.size > 0 else None
-
-
-def _near_motion(a, b, reach: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """:func:`motion` of shapes ``a``, ``b`` (batch axes broadcast to ``B``) where it matters: ``(d, W_a, W_b)``,
-    ``d`` ``B``, the wrenches ``B + (6,)``.
-
-    Box-box and capsule-box pairs (:data:`BOUNDED`) first get a cheap lower bound of their distance
-    (:func:`lower_bound`); where it is at least ``reach`` the residual and its row are zero, so ``d``
-    is that bound and the wrenches are zero. The exact motion is computed for the others only,
-    gathered ``1 / NEAR_SHARE`` of the pairs at a time (no step when none is near, one when few are,
-    up to ``NEAR_SHARE``): one traced :func:`motion` serves every case, which XLA compiles once. The
-    other kinds' motion is as cheap as a bound: computed for every pair.
-    """
-    batch = tuple(jnp.broadcast_shapes(batch_shape(a), batch_shape(b)))
-    if (type(a), type(b)) not in BOUNDED:
-        d, Wa, Wb = motion(a, b)
-        return jnp.broadcast_to(d, batch), jnp.broadcast_to(Wa, batch + (6,)), jnp.broadcast_to(Wb, batch + (6,))
-    total = int(np.prod(batch))
-    a, b = (flattened(s, batch) for s in (a, b))
-    bound = lower_bound(a, b)
-    budget = -(-total // NEAR_SHARE)
-
-    def step(state):
-        left, d, Wa, Wb = state
-        idx = jnp.nonzero(left, size=budget, fill_value=total)[0]
-        safe = jnp.minimum(idx, total - 1)
-        measured = motion(take(a, safe), take(b, safe))
-        put = lambda x, value: x.at[idx].set(value, mode="drop")  # noqa: E731
-        return put(left, False), *(put(x, m) for x, m in zip((d, Wa, Wb), measured, strict=True))
-
-    zero = jnp.zeros((total, 6), bound.dtype)
-    _, d, Wa, Wb = jax.lax.while_loop(lambda state: jnp.any(state[0]), step, (bound < reach, bound, zero, zero))
-    return d.reshape(batch), Wa.reshape(batch + (6,)), Wb.reshape(batch + (6,))
 
 
 def _world_wrench(w_world: list, coef: jax.Array) -> jax.Array:
@@ -175,40 +143,31 @@ class AvoidTerm:
 
     def _measure(self, kin, avoid: Avoid, jacobian: bool = False):
         """The self pairs' blocks (:func:`pair_blocks`) with their distances ``(n_pairs, P)`` each and the
-        world distances ``(S, W, P)`` at the state; with ``jacobian``, also the wrenches of the self
-        pairs' two sides ``(n_pairs, P, 6)`` and of the robot shapes against each obstacle kind
-        (``[[(n_kind, n_obstacles, P, 6)]]``), and distances that are exact only below the reach
-        (:func:`_near_motion`)."""
+        world distances ``(S, W, P)`` at the state, exact below the reach ``margin + BAND`` and lower
+        bounds above it (:func:`near_motions`); with ``jacobian``, also the wrenches of the self pairs'
+        two sides ``(n_pairs, P, 6)`` and of the robot shapes against each obstacle kind
+        (``[[(n_kind, n_obstacles, P, 6)]]``)."""
         T = rg.to_matrices([kin.pose(f) for f in self.frames], kin.shape, kin.dtype)  # (P, F, 4, 4)
         shapes = batch_last(moved(avoid.geom, T, self.slots))  # each kind (n_kind, P, ...)
         blocks = pair_blocks(avoid.geom) if self.self_collision else []
         world = _obstacles(avoid)
-        reach = avoid.margin + BAND
         n = kin.shape[0]
-        d_self, w_self, w_world, d_world = [], [], [], None
-        for _, ka, kb, ia, ib in blocks:
-            a, b = take(shapes[ka], ia), take(shapes[kb], ib)
-            if jacobian:
-                d, Wa, Wb = _near_motion(a, b, reach)
-                w_self.append((Wa, Wb))
-            d_self.append(jnp.broadcast_to(d if jacobian else distance(a, b), (len(ia), n)))
-        if world is not None and jacobian:
-            d_blocks = []
-            for shape in shapes:
-                row_d, row_w = [], []
-                for obstacle in world.kinds():
-                    d, W, _ = _near_motion(expanded(shape), expanded(obstacle), reach)  # (n_kind, n_obstacles, P)
-                    row_d.append(d)
-                    row_w.append(W)
-                d_blocks.append(row_d)
-                w_world.append(row_w)
-            d_world = blocks_joined(d_blocks, n)
-        elif world is not None:
-            d_world = world_of_placed(shapes, world, n)
+        pairs = [(take(shapes[ka], ia), take(shapes[kb], ib)) for _, ka, kb, ia, ib in blocks]
+        if world is not None:  # each robot kind against each obstacle kind: (n_kind, n_obstacles, P)
+            pairs += [(expanded(shape), obstacles) for shape in shapes for obstacles in obstacles_last(world)]
+        measured = near_motions(pairs, avoid.margin + BAND)
+        d_self = [d for d, _, _ in measured[: len(blocks)]]
+        w_self = [(Wa, Wb) for _, Wa, Wb in measured[: len(blocks)]] if jacobian else []
+        d_world, w_world = None, []
+        if world is not None:
+            per_kind = len(world.kinds())
+            rows = [measured[len(blocks) + k * per_kind : len(blocks) + (k + 1) * per_kind] for k in range(len(shapes))]
+            d_world = blocks_joined([[d for d, _, _ in row] for row in rows], n)
+            w_world = [[Wa for _, Wa, _ in row] for row in rows] if jacobian else []
         return blocks, d_self, d_world, w_self, w_world
 
     def clearance(self, kin, avoid: Avoid) -> jax.Array:
-        """``(P,)`` the smallest checked distance (exact)."""
+        """``(P,)`` the smallest checked distance: exact below ``margin + BAND``, a lower bound above it."""
         _, d_self, d_world, _, _ = self._measure(kin, avoid)
         d = d_self + ([] if d_world is None else [d_world.reshape(-1, kin.shape[0])])
         return jnp.min(jnp.concatenate(d), axis=0)

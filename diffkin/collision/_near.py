@@ -1,0 +1,152 @@
+"""Distances and their motions for many shape pairs, exact where they are near: what a solver needs.
+
+A solver that keeps shapes ``reach`` apart needs each pair's distance exactly only below ``reach``
+(above it the pair exerts nothing). So every pair of the kinds whose distance is dear
+(:data:`diffkin.collision._distance.BOUNDED`: box-box, capsule-box and the general pairs) first gets
+a cheap lower bound (:func:`diffkin.collision._distance.lower_bound`); where it is at least ``reach``
+that bound stands for the distance and the motion is zero. The exact work is gathered for the
+others, ``1 / NEAR_SHARE`` of the pairs at a time (no step when none is near, one when few are): one
+traced computation serves every case, which XLA compiles once.
+
+The general pairs (:mod:`diffkin.collision._gjk`) of every kind are joined into one batch, each
+shape in the one form :class:`diffkin.collision._shapes.Solid`: one GJK per call rather than one per
+pair of kinds (a robot of boxes and polytopes among boxes and cylinders has five), which is what
+XLA's compile time and the batch's work grow with.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffkin.collision import _gjk
+from diffkin.collision._distance import BOUNDED, GENERAL, lower_bound, motion
+
+#: the exact motion of the near pairs is computed for 1 / NEAR_SHARE of the pairs at a time.
+NEAR_SHARE = 8
+
+
+def _batch(shape) -> tuple[int, ...]:
+    fields = type(shape).TRAILING
+    return jnp.broadcast_shapes(*(jnp.shape(v)[: jnp.ndim(v) - fields[k]] for k, v in _fields(shape).items()))
+
+
+def _fields(shape) -> dict[str, jax.Array]:
+    return {name: getattr(shape, name) for name in type(shape).TRAILING}
+
+
+def _taken(shape, batch: tuple[int, ...], idx: jax.Array):
+    """The entries ``idx`` (flat indices of the broadcast ``batch``) of every field of ``shape``, read
+    without broadcasting the fields first (a robot's polytope vertices are not copied per pair)."""
+    multi = jnp.unravel_index(idx, batch) if batch else ()
+    out = {}
+    for name, v in _fields(shape).items():
+        r = type(shape).TRAILING[name]
+        own = (1,) * (len(batch) - (jnp.ndim(v) - r)) + jnp.shape(v)[: jnp.ndim(v) - r]
+        flat = jnp.zeros_like(idx)
+        for m, size in zip(multi, own, strict=True):
+            flat = flat * size + (m if size > 1 else 0)
+        tail = jnp.shape(v)[jnp.ndim(v) - r :]
+        out[name] = jnp.reshape(v, (int(np.prod(own)),) + tail)[flat]
+    obj = object.__new__(type(shape))
+    for name, value in out.items():
+        object.__setattr__(obj, name, value)
+    return obj
+
+
+def _wrench(n: jax.Array, p: jax.Array) -> jax.Array:
+    """``(..., 6)``: ``[n; p x n]``."""
+    return jnp.concatenate([n, jnp.cross(p, n)], axis=-1)
+
+
+def _gathered(bound: jax.Array, reach, measure) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """``(d, W_a, W_b)`` of ``M`` pairs, ``(M,)``, ``(M, 6)`` twice: ``measure(idx)`` (the exact distance and
+    wrenches of the pairs ``idx``) where ``bound < reach``, else the bound and zero wrenches."""
+    total = bound.shape[0]
+    budget = -(-total // NEAR_SHARE)
+
+    def step(state):
+        left, d, Wa, Wb = state
+        idx = jnp.nonzero(left, size=budget, fill_value=total)[0]
+        measured = measure(jnp.minimum(idx, total - 1))
+        put = lambda x, value: x.at[idx].set(value, mode="drop")  # noqa: E731
+        return put(left, False), *(put(x, m) for x, m in zip((d, Wa, Wb), measured, strict=True))
+
+    zero = jnp.zeros((total, 6), bound.dtype)
+    _, d, Wa, Wb = jax.lax.while_loop(lambda state: jnp.any(state[0]), step, (bound < reach, bound, zero, zero))
+    return d, Wa, Wb
+
+
+def _padded(solid, size: int):
+    """``solid`` with its vertices padded to ``size`` by repeating the first (the hull is unchanged)."""
+    v = solid.vertices
+    extra = jnp.broadcast_to(v[..., :1, :], v.shape[:-2] + (size - v.shape[-2], 3))
+    return solid.replace(vertices=jnp.concatenate([v, extra], axis=-2))
+
+
+def _general(pairs: list, batches: list, reach) -> list[tuple[jax.Array, jax.Array, jax.Array]]:
+    """The general pairs of every kind in one gathered batch (the module docstring)."""
+    sizes = [int(np.prod(b)) for b in batches]
+    starts = np.cumsum([0, *sizes])
+    bound = jnp.concatenate(
+        [jnp.broadcast_to(lower_bound(a, b), batch).reshape(-1) for (a, b), batch in zip(pairs, batches, strict=True)]
+    )
+    solids = [(a.solid(), b.solid()) for a, b in pairs]
+    width = max(s.vertices.shape[-2] for pair in solids for s in pair)
+
+    def measure(idx):
+        block = jnp.searchsorted(jnp.asarray(starts[1:-1]), idx, side="right")
+        sides = None
+        for k, ((sa, sb), batch) in enumerate(zip(solids, batches, strict=True)):
+            local = jnp.clip(idx - starts[k], 0, sizes[k] - 1)
+            taken = tuple(_padded(_taken(s, batch, local), width) for s in (sa, sb))
+            if sides is None:
+                sides = taken
+            else:
+                here = block == k
+                sides = jax.tree.map(
+                    lambda new, old, here=here: jnp.where(here.reshape(here.shape + (1,) * (new.ndim - 1)), new, old),
+                    taken,
+                    sides,
+                )
+        a, b = sides
+        n, pa, pb, s = _gjk.witnesses(a, b)
+        return s - a.radius - b.radius, _wrench(-n, pa), _wrench(n, pb)
+
+    d, Wa, Wb = _gathered(bound, reach, measure)
+    return [
+        (d[i:j].reshape(batch), Wa[i:j].reshape(batch + (6,)), Wb[i:j].reshape(batch + (6,)))
+        for i, j, batch in zip(starts[:-1], starts[1:], batches, strict=True)
+    ]
+
+
+def near_motions(pairs: list, reach) -> list[tuple[jax.Array, jax.Array, jax.Array]]:
+    """Per pair of shape batches ``(a, b)`` (their batch axes broadcast to ``B``): ``(d, W_a, W_b)``, ``d`` ``B``
+    and the wrenches ``B + (6,)`` of :func:`diffkin.collision._distance.motion`, exact where the
+    distance is below ``reach``; elsewhere ``d`` is a lower bound at least ``reach`` and the wrenches
+    are zero (the module docstring)."""
+    batches = [tuple(jnp.broadcast_shapes(_batch(a), _batch(b))) for a, b in pairs]
+    out: list = [None] * len(pairs)
+    general = [k for k, (a, b) in enumerate(pairs) if (type(a), type(b)) in GENERAL and np.prod(batches[k]) > 0]
+    if general:
+        joined = _general([pairs[k] for k in general], [batches[k] for k in general], reach)
+        for k, result in zip(general, joined, strict=True):
+            out[k] = result
+    for k, ((a, b), batch) in enumerate(zip(pairs, batches, strict=True)):
+        if out[k] is not None:
+            continue
+        if not np.prod(batch):  # no pairs (e.g. a world without obstacles of one kind)
+            dtype = jnp.result_type(*jax.tree.leaves((a, b)))
+            d, Wa, Wb = jnp.zeros(batch, dtype), jnp.zeros(batch + (6,), dtype), jnp.zeros(batch + (6,), dtype)
+        elif (type(a), type(b)) not in BOUNDED:
+            d, Wa, Wb = motion(a, b)  # as cheap as a bound
+        else:
+            d, Wa, Wb = _gathered(
+                jnp.broadcast_to(lower_bound(a, b), batch).reshape(-1),
+                reach,
+                lambda idx, a=a, b=b, batch=batch: motion(_taken(a, batch, idx), _taken(b, batch, idx)),
+            )
+            d, Wa, Wb = d.reshape(batch), Wa.reshape(batch + (6,)), Wb.reshape(batch + (6,))
+        out[k] = (jnp.broadcast_to(d, batch), *(jnp.broadcast_to(W, batch + (6,)) for W in (Wa, Wb)))
+    return out
