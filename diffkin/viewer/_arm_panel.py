@@ -5,7 +5,6 @@ moving the slider or the dropdown moves the arm along its self-motion."""
 from __future__ import annotations
 
 import itertools
-from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -13,10 +12,7 @@ import numpy as np
 import viser
 
 import diffkin as dk
-from diffkin.viewer._gui import shown
-
-if TYPE_CHECKING:
-    from diffkin.viewer._viewer import Viewer
+from diffkin.viewer._gui import Page, shown
 
 GC_OPTIONS = tuple(" ".join(f"{s:+d}" for s in signs) for signs in itertools.product((1, -1), repeat=3))
 
@@ -36,7 +32,7 @@ def _intervals_text(intervals: np.ndarray, mask: np.ndarray) -> str:
 
 
 class ArmPanel:
-    """The arm-angle controls of a :class:`~diffkin.viewer._viewer.Viewer` showing an iiwa.
+    """The arm-angle controls of a :class:`~diffkin.viewer._viewer.Viewer` showing an iiwa, on its page.
 
     Attributes:
         psi_slider: the arm angle, radians.
@@ -44,15 +40,15 @@ class ArmPanel:
         srs_status: the feasible arm-angle intervals of the flange pose and configuration.
     """
 
-    def __init__(self, viewer: Viewer, arm) -> None:
-        self.viewer = viewer
+    def __init__(self, page: Page, arm) -> None:
+        self.page = page
         chain = arm.chain()
         self._fk = jax.jit(lambda q: dk.fk(chain, q))
         self._ik = jax.jit(lambda T, psi, gc: dk.srs.ik(arm, T, psi, gc))
         self._angle = jax.jit(lambda q: dk.srs.arm_angle(arm, q))
         self._feasible = jax.jit(lambda T, gc: dk.srs.feasible_arm_angles(arm, T, gc))
         self._flange = None
-        gui = viewer.server.gui
+        gui = page.gui
         with gui.add_folder("Arm angle (iiwa)") as self._folder:
             self.psi_slider = gui.add_slider("arm angle psi", min=-np.pi, max=np.pi, step=1e-3, initial_value=0.0)
             self.srs_status = gui.add_markdown("")
@@ -61,7 +57,7 @@ class ArmPanel:
 
         @self.psi_slider.on_update
         def _(_event) -> None:
-            if not viewer._quiet:
+            if not page.quiet:
                 self.set_arm_angle(self.psi_slider.value)
 
     def _show_gc(self, text: str) -> None:
@@ -74,7 +70,7 @@ class ArmPanel:
         if old is not None and old.value == text:
             return
         with self._folder:
-            dropdown = self.viewer.server.gui.add_dropdown(
+            dropdown = self.page.gui.add_dropdown(
                 "gc (signs q2 q4 q6)", GC_OPTIONS, initial_value=text, order=None if old is None else old.order
             )
         self.gc_dropdown = dropdown
@@ -83,7 +79,7 @@ class ArmPanel:
 
         @dropdown.on_update
         def _(_event) -> None:
-            if not self.viewer._quiet:
+            if not self.page.quiet:
                 self.set_arm_angle(self.psi_slider.value, _signs(dropdown.value), nearest=True)
 
     def sync(self, q: np.ndarray) -> None:
@@ -105,8 +101,7 @@ class ArmPanel:
 
     def set_arm_angle(self, psi: float, gc=None, *, nearest: bool = False) -> bool:
         """:meth:`Viewer.set_arm_angle <diffkin.viewer._viewer.Viewer.set_arm_angle>`."""
-        viewer = self.viewer
-        with viewer._lock:
+        with self.page.lock:
             if gc is None and self.gc_dropdown is not None:  # (always built with the panel)
                 gc = _signs(self.gc_dropdown.value)
             gc = np.asarray(gc, dtype=np.float64)
@@ -116,14 +111,11 @@ class ArmPanel:
                 clipped = np.clip(psi, feasible[:, 0], feasible[:, 1])
                 psi = float(clipped[np.argmin(np.abs(clipped - psi))])
                 q, valid = self._ik(self._flange, psi, jnp.asarray(gc))
-            viewer._quiet = True
-            try:
+            with self.page.quietly():
                 self.psi_slider.value = shown(psi)  # type: ignore[misc]  # viser's stub: read-only; its API sets it
                 self._show_gc(_gc_text(gc))
-            finally:
-                viewer._quiet = False
             if not bool(valid):
                 self.srs_status.content += "  \n**no solution within the joint limits at this arm angle**"
                 return False
-            viewer._apply(np.asarray(q, dtype=np.float64), source="srs")
+            self.page.show(np.asarray(q, dtype=np.float64), source="srs")
             return True

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import string
 import threading
 from collections.abc import Sequence
 from typing import Any
@@ -18,42 +17,25 @@ from diffkin._npz import read_npz
 from diffkin.collision._robot import check_geometry
 from diffkin.viewer import _overlays, _visuals
 from diffkin.viewer._arm_panel import ArmPanel
-from diffkin.viewer._gui import shown
+from diffkin.viewer._gui import Page, node, plain, shown
 from diffkin.viewer._model import kinematics, make_ik, make_ik_avoiding
+from diffkin.viewer._panels import (
+    FPS_RANGE,
+    DisplayPanel,
+    JointPanel,
+    MapPanel,
+    ObstaclePanel,
+    ResultsPanel,
+    TargetPanel,
+)
 from diffkin.viewer._results import check_results, describe
 
 IIWA_READY = np.array([0.0, 0.5, 0.0, -1.2, 0.0, 0.7, 0.0])  # a bent pose: the arm angle is defined
 _ARM_NAMES = ("iiwa7", "iiwa14")
 BUILTIN = dk.robots.BUILTIN
-FPS_RANGE = (0.1, 1000.0)  # playback rates of batch results, results per second
-
-
-_MARKDOWN_ESCAPES = {
-    **{c: "\\" + c for c in string.punctuation},  # CommonMark: any ASCII punctuation escapes with a backslash
-    "&": "&amp;",
-    "<": "&lt;",
-    ">": "&gt;",
-    **{c: " " for c in "\n\r\t\f\v"},  # one line: no block structure
-}
 
 
 CLEAR, NEAR = (70, 130, 220), (230, 50, 40)  # a robot's collision shape: clear of everything, within the margin
-
-
-def _plain(text: str) -> str:
-    """``text`` (a name or path from a file or the command line) as Markdown that shows it verbatim.
-
-    viser renders Markdown with raw HTML and its server reads the file of an image ``![x](path)``
-    into the page: every ASCII punctuation character is escaped (``<``, ``>``, ``&`` as HTML
-    entities), so the text forms no tag, link, image, code span or emphasis.
-    """
-    return "".join(_MARKDOWN_ESCAPES.get(c, c) for c in str(text))
-
-
-def _node(name: str) -> str:
-    """A frame name as one scene-tree path component, one-to-one: ``%`` and ``/`` percent-encoded
-    (``arm/base`` is ``arm%2Fbase``, apart from ``arm_base``), the empty name ``%``."""
-    return name.replace("%", "%25").replace("/", "%2F") or "%"
 
 
 def _wxyz(R: np.ndarray) -> np.ndarray:
@@ -98,13 +80,16 @@ class Viewer:
         visuals: ``{frame name: [mesh handles]}`` of the meshes and primitives drawn.
         missing: mesh references that could not be found or read (not drawn; "Show skeleton"
             draws every link as a cylinder).
-        sliders: one slider per joint, in ``q`` order.
-        targets: ``{end frame: TransformControlsHandle}``.
         ik_results: ``{end frame: last IKResult}`` (numpy fields).
         results: the batch results browsed, ``{field: array}`` as checked, or ``None``.
         result_index: the batch result shown last (``None`` before the first).
-        play_fps, play_loop, play_button: the "Batch results" playback controls (with results).
         arm: the ``dk.srs.SRSArm`` driving the arm-angle controls, or ``None``.
+        display_panel, joint_panel, target_panel: the page's folders (``diffkin.viewer._panels``) of what is
+            drawn, the joint sliders (``joint_panel.sliders``, in ``q`` order) and the IK gizmos
+            (``target_panel.targets``: ``{end frame: TransformControlsHandle}``).
+        obstacle_panel, map_panel, results_panel, arm_panel: the folders of the obstacles (with ``avoid``),
+            the workspace map, the batch results (``results_panel.play_fps``, ``play_loop``,
+            ``play_button``: the playback) and the arm angle, each ``None`` without what it shows.
         avoid: the ``dk.ik.Avoid`` every drag is solved with (the whole robot, clear of its obstacles
             by its margin), or ``None`` (the chain of the dragged frame, no collision check).
         obstacles: ``{scene path: handle}`` of the obstacles drawn (empty without ``avoid``).
@@ -133,8 +118,6 @@ class Viewer:
         self.arm = arm
         self.avoid = _checked_avoid(avoid, model)
         self.clearance = float("inf")
-        self._lock = threading.RLock()
-        self._quiet = False
         self._key = jax.random.key(0)
         self._ik: dict[str, tuple] = {}
         self._num_seeds = num_seeds
@@ -154,6 +137,7 @@ class Viewer:
 
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.url = f"http://{host}:{self.server.get_port()}"
+        self._page = Page(self.server.gui, self._apply)
         poses = np.asarray(self.kin.poses(jnp.asarray(self.q)), dtype=np.float64)
         origins = poses[:, :3, 3]
         if self.results is not None and "base" in self.results:  # the scene spans the root poses too
@@ -192,7 +176,7 @@ class Viewer:
         axes = 0.08 * size
         for name in names:
             self.frames[name] = scene.add_frame(
-                f"/robot/{_node(name)}", show_axes=True, axes_length=axes, axes_radius=axes / 25
+                f"/robot/{node(name)}", show_axes=True, axes_length=axes, axes_radius=axes / 25
             )
         for k, visual in enumerate(visuals):
             if visual.frame not in self.frames:
@@ -203,7 +187,7 @@ class Viewer:
                 continue
             has_meshes = True
             handle = scene.add_mesh_trimesh(
-                f"/robot/{_node(visual.frame)}/visual{k}",
+                f"/robot/{node(visual.frame)}/visual{k}",
                 mesh,
                 position=visual.T_frame_visual[:3, 3],
                 wxyz=_wxyz(visual.T_frame_visual[:3, :3]),
@@ -216,11 +200,11 @@ class Viewer:
         for f, parent in enumerate(self.kin.frame_parents):
             name = names[f]
             self.joint_spheres[name] = scene.add_icosphere(
-                f"/robot/{_node(name)}/joint", radius=radius * 1.3, color=(240, 140, 40), visible=not has_meshes
+                f"/robot/{node(name)}/joint", radius=radius * 1.3, color=(240, 140, 40), visible=not has_meshes
             )
             if parent >= 0:
                 self.skeleton[name] = scene.add_cylinder(
-                    f"/skeleton/{_node(name)}", radius=radius, height=1.0, color=(120, 130, 150), visible=not has_meshes
+                    f"/skeleton/{node(name)}", radius=radius, height=1.0, color=(120, 130, 150), visible=not has_meshes
                 )
         self._lengths = {name: 1.0 for name in self.skeleton}
         for frame in self.frames.values():
@@ -237,7 +221,7 @@ class Viewer:
         :meth:`_colour_collision`; :attr:`shape_gaps` the distance of each to whatever it is checked against."""
         avoid, model = self.avoid, self.model
         geom = avoid.geom
-        paths = [f"/robot/{_node(link)}/collision{k}" for k, link in enumerate(geom.shape_links)]
+        paths = [f"/robot/{node(link)}/collision{k}" for k, link in enumerate(geom.shape_links)]
         index = {path: k for k, path in enumerate(paths)}
         self.collision = [[] for _ in paths]
         for shape in _overlays.shape_primitives(geom.shapes, paths):
@@ -310,181 +294,61 @@ class Viewer:
     # ------------------------------------------------------------------------------------- gui
 
     def _build_gui(self, workspace_map) -> None:
-        gui = self.server.gui
+        page, scene = self._page, self.server.scene
         name = getattr(self.model, "name", "") or type(self.model).__name__
-        gui.add_markdown(f"**{_plain(name)}**: {self.kin.dof} joints, {len(self.kin.frame_names)} frames")
-        with gui.add_folder("Display"):
-            self.show_frames = gui.add_checkbox("Show frames", initial_value=not self.has_meshes)
-            self.show_skeleton = gui.add_checkbox("Show skeleton", initial_value=not self.has_meshes)
-            self.show_meshes = gui.add_checkbox("Show meshes", initial_value=True, visible=self.has_meshes)
-
-        @self.show_frames.on_update
-        def _(_event) -> None:
-            for handle in self.frames.values():
-                handle.show_axes = self.show_frames.value
-
-        @self.show_skeleton.on_update
-        def _(_event) -> None:
-            for handle in (*self.skeleton.values(), *self.joint_spheres.values()):
-                handle.visible = self.show_skeleton.value
-
-        @self.show_meshes.on_update
-        def _(_event) -> None:
-            for handles in self.visuals.values():
-                for handle in handles:
-                    handle.visible = self.show_meshes.value
-
-        with gui.add_folder("Joints"):
-            self.sliders = []
-            for i, joint in enumerate(self.kin.joint_names):
-                lo, hi = float(self.kin.lower[i]), float(self.kin.upper[i])
-                slider = gui.add_slider(joint, min=lo, max=hi, step=1e-3, initial_value=shown(self.q[i]))
-
-                def moved(_event, i: int = i) -> None:
-                    self._on_slider(i)
-
-                slider.on_update(moved)
-                self.sliders.append(slider)
-            reset = gui.add_button("Reset to zero")
-            reset.on_click(lambda _event: self.set_q(np.zeros(self.kin.dof)))
-
-        self.targets = {}
-        self.ik_status = {}
-        with gui.add_folder("IK targets"):
-            gui.add_markdown("Drag a gizmo: IK from the current configuration (LM, warm start).")
-            for end in self.kin.ends:
-                self.ik_status[end] = gui.add_markdown(f"{_plain(end)}: not solved yet")
-                gizmo = self.server.scene.add_transform_controls(f"/targets/{_node(end)}", scale=0.18 * self.size)
-
-                def dragged(_event, end: str = end) -> None:
-                    self._on_gizmo(end)
-
-                gizmo.on_update(dragged)
-                self.targets[end] = gizmo
+        page.gui.add_markdown(f"**{plain(name)}**: {self.kin.dof} joints, {len(self.kin.frame_names)} frames")
+        self.display_panel = DisplayPanel(
+            page, self.frames, self.skeleton, self.joint_spheres, self.visuals, self.has_meshes
+        )
+        self.joint_panel = JointPanel(
+            page, self.kin, self.q, self._on_slider, lambda: self.set_q(np.zeros(self.kin.dof))
+        )
+        self.target_panel = TargetPanel(page, scene, self.kin.ends, 0.18 * self.size, self._on_gizmo)
         self._pending = dict.fromkeys(self.kin.ends, False)
         self._solving = threading.Lock()
-
+        self.obstacle_panel = None
         if self.avoid is not None:
             avoid, model = self.avoid, self.model
             self._clearance = jax.jit(lambda q, base: avoid.clearance(model, q, base))
-            world = avoid.world
-            sizes = (
-                {}
-                if world is None
-                else {
-                    "spheres": world.spheres.radius,
-                    "capsules": world.capsules.radius,
-                    "boxes": world.boxes.half_extents,
-                    "cylinders": world.cylinders.radius,
-                    "convex polytopes": world.convexes.pose,
-                    "planes": world.planes.offset,
-                }
-            )
-            counts = ", ".join(f"{len(v)} {name}" for name, v in sizes.items() if len(v))
-            with gui.add_folder("Obstacles"):
-                gui.add_markdown(
-                    f"{counts or 'no obstacles'}; self-collision {'on' if avoid.self_collision else 'off'}; "
-                    "every drag is solved clear of them by the margin (the whole robot moves)."
-                )
-                self.clearance_status = gui.add_markdown("")
-                self.show_obstacles = gui.add_checkbox("Show obstacles", initial_value=True)
-                self.show_collision = gui.add_checkbox("Show the robot's collision shapes", initial_value=False)
-                gui.add_markdown("Red: within the margin of an obstacle or of a link it is checked against.")
-
-            @self.show_collision.on_update
-            def _(_event) -> None:
-                for handles in self.collision:
-                    for handle in handles:
-                        handle.visible = self.show_collision.value
-
-            @self.show_obstacles.on_update
-            def _(_event) -> None:
-                for handle in self.obstacles.values():
-                    handle.visible = self.show_obstacles.value
-
-        self.arm_panel = None if self.arm is None else ArmPanel(self, self.arm)
-
-        self.map = workspace_map
-        if workspace_map is not None:
-            with gui.add_folder("Workspace map"):
-                self.show_map = gui.add_checkbox("Show map", initial_value=True)
-                self.map_quantity = gui.add_dropdown("colour", _overlays.QUANTITIES, initial_value="counts")
-                reached = int((np.asarray(workspace_map.counts) > 0).sum())
-                gui.add_markdown(
-                    f"{reached} reached voxels of {float(workspace_map.voxel_size):g} m, "
-                    f"{int(workspace_map.n_samples)} samples"
-                )
-            self._draw_map()
-            self.show_map.on_update(lambda _event: setattr(self.map_cloud, "visible", self.show_map.value))
-            self.map_quantity.on_update(lambda _event: self._draw_map())
-
+            self.obstacle_panel = ObstaclePanel(page, avoid, self.obstacles, self.collision)
+        self.arm_panel = None if self.arm is None else ArmPanel(page, self.arm)
+        self.map_panel = None if workspace_map is None else MapPanel(page, scene, workspace_map)
+        self.results_panel = None
         if self.results is not None:
-            n = len(self.results["q"])
-            with gui.add_folder("Batch results"):
-                self.result_slider = gui.add_slider("result", min=0, max=max(n - 1, 1), step=1, initial_value=0)
-                self.play_fps = gui.add_number(
-                    "frames per second", initial_value=10.0, min=FPS_RANGE[0], max=FPS_RANGE[1], step=0.1
-                )
-                self.play_loop = gui.add_checkbox("Loop", initial_value=True)
-                self.play_button = gui.add_button("Play")
-                self.result_status = gui.add_markdown(f"{n} configurations")
-
-            @self.result_slider.on_update
-            def _(_event) -> None:
-                if not self._quiet:
-                    self.show_result(int(self.result_slider.value))
-
-            @self.play_button.on_click
-            def _(_event) -> None:
-                if self.playing:
-                    self.pause()
-                else:
-                    self.play()
-
-    def _draw_map(self) -> None:
-        points, colors = _overlays.map_points(self.map, self.map_quantity.value)
-        self.map_cloud = self.server.scene.add_point_cloud(
-            "/map",
-            points,
-            colors,
-            point_size=0.6 * float(self.map.voxel_size),
-            point_shape="rounded",
-            precision="float32",
-            visible=self.show_map.value,
-        )
+            self.results_panel = ResultsPanel(
+                page, len(self.results["q"]), self.show_result, lambda: self.pause() if self.playing else self.play()
+            )
 
     # ------------------------------------------------------------------------------------- state
 
     def _apply(self, q: np.ndarray, source) -> None:
         """Show ``q``: scene, sliders, gizmos (all but the one dragged), arm angle (unless it moved the arm)."""
-        with self._lock:
+        with self._page.lock:
             self.q = np.asarray(q, dtype=np.float64).copy()
             poses = self.T_world_root @ np.asarray(self.kin.poses(jnp.asarray(self.q)), dtype=np.float64)
             self._update_scene(poses)
-            self._quiet = True
-            try:
+            with self._page.quietly():
                 if source != "slider":
-                    for slider, value in zip(self.sliders, self.q, strict=True):
+                    for slider, value in zip(self.joint_panel.sliders, self.q, strict=True):
                         slider.value = shown(value)  # type: ignore[misc]  # viser's stub: read-only; its API sets it
-                for end, gizmo in self.targets.items():
+                for end, gizmo in self.target_panel.targets.items():
                     if source != ("gizmo", end):
                         f = self.kin.frame_names.index(end)
                         gizmo.position, gizmo.wxyz = poses[f, :3, 3], _wxyz(poses[f, :3, :3])
                 if self.arm_panel is not None and source != "srs":
                     self.arm_panel.sync(self.q)
-                if self.avoid is not None:
+                if self.obstacle_panel is not None:  # (with avoid)
                     self.clearance = float(self._clearance(jnp.asarray(self.q), jnp.asarray(self.T_world_root)))
-                    self.clearance_status.content = _clearance_text(self.clearance, float(self.avoid.margin))
+                    margin = float(self.avoid.margin)
+                    self.obstacle_panel.clearance_status.content = _clearance_text(self.clearance, margin)
                     self._colour_collision()
-            finally:
-                self._quiet = False
 
     def _on_slider(self, i: int) -> None:
-        if self._quiet:
+        if self._page.quiet:
             return
-        with self._lock:
+        with self._page.lock:
             q = self.q.copy()
-            q[i] = float(self.sliders[i].value)
+            q[i] = float(self.joint_panel.sliders[i].value)
             self._apply(q, source="slider")
 
     def set_q(self, q) -> None:
@@ -528,7 +392,7 @@ class Viewer:
         obstacles by the margin (``success`` needs it; ``res.clearance``). Returns the
         ``IKResult`` (numpy fields; poses in the root frame).
         """
-        with self._lock:
+        with self._page.lock:
             res, index = self._run_ik(end, np.asarray(T, dtype=np.float64), self.q)
             res = jax.tree.map(np.asarray, res)
             q = self.q.copy()
@@ -537,8 +401,8 @@ class Viewer:
             self.ik_results[end] = res
             mark = "✓ solved" if bool(res.success) else "✗ not reached (best shown)"
             clear = "" if self.avoid is None else f", clearance {float(res.clearance):.4f} m"
-            self.ik_status[end].content = (
-                f"{_plain(end)}: {mark}, pos err {float(res.pos_err):.2e} m, "
+            self.target_panel.ik_status[end].content = (
+                f"{plain(end)}: {mark}, pos err {float(res.pos_err):.2e} m, "
                 f"rot err {float(res.rot_err):.2e} rad{clear}, {int(res.iters)} iters"
             )
         return res
@@ -546,7 +410,7 @@ class Viewer:
     def move_target(self, end: str, T) -> object:
         """Move the gizmo of ``end`` to ``T (4, 4)`` and solve, as a drag in the browser does."""
         T = np.asarray(T, dtype=np.float64)
-        gizmo = self.targets[end]
+        gizmo = self.target_panel.targets[end]
         gizmo.position, gizmo.wxyz = T[:3, 3], _wxyz(T[:3, :3])
         return self.solve_ik(end, _pose(gizmo.position, gizmo.wxyz))
 
@@ -558,7 +422,7 @@ class Viewer:
         try:
             while self._pending[end]:
                 self._pending[end] = False
-                gizmo = self.targets[end]
+                gizmo = self.target_panel.targets[end]
                 self.solve_ik(end, _pose(gizmo.position, gizmo.wxyz))
         finally:
             self._solving.release()
@@ -582,24 +446,22 @@ class Viewer:
 
     # ------------------------------------------------------------------------------------- results
 
-    def _checked_results(self, what: str) -> dict[str, np.ndarray]:
-        if self.results is None:
+    def _checked_results(self, what: str) -> tuple[dict[str, np.ndarray], ResultsPanel]:
+        """The batch results and their panel; a ValueError names ``what`` without results."""
+        if self.results is None or self.results_panel is None:
             raise ValueError(f"{what}: the viewer has no batch results (show(..., results=...))")
-        return self.results
+        return self.results, self.results_panel
 
     def show_result(self, i: int) -> None:
         """Show result ``i`` of the batch results (clipped to ``[0, N)``): its ``q``, and its root pose
         ``base`` where given (the root stays where it is otherwise); the result slider follows."""
-        results = self._checked_results("show_result")
+        results, panel = self._checked_results("show_result")
         i = int(np.clip(i, 0, len(results["q"]) - 1))
-        with self._lock:
+        with self._page.lock:
             self.result_index = i
-            self._quiet = True
-            try:
-                self.result_slider.value = i  # type: ignore[misc]  # viser's stub: read-only; its API sets it
-            finally:
-                self._quiet = False
-            self.result_status.content = describe(results, i)
+            with self._page.quietly():
+                panel.result_slider.value = i  # type: ignore[misc]  # viser's stub: read-only; its API sets it
+            panel.result_status.content = describe(results, i)
             if "base" in results:
                 self.T_world_root = results["base"][i]
             self.set_q(results["q"][i])
@@ -621,14 +483,14 @@ class Viewer:
             loop: after the last result, start over at result 0 (default: the GUI's value; set
                 there); otherwise stop at the last.
         """
-        results = self._checked_results("play")
+        results, panel = self._checked_results("play")
         if fps is not None:
             if not FPS_RANGE[0] <= float(fps) <= FPS_RANGE[1]:
                 raise ValueError(f"fps: expected frames per second in [{FPS_RANGE[0]:g}, {FPS_RANGE[1]:g}], got {fps}")
-            self.play_fps.value = float(fps)  # type: ignore[misc]  # viser's stub: read-only; its API sets it
+            panel.play_fps.value = float(fps)  # type: ignore[misc]  # viser's stub: read-only; its API sets it
         if loop is not None:
-            self.play_loop.value = bool(loop)  # type: ignore[misc]  # viser's stub: read-only; its API sets it
-        with self._lock:
+            panel.play_loop.value = bool(loop)  # type: ignore[misc]  # viser's stub: read-only; its API sets it
+        with self._page.lock:
             if self.playing:
                 return
             if self.result_index in (None, len(results["q"]) - 1):
@@ -636,31 +498,32 @@ class Viewer:
             stop = threading.Event()
             thread = threading.Thread(target=self._play, args=(stop,), name="diffkin-viewer-play", daemon=True)
             self._player = thread, stop
-            self.play_button.label = "Pause"
+            panel.play_button.label = "Pause"
             thread.start()
 
     def pause(self) -> None:
         """Stop the playback (if any) and wait for its thread to end; the shown result stays."""
-        with self._lock:
+        with self._page.lock:
             player, self._player = self._player, None
             if player is None:
                 return
             player[1].set()
-            self.play_button.label = "Play"
+            self._checked_results("pause")[1].play_button.label = "Play"  # (a player plays results)
         if player[0] is not threading.current_thread():
             player[0].join()  # outside the lock: the thread may be waiting for it to see the stop
 
     def _play(self, stop: threading.Event) -> None:
         """The playback thread: the next result every ``1 / fps`` seconds until ``stop`` is set or the end."""
-        n = len(self._checked_results("play")["q"])
-        while not stop.wait(1.0 / float(np.clip(self.play_fps.value, *FPS_RANGE))):  # (a browser may send any)
-            with self._lock:
+        results, panel = self._checked_results("play")
+        n = len(results["q"])
+        while not stop.wait(1.0 / float(np.clip(panel.play_fps.value, *FPS_RANGE))):  # (a browser may send any)
+            with self._page.lock:
                 if stop.is_set():
                     return
                 i = (self.result_index or 0) + 1
-                if i == n and not self.play_loop.value:
+                if i == n and not panel.play_loop.value:
                     self._player = None
-                    self.play_button.label = "Play"
+                    panel.play_button.label = "Play"
                     return
                 self.show_result(i % n)
 

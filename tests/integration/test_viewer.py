@@ -80,22 +80,22 @@ def test_builtin_iiwa14_scene_and_sliders(viewer_of):
     assert sorted(viewer.joint_spheres) == sorted(viewer.kin.frame_names)
     assert all(h.visible for h in (*viewer.skeleton.values(), *viewer.joint_spheres.values()))
     assert all(h.show_axes for h in viewer.frames.values())
-    assert viewer.arm is not None and set(viewer.targets) == {"ee"}
+    assert viewer.arm is not None and set(viewer.target_panel.targets) == {"ee"}
     _assert_scene_matches(viewer, _chain_poses(chain, viewer.q))
     # a slider moves its joint, the scene follows fk
-    viewer.sliders[3].value = -0.4
+    viewer.joint_panel.sliders[3].value = -0.4
     assert viewer.q[3] == -0.4
     _assert_scene_matches(viewer, _chain_poses(chain, viewer.q))
     # the skeleton cylinder of link2 joins the link1 and link2 origins
     T = _chain_poses(chain, viewer.q)
     np.testing.assert_allclose(viewer.skeleton["link2"].position, (T[1, :3, 3] + T[2, :3, 3]) / 2, atol=1e-9)
     # the gizmo follows the flange; the frames checkbox hides the axes
-    np.testing.assert_allclose(viewer.targets["ee"].position, T[-1, :3, 3], atol=1e-9)
-    viewer.show_frames.value = False
+    np.testing.assert_allclose(viewer.target_panel.targets["ee"].position, T[-1, :3, 3], atol=1e-9)
+    viewer.display_panel.show_frames.value = False
     assert not any(h.show_axes for h in viewer.frames.values())
     viewer.set_q(np.full(7, 10.0))  # clipped to the limits
     np.testing.assert_allclose(viewer.q, chain.upper)
-    assert [s.value for s in viewer.sliders] == pytest.approx(np.asarray(chain.upper).tolist(), abs=1e-6)
+    assert [s.value for s in viewer.joint_panel.sliders] == pytest.approx(np.asarray(chain.upper).tolist(), abs=1e-6)
 
 
 def test_urdf_meshes_and_tree(viewer_of):
@@ -111,10 +111,10 @@ def test_urdf_meshes_and_tree(viewer_of):
     assert not any(h.visible for h in (*viewer.skeleton.values(), *viewer.joint_spheres.values()))  # meshes shown
     _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, viewer.q)))
     for i, value in enumerate((0.3, -0.7, 1.1)):
-        viewer.sliders[i].value = value
+        viewer.joint_panel.sliders[i].value = value
     np.testing.assert_array_equal(viewer.q, [0.3, -0.7, 1.1])
     _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, viewer.q)))
-    viewer.show_meshes.value = False
+    viewer.display_panel.show_meshes.value = False
     assert not any(h.visible for handles in viewer.visuals.values() for h in handles)
 
 
@@ -129,8 +129,8 @@ def test_mimic_joints_follow(viewer_of):
     </robot>"""
     robot = dk.load_robot(urdf)
     viewer = viewer_of(robot)
-    assert [s.label for s in viewer.sliders] == ["j1"]  # the mimic joint has no slider
-    viewer.sliders[0].value = 0.25
+    assert [s.label for s in viewer.joint_panel.sliders] == ["j1"]  # the mimic joint has no slider
+    viewer.joint_panel.sliders[0].value = 0.25
     _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, viewer.q)))
     assert viewer.skeleton["c"].height == pytest.approx(0.4)
 
@@ -153,7 +153,7 @@ def test_frame_names_that_look_alike_get_their_own_scene_nodes(viewer_of):
     assert len({viewer.skeleton[n].name for n in names[1:]}) == len(names) - 1
     assert len({viewer.joint_spheres[n].name for n in names}) == len(names)
     for k, value in enumerate((0.3, -0.2, 0.5, 0.1, -0.4, 0.7)):
-        viewer.sliders[k].value = value
+        viewer.joint_panel.sliders[k].value = value
     _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, viewer.q)))
     T = np.asarray(dk.link_poses(robot, viewer.q))
     for f in range(1, len(names)):  # each cylinder joins its frame to the parent frame
@@ -164,10 +164,11 @@ def test_frame_names_that_look_alike_get_their_own_scene_nodes(viewer_of):
 def test_unlimited_joints_slide_over_one_turn(viewer_of):
     chain = dk.load_urdf(os.path.join(DATA, "ur5.urdf"), "tool0")
     viewer = viewer_of(chain)
-    assert [(s.min, s.max) for s in viewer.sliders][0] == pytest.approx((float(chain.lower[0]), float(chain.upper[0])))
+    sliders = viewer.joint_panel.sliders
+    assert [(s.min, s.max) for s in sliders][0] == pytest.approx((float(chain.lower[0]), float(chain.upper[0])))
     unlimited = dk.DHChain.from_table(np.array([[0.5, 0, 0, 0], [0.4, 0, 0, 0]]))
     viewer = viewer_of(unlimited)
-    assert [(s.min, s.max) for s in viewer.sliders] == [pytest.approx((-np.pi, np.pi))] * 2
+    assert [(s.min, s.max) for s in viewer.joint_panel.sliders] == [pytest.approx((-np.pi, np.pi))] * 2
 
 
 def test_arm_angle_moves_along_the_self_motion(viewer_of):
@@ -243,8 +244,9 @@ def test_gizmo_solves_ik_from_the_current_configuration(viewer_of, which):
     else:
         poses = np.asarray(dk.link_poses(model, viewer.q, base=T_world_root))
     _assert_scene_matches(viewer, poses)
-    np.testing.assert_allclose(viewer.targets[end].position, T[:3, 3], atol=1e-9)  # the gizmo stays at the target
-    assert "solved" in viewer.ik_status[end].content
+    gizmo = viewer.target_panel.targets[end]
+    np.testing.assert_allclose(gizmo.position, T[:3, 3], atol=1e-9)  # the gizmo stays at the target
+    assert "solved" in viewer.target_panel.ik_status[end].content
 
 
 def test_map_overlay_and_batch_results(viewer_of, tmp_path):
@@ -265,17 +267,17 @@ def test_map_overlay_and_batch_results(viewer_of, tmp_path):
     q = np.random.default_rng(0).uniform(-1, 1, (5, 7))
     np.savez(tmp_path / "res.npz", q=q, success=np.array([1, 0, 1, 1, 1], bool), pos_err=np.arange(5.0))
     viewer = viewer_of("iiwa14", workspace_map=tmp_path / "map.npz", results=tmp_path / "res.npz")
-    points = np.asarray(viewer.map_cloud.points, np.float64)
+    points = np.asarray(viewer.map_panel.map_cloud.points, np.float64)
     expected = np.array([-0.2, 0, 0.1]) + (np.argwhere(counts > 0) + 0.5) * 0.1
     np.testing.assert_allclose(np.sort(points, 0), np.sort(expected, 0), atol=1e-6)
-    assert viewer.map_cloud.visible
-    viewer.show_map.value = False
-    assert not viewer.map_cloud.visible
-    viewer.map_quantity.value = "manipulability"
-    assert len(viewer.map_cloud.points) == 3
-    viewer.result_slider.value = 3
+    assert viewer.map_panel.map_cloud.visible
+    viewer.map_panel.show_map.value = False
+    assert not viewer.map_panel.map_cloud.visible
+    viewer.map_panel.map_quantity.value = "manipulability"
+    assert len(viewer.map_panel.map_cloud.points) == 3
+    viewer.results_panel.result_slider.value = 3
     np.testing.assert_allclose(viewer.q, np.clip(q[3], viewer.kin.lower, viewer.kin.upper))
-    assert "success True" in viewer.result_status.content
+    assert "success True" in viewer.results_panel.result_status.content
     _assert_scene_matches(viewer, _chain_poses(dk.robots.iiwa14(), viewer.q))
     with pytest.raises(ValueError, match=r"results q: expected shape \(N, 7\)"):
         show("iiwa14", results={"q": np.zeros((3, 6))}, port=_free_port(), verbose=False)
@@ -375,7 +377,7 @@ def test_results_with_root_poses(viewer_of, tmp_path):
     np.testing.assert_allclose(viewer.results["base"], base, atol=1e-7)
     _assert_scene_matches(viewer, np.asarray(dk.link_poses(robot, viewer.q)))  # the root at the identity
     for i in (2, 0):
-        viewer.result_slider.value = i
+        viewer.results_panel.result_slider.value = i
         assert viewer.result_index == i
         np.testing.assert_allclose(viewer.q, q[i])
         T = np.asarray(dk.link_poses(robot, q[i], base=viewer.results["base"][i]))
@@ -409,19 +411,20 @@ def test_play_results(viewer_of):
     viewer = viewer_of(chain, results=results)
     with pytest.raises(ValueError, match=r"fps: expected frames per second in \[0.1, 1000\], got 0"):
         viewer.play(fps=0)
+    panel = viewer.results_panel
     viewer.play(fps=200, loop=False)  # from result 0 (none shown yet) to the last
-    assert viewer.play_fps.value == 200 and viewer.play_loop.value is False
+    assert panel.play_fps.value == 200 and panel.play_loop.value is False
     _wait_until(lambda: not viewer.playing and not _players())  # the thread ends at the last result
-    assert viewer.result_index == 4 and viewer.result_slider.value == 4 and viewer.play_button.label == "Play"
+    assert viewer.result_index == 4 and panel.result_slider.value == 4 and panel.play_button.label == "Play"
     np.testing.assert_allclose(viewer.q, np.clip(results["q"][4], viewer.kin.lower, viewer.kin.upper))
-    assert "result 4 of 5" in viewer.result_status.content
-    viewer.play_loop.value = True
-    viewer.play_button.value = True  # a click: from the last result, over again from 0, looping
-    assert viewer.playing and viewer.play_button.label == "Pause"
+    assert "result 4 of 5" in panel.result_status.content
+    panel.play_loop.value = True
+    viewer.results_panel.play_button.value = True  # a click: from the last result, over again from 0, looping
+    assert viewer.playing and viewer.results_panel.play_button.label == "Pause"
     shown = [viewer.result_index]
     _wait_until(lambda: shown.append(viewer.result_index) or shown[-1] < max(shown))  # past the end, to the start
-    viewer.play_button.value = True  # a click: pause
-    assert not viewer.playing and viewer.play_button.label == "Play" and _players() == []
+    viewer.results_panel.play_button.value = True  # a click: pause
+    assert not viewer.playing and viewer.results_panel.play_button.label == "Play" and _players() == []
     i = viewer.result_index
     time.sleep(0.05)
     assert viewer.result_index == i
@@ -438,8 +441,9 @@ def test_batch_results_errors_per_target_and_from_the_command_line(viewer_of, tm
     """Per-target errors ``(N, k)`` (a whole robot's IK) are shown per target; a bad file is one CLI line."""
     results = _results(pos_err=np.arange(10.0).reshape(5, 2) * 1e-3, rot_err=np.arange(5))  # integer errors too
     viewer = viewer_of("iiwa14", results=results)
-    viewer.result_slider.value = 2
-    assert "pos_err [0.004, 0.005]" in viewer.result_status.content and "rot_err 2" in viewer.result_status.content
+    viewer.results_panel.result_slider.value = 2
+    status = viewer.results_panel.result_status.content
+    assert "pos_err [0.004, 0.005]" in status and "rot_err 2" in status
     np.testing.assert_allclose(viewer.q, np.clip(results["q"][2], viewer.kin.lower, viewer.kin.upper))
     from diffkin.cli import main
 
@@ -622,13 +626,13 @@ def test_obstacles_are_drawn_with_the_clearance(viewer_of, arm_avoid):
     assert viewer.obstacles["/obstacles/sphere0"].radius == pytest.approx(0.1)
     for q in (viewer.q, np.array([-0.2, 1.3, 1.0])):  # the start, then the hand pushed into the box by the sliders
         for i, value in enumerate(q):
-            viewer.sliders[i].value = float(value)
+            viewer.joint_panel.sliders[i].value = float(value)
         expected = float(dk.collision.clearance(robot, geom, viewer.q, avoid.world))
         assert viewer.clearance == pytest.approx(expected, abs=1e-9)
         word = "collision-free" if expected >= 0.02 else "in collision" if expected < 0 else "within the margin"
-        assert viewer.clearance_status.content == f"clearance {expected:.4f} m (margin 0.02 m): {word}"
+        assert viewer.obstacle_panel.clearance_status.content == f"clearance {expected:.4f} m (margin 0.02 m): {word}"
     assert word == "in collision"
-    viewer.show_obstacles.value = False
+    viewer.obstacle_panel.show_obstacles.value = False
     assert not any(h.visible for h in viewer.obstacles.values())
     with pytest.raises(TypeError, match="avoid: collision-aware IK needs a dk.Robot"):
         show(dk.robots.iiwa14(), avoid=avoid, warmup=False, verbose=False)
@@ -650,8 +654,8 @@ def test_drag_with_avoid_is_solved_clear_of_the_obstacles(viewer_of, arm_avoid):
     clearance = float(dk.collision.clearance(robot, geom, viewer.q, scene.world))
     assert clearance >= 0.02 and float(res.clearance) == pytest.approx(clearance, abs=1e-9)
     np.testing.assert_allclose(viewer.frame_pose("hand"), T, atol=1e-4)
-    assert f"clearance {clearance:.4f} m" in viewer.ik_status["hand"].content
-    assert viewer.clearance_status.content.endswith(": collision-free")
+    assert f"clearance {clearance:.4f} m" in viewer.target_panel.ik_status["hand"].content
+    assert viewer.obstacle_panel.clearance_status.content.endswith(": collision-free")
 
 
 def test_cli_view_errors(capsys):
@@ -807,7 +811,7 @@ def test_browser_draws_the_robot(viewer_of, tmp_path):
     viewer = viewer_of("iiwa14")
     viewer.set_q(np.array([0.4, 0.6, 0.0, -1.3, 0.0, 0.8, 0.0]))
     handles = (*viewer.frames.values(), *viewer.skeleton.values(), *viewer.joint_spheres.values())
-    handles += tuple(viewer.targets.values())
+    handles += tuple(viewer.target_panel.targets.values())
     canvas = (slice(160, 768), slice(0, 680))  # below the WebGL notice, left of the GUI panel
     # A loaded machine can take the screenshot before the scene has arrived over the websocket:
     # up to three tries of the pair, each judged as a whole.
@@ -848,12 +852,12 @@ def test_the_robots_collision_shapes_are_drawn_and_coloured(viewer_of, arm_avoid
     axis = viewer.collision[spheres][0]  # the first capsule's cylinder, in its frame
     np.testing.assert_allclose(axis.position, (np.asarray(c.a[0]) + np.asarray(c.b[0])) / 2, atol=1e-12)
     assert axis.height == pytest.approx(float(np.linalg.norm(np.asarray(c.b[0]) - np.asarray(c.a[0]))))
-    viewer.show_collision.value = True
+    viewer.obstacle_panel.show_collision.value = True
     assert all(h.visible for handles in viewer.collision for h in handles)
 
     for q in (viewer.q, np.array([-0.2, 1.3, 1.0])):  # the start, then the hand pushed into the box
         for i, value in enumerate(q):
-            viewer.sliders[i].value = float(value)
+            viewer.joint_panel.sliders[i].value = float(value)
         world = np.asarray(dk.collision.world_distances(robot, geom, viewer.q, avoid.world)).min(axis=-1)
         own = np.full(len(world), np.inf)
         for (i, j), d in zip(geom.pairs, np.asarray(dk.collision.self_distances(robot, geom, viewer.q)), strict=True):
