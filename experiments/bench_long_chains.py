@@ -3,7 +3,7 @@
     python experiments/bench_long_chains.py [--joints 8 16 32 64 128 1000 4000] [--batch 100]
         [--dtype float32] [--unrolled-up-to 128]
 
-A URDF snake of ``n`` joints (``tests/_reference.py::snake_robot``: revolute about z and y in turn,
+A URDF snake of ``n`` joints (``tests/_models.py::snake_robot``: revolute about z and y in turn,
 every seventh prismatic), loaded as a whole robot. For each length, FK of the last frame, the poses
 of every frame (``link_poses``) and the world Jacobian of the last frame (analytic), each jitted:
 the first call's trace + compile time (``.lower().compile()``), then the median of 7 warm runs at
@@ -57,7 +57,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.dtype == "float64":
         jax.config.update("jax_enable_x64", True)
-    from _reference import snake_robot
+    from _models import snake_robot
 
     from diffkin.models import _scanned
 

@@ -19,7 +19,7 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from _reference import PANDA, random_robot_q  # noqa: E402
+from _models import PANDA, random_robot_q  # noqa: E402
 
 import diffkin as dk  # noqa: E402
 

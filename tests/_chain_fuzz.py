@@ -11,7 +11,7 @@ one CPU core): the unit tier checks the Jacobian properties on the short structu
 import hypothesis.extra.numpy as hnp
 import jax
 import numpy as np
-from _reference import finite_floats as _floats
+from _fuzzing import finite_floats as _floats
 from _reference import fk as fk_reference
 from hypothesis import strategies as st
 

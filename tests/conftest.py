@@ -6,8 +6,10 @@ scipy, jax, optax, hypothesis: ``pip install -e ".[dev]"``), ``validation/`` (ot
 MuJoCo, pytorch-kinematics, coal, example-robot-data, dm_control, real meshes) and ``integration/``
 (subprocesses, the CLI, the viewer's server, benchmarks and experiments, the docs' examples). Each test
 is marked with its directory's name (``-m unit``); tests outside the unit tier are also ``slow``, so
-``-m "not slow"`` selects the unit tier. Shared helpers: ``tests/_reference.py`` (``tests/`` is put on
-``sys.path`` here, so every tier imports it as ``_reference``)."""
+``-m "not slow"`` selects the unit tier. Shared helpers, one module per kind (``tests/`` is put on
+``sys.path`` here, so every tier imports them): ``_paths``, ``_models`` (test robots, every model kind,
+random configurations), ``_reference`` (independent NumPy and Pinocchio references), ``_shapes``,
+``_mjcf`` and ``_fuzzing``."""
 
 import atexit
 import os
@@ -96,7 +98,7 @@ TESTS = Path(__file__).resolve().parent
 if str(TESTS) not in sys.path:
     sys.path.insert(0, str(TESTS))
 
-from _reference import URDF_ROBOTS  # noqa: E402
+from _models import URDF_ROBOTS  # noqa: E402
 
 import diffkin as dk  # noqa: E402
 

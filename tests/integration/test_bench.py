@@ -4,7 +4,7 @@ import re
 import sys
 
 import pytest
-from _reference import EXPERIMENTS
+from _paths import EXPERIMENTS
 
 
 @pytest.fixture

@@ -12,8 +12,10 @@ import sys
 
 import numpy as np
 import pytest
-from _reference import BOX_CENTER, DATA, INTERRUPTIBLE, SCENE, SCENE_FILE, dh_fk, pose, pose_errors
-from _reference import CAPSULE_ARM as ARM
+from _paths import DATA, INTERRUPTIBLE
+from _reference import dh_fk, pose, pose_errors
+from _shapes import BOX_CENTER, SCENE, SCENE_FILE
+from _shapes import CAPSULE_ARM as ARM
 
 import diffkin as dk
 from diffkin import cli

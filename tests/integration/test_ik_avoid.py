@@ -15,8 +15,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import BAXTER, ERD, EXPERIMENTS, HANDS, robot_poses
-from _reference import CAPSULE_ARM as ARM
+from _models import BAXTER, ERD, HANDS
+from _paths import EXPERIMENTS
+from _reference import robot_poses
+from _shapes import CAPSULE_ARM as ARM
 
 import diffkin as dk
 from diffkin import _rigid as rg

@@ -6,7 +6,7 @@ import subprocess
 import sys
 import textwrap
 
-from _reference import DATA
+from _paths import DATA
 
 FINGER = os.path.join(DATA, "example-robot-data", "robots", "finger_edu_description", "robots", "finger_edu.urdf")
 

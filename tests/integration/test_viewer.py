@@ -16,8 +16,9 @@ import pytest
 pytest.importorskip("viser")
 pytest.importorskip("trimesh")
 
-from _reference import CAPSULE_ARM as ARM
-from _reference import DATA, INTERRUPTIBLE, ROOT, SCENE, SCENE_FILE
+from _paths import DATA, INTERRUPTIBLE, ROOT
+from _shapes import CAPSULE_ARM as ARM
+from _shapes import SCENE, SCENE_FILE
 
 import diffkin as dk  # noqa: E402
 from diffkin.viewer import _visuals, show  # noqa: E402

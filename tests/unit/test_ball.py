@@ -8,7 +8,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import mjcf, robot_poses
+from _mjcf import mjcf
+from _reference import robot_poses
 
 import diffkin as dk
 from diffkin.models import _ball

@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import SHAPE_PAIRS, random_fields, shape
+from _shapes import SHAPE_PAIRS, random_fields, shape
 
 import diffkin as dk
 from diffkin.collision import Box, Capsule, Plane, Sphere, distance

@@ -11,8 +11,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import TOY_COLLISION_URDF as URDF
-from _reference import toy_robot
+from _shapes import TOY_COLLISION_URDF as URDF
+from _shapes import toy_robot
 
 import diffkin as dk
 from diffkin.collision import Plane, Sphere, World

@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import random_cylinders, random_fields, shape
+from _shapes import random_cylinders, random_fields, shape
 
 import diffkin as dk
 from diffkin.collision import Convex, _sources, distance

@@ -5,7 +5,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import BUILTIN, CHAIN_KINDS, URDF_ROBOTS, dh_fk, every_model_kind, frames_of, poe_fk, random_q
+from _models import BUILTIN, CHAIN_KINDS, URDF_ROBOTS, every_model_kind, frames_of, random_q
+from _reference import dh_fk, poe_fk
 
 import diffkin as dk
 from diffkin import se3

@@ -7,7 +7,7 @@ finite; bad input raises ValueError or TypeError, never another exception. The M
 kinematic trees (default classes, frames, every orientation form) give MuJoCo's frames, limits and
 poses; random include structures load as MuJoCo loads them or are rejected as MuJoCo rejects them;
 random arrangements of MJCF's elements load or raise ValueError/TypeError. Each MJCF example runs
-under a time limit (``_reference.time_limit``), so a hang fails the test. The properties against MuJoCo
+under a time limit (``_fuzzing.time_limit``), so a hang fails the test. The properties against MuJoCo
 (random trees and include structures) are in ``tests/validation/test_fuzz_validation.py``, with
 whole-robot IK (a tree's solvers compile long) and the Jacobian properties on the long chains.
 
@@ -39,9 +39,10 @@ from _chain_fuzz import (
     dh_chains,
     fk,
 )
-from _reference import FUZZ, MJCF_FUZZ, MJCF_TIME_LIMIT, rotation_angle, time_limit
+from _fuzzing import FUZZ, MJCF_FUZZ, MJCF_TIME_LIMIT, time_limit
+from _fuzzing import number_text as _text
 from _reference import fk as fk_reference
-from _reference import number_text as _text
+from _reference import rotation_angle
 from hypothesis import given
 from hypothesis import strategies as st
 

@@ -11,7 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 import pytest
-from _reference import dh_fk, random_q
+from _models import random_q
+from _reference import dh_fk
 
 import diffkin as dk
 import diffkin.ik as ik

@@ -5,7 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import BUILTIN, CHAIN_KINDS, URDF_ROBOTS, every_model_kind, jacobian_parameter_gradients, random_q
+from _models import BUILTIN, CHAIN_KINDS, URDF_ROBOTS, every_model_kind, jacobian_parameter_gradients, random_q
 
 import diffkin as dk
 from diffkin import se3
@@ -193,7 +193,7 @@ def test_poe_and_urdf_parameter_gradients(name, field):
 def test_jacobian_parameter_gradients_agree_between_methods(name, field):
     """Calibrating through a Jacobian: the default (analytic) and autodiff give the same parameter gradient.
 
-    The base is moved rigidly (:func:`_reference.jacobian_parameter_gradients`). The traced base of
+    The base is moved rigidly (:func:`_models.jacobian_parameter_gradients`). The traced base of
     the 7-joint iiwa14 compiles its autodiff second derivatives for ~15 s: it is checked in
     ``tests/validation/test_jacobian_validation.py``; the 3-joint chain here takes the same path. (Traced
     PoE screws agree too, measured, but compiling their second derivatives took 88 s: not in the suite.)

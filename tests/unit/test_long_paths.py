@@ -8,7 +8,8 @@ import time
 import jax
 import numpy as np
 import pytest
-from _reference import robot_poses, snake_robot
+from _models import snake_robot
+from _reference import robot_poses
 
 import diffkin as dk
 from diffkin import se3

@@ -10,7 +10,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import DATA, WELDED_ARMS, mjcf
+from _mjcf import WELDED_ARMS, mjcf
+from _paths import DATA
 
 import diffkin as dk
 

@@ -4,8 +4,9 @@ bombs and chains, and every bad input named (against MuJoCo itself:
 
 import numpy as np
 import pytest
-from _reference import ARM, mjcf, time_limit
-from _reference import nested_mjcf as _nested
+from _fuzzing import time_limit
+from _mjcf import ARM, mjcf
+from _mjcf import nested_mjcf as _nested
 
 import diffkin as dk
 import diffkin.cli

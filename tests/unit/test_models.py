@@ -5,7 +5,7 @@ import re
 import jax
 import numpy as np
 import pytest
-from _reference import URDF_ROBOTS
+from _models import URDF_ROBOTS
 
 import diffkin as dk
 

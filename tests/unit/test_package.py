@@ -3,7 +3,7 @@
 import os
 import tomllib
 
-from _reference import ROOT
+from _paths import ROOT
 
 import diffkin as dk
 

@@ -8,8 +8,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import PANDA
-from _reference import random_robot_q as _random_q
+from _models import PANDA
+from _models import random_robot_q as _random_q
 
 import diffkin as dk
 from diffkin import se3

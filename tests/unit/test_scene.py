@@ -3,7 +3,7 @@ integers are the documented one-line ``ValueError``, and ``diffkin ik --avoid`` 
 (every field's own errors: ``tests/integration/test_cli.py``)."""
 
 import pytest
-from _reference import CAPSULE_ARM
+from _shapes import CAPSULE_ARM
 
 import diffkin as dk
 from diffkin import cli

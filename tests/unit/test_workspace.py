@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import DATA
+from _paths import DATA
 
 import diffkin as dk
 from diffkin import workspace as ws

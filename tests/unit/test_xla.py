@@ -7,7 +7,9 @@ import os
 import jax
 import numpy as np
 import pytest
-from _reference import DATA, dh_fk, random_q
+from _models import random_q
+from _paths import DATA
+from _reference import dh_fk
 
 import diffkin as dk
 

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
-from _reference import success_rate
+from _models import success_rate
 
 import diffkin as dk
 

@@ -10,7 +10,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import ERD, toy_robot
+from _models import ERD
+from _shapes import toy_robot
 
 import diffkin as dk
 from diffkin.collision import Box, Sphere, World

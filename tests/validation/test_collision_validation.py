@@ -10,8 +10,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import SHAPE_PAIRS as PAIRS
-from _reference import coal_shape, random_fields, shape
+from _shapes import SHAPE_PAIRS as PAIRS
+from _shapes import coal_shape, random_fields, shape
 
 import diffkin as dk
 from diffkin.collision import Box, Capsule, Plane, Sphere, _boxes, distance

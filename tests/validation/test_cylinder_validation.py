@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import coal_shape, random_cylinders, random_fields, shape
+from _shapes import coal_shape, random_cylinders, random_fields, shape
 
 from diffkin.collision import distance
 from diffkin.collision._gjk import contact

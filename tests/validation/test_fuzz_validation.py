@@ -17,9 +17,10 @@ from _chain_fuzz import (
     check_fk_and_jacobians_finite_for_any_finite_q,
     check_jacobians_match_central_differences,
 )
-from _reference import EXAMPLES, FINGER, FUZZ, MJCF_FUZZ, MJCF_TIME_LIMIT, time_limit
-from _reference import finite_floats as _floats
-from _reference import number_text as _text
+from _fuzzing import EXAMPLES, FUZZ, MJCF_FUZZ, MJCF_TIME_LIMIT, time_limit
+from _fuzzing import finite_floats as _floats
+from _fuzzing import number_text as _text
+from _models import FINGER
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 

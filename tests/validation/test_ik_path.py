@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import URDF_ROBOTS
+from _models import URDF_ROBOTS
 
 import diffkin as dk
 import diffkin.srs as srs

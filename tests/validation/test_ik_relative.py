@@ -7,22 +7,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import (
-    BAXTER,
-    ERD,
-    FEET,
-    HANDS,
-    PANDA,
-    POS_TOL,
-    ROT_TOL,
-    SLACK_POS,
-    SLACK_ROT,
-    SOLO,
-)
+from _models import BAXTER, ERD, FEET, HANDS, PANDA, POS_TOL, ROT_TOL, SLACK_POS, SLACK_ROT, SOLO
+from _models import random_q as _random_q
+from _models import success_rate as _rate
 from _reference import frame_errors as _errors
 from _reference import pin_poses as _pin_poses
-from _reference import random_q as _random_q
-from _reference import success_rate as _rate
 
 import diffkin as dk
 from diffkin._xla import solver_jit  # compiled as dk.ik.solve compiles itself

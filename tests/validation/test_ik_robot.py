@@ -9,25 +9,13 @@ import jax.numpy as jnp
 import numpy as np
 import pinocchio as pin
 import pytest
-from _reference import (
-    BAXTER,
-    ERD,
-    FEET,
-    HANDS,
-    PANDA,
-    POS_TOL,
-    ROT_TOL,
-    SLACK_POS,
-    SLACK_ROT,
-    SOLO,
-    pose_errors,
-    robot_poses,
-)
+from _models import BAXTER, ERD, FEET, HANDS, PANDA, POS_TOL, ROT_TOL, SLACK_POS, SLACK_ROT, SOLO
+from _models import random_q as _random_q
+from _models import success_rate as _rate
 from _reference import frame_errors as _errors
 from _reference import pin_poses as _pin_poses
 from _reference import pin_q as _pin_q
-from _reference import random_q as _random_q
-from _reference import success_rate as _rate
+from _reference import pose_errors, robot_poses
 
 import diffkin as dk
 from diffkin import se3

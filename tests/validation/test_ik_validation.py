@@ -9,7 +9,8 @@ import optax
 import pytest
 import pytorch_kinematics as pk
 import torch
-from _reference import URDF_ROBOTS, dh_fk, pose_errors, random_q
+from _models import URDF_ROBOTS, random_q
+from _reference import dh_fk, pose_errors
 
 import diffkin as dk
 import diffkin.ik as ik

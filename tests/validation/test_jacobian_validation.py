@@ -6,7 +6,7 @@ import pinocchio as pin
 import pytest
 import pytorch_kinematics as pk
 import torch
-from _reference import URDF_ROBOTS, jacobian_parameter_gradients, random_q
+from _models import URDF_ROBOTS, jacobian_parameter_gradients, random_q
 
 import diffkin as dk
 

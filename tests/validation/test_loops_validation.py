@@ -11,7 +11,9 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
-from _reference import DATA, WELDED_ARMS, success_rate
+from _mjcf import WELDED_ARMS
+from _models import success_rate
+from _paths import DATA
 
 import diffkin as dk
 

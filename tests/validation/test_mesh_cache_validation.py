@@ -9,7 +9,7 @@ from __future__ import annotations
 import jax
 import numpy as np
 import pytest
-from _reference import ERD
+from _models import ERD
 
 import diffkin as dk
 from diffkin.collision import _sources

@@ -7,8 +7,10 @@ import os
 import mujoco
 import numpy as np
 import pytest
-from _reference import ARM, DATA, HEAD, mjcf, random_q
-from _reference import nested_mjcf as _nested
+from _mjcf import ARM, HEAD, mjcf
+from _mjcf import nested_mjcf as _nested
+from _models import random_q
+from _paths import DATA
 
 import diffkin as dk
 import diffkin.cli

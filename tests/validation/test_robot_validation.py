@@ -8,9 +8,10 @@ import jax
 import numpy as np
 import pinocchio as pin
 import pytest
-from _reference import ERD, robot_poses, snake_robot
+from _models import ERD, snake_robot
+from _models import random_robot_q as _random_q
 from _reference import pin_q as _pin_q
-from _reference import random_robot_q as _random_q
+from _reference import robot_poses
 
 import diffkin as dk
 from diffkin.models import _scanned

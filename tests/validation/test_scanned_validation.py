@@ -7,7 +7,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import PANDA, dh_fk, random_robot_q, snake_robot
+from _models import PANDA, random_robot_q, snake_robot
+from _reference import dh_fk
 
 import diffkin as dk
 from diffkin import se3
