@@ -170,6 +170,18 @@ def table(header: list[str], rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
+def publish(parts: list[str], name: str | None = None) -> None:
+    """Print a report, its non-empty ``parts`` joined by blank lines; with ``name``, also write it to
+    ``experiments/results/<machine>-<name>.md`` (:func:`machine_slug`)."""
+    text = "\n\n".join(p for p in parts if p)
+    print("\n" + text)
+    if name is not None:
+        out = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", f"{machine_slug()}-{name}.md")
+        with open(out, "w") as fh:
+            fh.write(text + "\n")
+        print(f"\n# written: {out}")
+
+
 def rate(n: int, seconds: float) -> str:
     """Throughput ``n / seconds`` in a readable unit."""
     per_s = n / seconds

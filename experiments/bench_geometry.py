@@ -53,7 +53,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _bench import busy_note, machine_line, machine_slug, median_seconds, table  # noqa: E402
+from _bench import busy_note, machine_line, median_seconds, publish, table  # noqa: E402
 from bench_collision import panda  # noqa: E402
 
 import diffkin as dk  # noqa: E402
@@ -422,12 +422,7 @@ def main(argv=None) -> int:
             speed,
         )
     )
-    text = "\n\n".join(p for p in parts if p)
-    print("\n" + text)
-    if args.write:
-        out = Path(__file__).resolve().parent / "results" / f"{machine_slug()}-geometry.md"
-        out.write_text(text + "\n")
-        print(f"\n# written: {out}")
+    publish(parts, "geometry" if args.write else None)
     return 0
 
 
