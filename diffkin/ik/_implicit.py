@@ -24,8 +24,9 @@ from diffkin.ik._problem import Problem
 def _problem(spec, model, targets: tuple, base) -> Problem:
     """The problem of the targets alone (``n`` each; not the constraints: the derivative is the targets'),
     for its residual (no limits are needed)."""
-    root = rg.IDENTITY if base is None else rg.from_matrix(base)
-    return spec._replace(constraints=()).problem(model, targets, (), root)
+    targets_only = spec._replace(constraints=())
+    bound = targets_only.bind(targets, ())
+    return targets_only.problem(model, bound, rg.IDENTITY if base is None else rg.from_matrix(base))
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))

@@ -214,7 +214,7 @@ def _follow(
 ) -> PathResult:
     """Waypoints ``1 .. T-1`` from waypoint 0's solution ``first`` (an :class:`IKResult`), scanned."""
     paths, T = batch[:-1], batch[-1]
-    s = prepare(static, traced, data, spec, batch, paths, locked_q, None if spec.solve_base else base)
+    s = prepare(static, traced, data, spec, batch, paths, locked_q=locked_q, base=None if spec.solve_base else base)
     dtype, dof, k = data[0].dtype, s.model.dof, len(spec.targets)
     n = int(np.prod(paths, dtype=np.int64))
     lower, upper = s.lower, s.upper
@@ -239,10 +239,11 @@ def _follow(
         q_prev = x_prev[:dof]
         lo = jnp.maximum(lower[:, None], q_prev - bound[:, None])
         hi = jnp.minimum(upper[:, None], q_prev + bound[:, None])
-        problem = spec.problem(s.model, waypoint, s.data, root, locked_values, (lo, hi, no_wrap, True))
+        problem = spec.problem(s.model, spec.bind(waypoint, s.data), root, locked_values, (lo, hi, no_wrap, True))
         best = _search.follow(problem, x_prev, steps, settings)
         values, met = constraints_at(spec, problem, best.x)  # exactly, at the returned states
-        return best.x, (best.x, best.success & met, best.ev.pos_err[:k], best.ev.rot_err[:k], best.iters, values)
+        success = best.success if met is None else best.success & met
+        return best.x, (best.x, success, best.ev.pos_err[:k], best.ev.rot_err[:k], best.iters, values)
 
     # per waypoint (T, n, ...), in term order
     later = [jnp.moveaxis(t.reshape((n, T) + t.shape[1:]), 1, 0)[1:] for t in s.targets]

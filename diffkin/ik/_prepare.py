@@ -51,10 +51,11 @@ class Prepared(NamedTuple):
         model: the model in the solver's dtype, detached (what the search iterates on).
         differentiable: the same, not detached (what the implicit derivative reads).
         lower, upper: ``(dof,)`` the limits, rounded inwards; ``wrap``: ``(dof,)`` unlimited revolute joints.
-        valid: ``(n,)`` finite (and rigid) targets with finite locked values.
+        valid: ``(n,)`` finite (and rigid) targets with finite rest and locked values.
         safe: per target term, its targets ``(n, ...)``, invalid ones the identity (differentiable).
         targets: the same, detached; ``data``: per constraint, its data in the dtype, detached.
-        locked_q: ``(m, dof)`` the locked values (non-finite ones 0, detached), or ``None``.
+        q0, rest, locked_q: ``(m, dof)`` the warm start, rest and locked values (non-finite
+            entries 0, detached), or ``None``.
         base: ``(m, 4, 4)`` the given (or, ``spec.solve_base``, guessed) root poses, non-finite ones
             the identity, and ``base_ok`` ``(m,)`` where they were finite; or ``None``.
     """
@@ -68,13 +69,25 @@ class Prepared(NamedTuple):
     safe: tuple
     targets: tuple
     data: tuple
+    q0: jax.Array | None
+    rest: jax.Array | None
     locked_q: jax.Array | None
     base: jax.Array | None
     base_ok: jax.Array | None
 
 
 def prepare(
-    static, traced, data: tuple, spec, batch: tuple[int, ...], lead: tuple[int, ...], locked_q, base
+    static,
+    traced,
+    data: tuple,
+    spec,
+    batch: tuple[int, ...],
+    lead: tuple[int, ...],
+    *,
+    q0=None,
+    rest=None,
+    locked_q=None,
+    base=None,
 ) -> Prepared:
     """The setup that :func:`~diffkin.ik._solve.solve` and :func:`~diffkin.ik._path.solve_path` share, inside ``jit``.
 
@@ -82,13 +95,13 @@ def prepare(
         static, traced: the model (:func:`diffkin._static.partition`).
         data: what the terms of ``spec`` (:class:`~diffkin.ik._problem.Spec`) bind: per target
             ``batch + (4, 4)`` or ``batch + (3,)`` (their dtype is the solver's), then per constraint its data.
-        batch: the targets' batch shape; ``lead``: its leading part that ``locked_q`` and ``base`` have.
-        locked_q: ``lead + (dof,)`` (broadcastable) values of the locked joints, or ``None``.
+        batch: the targets' batch shape; ``lead``: its leading part that the others have.
+        q0, rest, locked_q: ``lead + (dof,)`` (broadcastable) warm start, rest configuration and values
+            of the locked joints, or ``None``.
         base: ``lead + (4, 4)`` (broadcastable) root poses, or ``None``.
     """
     model_in = combine(static, traced)
     k, dtype, dof = len(spec.targets), data[0].dtype, model_in.dof
-    lower, upper = inward(detach(model_in.lower), dtype, -1), inward(detach(model_in.upper), dtype, 1)
     n, m = int(np.prod(batch, dtype=np.int64)), int(np.prod(lead, dtype=np.int64))
     checked = [
         valid_targets(t.reshape((n,) + t.shape[len(batch) :]), term.position_only)
@@ -96,12 +109,15 @@ def prepare(
     ]
     valid = checked[0][0] if k == 1 else jnp.all(jnp.stack([v for v, _ in checked]), axis=0)
     safe = tuple(s for _, s in checked)
-    locked_flat = None
-    if locked_q is not None:  # traced non-finite values (the host rejects concrete ones): no success
-        locked_flat = flat(locked_q, lead, (dof,), m, dtype)
-        given = jnp.where(jnp.asarray(spec.locked), locked_q, 0.0)
-        finite = jnp.all(jnp.isfinite(jnp.broadcast_to(given, lead + (dof,)).reshape(m, dof)), axis=-1)
-        valid = (valid.reshape(m, -1) & finite[:, None]).reshape(n)
+    targets = tuple(detach(s) for s in safe)
+    model = cast(detach(model_in), dtype)
+    lower, upper = inward(detach(model_in.lower), dtype, -1), inward(detach(model_in.upper), dtype, 1)
+    wrap = jnp.asarray([t == "R" for t in model_in.actuated_types]) & ~jnp.isfinite(lower) & ~jnp.isfinite(upper)
+    q0_flat, rest_flat, locked_flat = (flat(x, lead, (dof,), m, dtype) for x in (q0, rest, locked_q))
+    for given in (rest, None if locked_q is None else jnp.where(jnp.asarray(spec.locked), locked_q, 0.0)):
+        if given is not None:  # traced non-finite values (the host rejects concrete ones): no success
+            finite = jnp.all(jnp.isfinite(jnp.broadcast_to(given, lead + (dof,)).reshape(m, dof)), axis=-1)
+            valid = valid & (finite if m == n else jnp.repeat(finite, n // m))
     base_in, base_ok = None, None
     if base is not None or spec.solve_base:
         eye = jnp.eye(4, dtype=dtype)
@@ -109,15 +125,17 @@ def prepare(
         base_ok = jnp.all(jnp.isfinite(base_in.reshape(m, -1)), axis=-1)
         base_in = jnp.where(base_ok[:, None, None], base_in, eye)
     return Prepared(
-        model=cast(detach(model_in), dtype),
+        model=model,
         differentiable=cast(model_in, dtype),
         lower=lower,
         upper=upper,
-        wrap=jnp.asarray([t == "R" for t in model_in.actuated_types]) & ~jnp.isfinite(lower) & ~jnp.isfinite(upper),
+        wrap=wrap,
         valid=valid,
         safe=safe,
-        targets=tuple(detach(s) for s in safe),
+        targets=targets,
         data=tuple(detach(d.cast(dtype)) for d in data[k:]),
+        q0=q0_flat,
+        rest=rest_flat,
         locked_q=locked_flat,
         base=base_in,
         base_ok=base_ok,

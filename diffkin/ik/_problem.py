@@ -8,6 +8,7 @@ All arrays here are flat over ``P = seeds x targets`` problems, with that axis l
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any, NamedTuple
 
 import jax
@@ -115,15 +116,21 @@ class Spec(NamedTuple):
         """The targets, then the constraints (deferred terms come last: :meth:`Problem.padded`)."""
         return self.targets + self.constraints
 
-    def problem(self, model, targets: tuple, data: tuple, root=rg.IDENTITY, locked_q=None, limits=None) -> Problem:
-        """The :class:`Problem` of these terms bound to ``targets`` (per target, ``(P, 4, 4)`` or ``(P, 3)``)
-        and ``data`` (per constraint), with root pose ``root`` (entries ``(P,)`` or constants),
-        locked values ``locked_q`` ``(dof, P)`` (``None``: none are read) and ``limits``
-        ``(lower, upper, wrap, respect_limits)`` (``None``: none, for a residual only)."""
+    def bind(self, targets: Iterable, data: tuple) -> tuple:
+        """Every term's entries: the targets' from ``targets`` (per target, ``(P, 4, 4)`` or ``(P, 3)``;
+        any iterable, each bound as it comes), the constraints' from ``data`` (per constraint)."""
         bound = tuple(t.bind(a) for t, a in zip(self.targets, targets, strict=True))
-        bound += tuple(c.bind(d) for c, d in zip(self.constraints, data, strict=True))
-        none = jnp.zeros(0)
-        lower, upper, wrap, respect_limits = (none, none, none, False) if limits is None else limits
+        return bound + tuple(c.bind(d) for c, d in zip(self.constraints, data, strict=True))
+
+    def problem(self, model, bound: tuple, root=rg.IDENTITY, locked_q=None, limits=None) -> Problem:
+        """The :class:`Problem` of these terms, ``bound`` (:meth:`bind`), with root pose ``root`` (entries
+        ``(P,)`` or constants), locked values ``locked_q`` ``(dof, P)`` (``None``: none are read) and
+        ``limits`` ``(lower, upper, wrap, respect_limits)`` (``None``: none, for a residual only)."""
+        if limits is None or locked_q is None:
+            none = jnp.zeros(0)
+            limits = (none, none, none, False) if limits is None else limits
+            locked_q = none if locked_q is None else locked_q
+        lower, upper, wrap, respect_limits = limits
         return Problem(
             model,
             self.terms,
@@ -133,7 +140,7 @@ class Spec(NamedTuple):
             wrap,
             respect_limits,
             self.locked,
-            none if locked_q is None else locked_q,
+            locked_q,
             root,
             self.solve_base,
         )

@@ -21,7 +21,7 @@ from diffkin.ik import _args, _search, _secondary
 from diffkin.ik._implicit import implicit
 from diffkin.ik._keywords import terms_of
 from diffkin.ik._methods import METHODS
-from diffkin.ik._prepare import detach, flat, prepare
+from diffkin.ik._prepare import detach, prepare
 from diffkin.ik._problem import BASE_ROWS, Kinematics, Problem, Spec
 from diffkin.ik._result import IKResult
 from diffkin.models.dh import DHChain
@@ -333,14 +333,10 @@ def _solve(
     Every closure (problems, ranks) is built here, inside the trace, so that repeated eager
     calls of :func:`solve` hit jit's cache instead of retracing and recompiling.
     """
-    s = prepare(static, traced, data, spec, batch, batch, locked_q, base)
+    s = prepare(static, traced, data, spec, batch, batch, q0=q0, rest=rest, locked_q=locked_q, base=base)
     dtype, dof, k = data[0].dtype, s.model.dof, len(spec.targets)
     n = int(np.prod(batch, dtype=np.int64))
-    valid = s.valid
-    q0_flat = flat(q0, batch, (dof,), n, dtype)
-    rest_flat = flat(rest, batch, (dof,), n, dtype)
-    if rest is not None:  # traced non-finite values (the host rejects concrete ones): no success
-        valid = valid & jnp.all(jnp.isfinite(jnp.broadcast_to(rest, batch + (dof,)).reshape(n, dof)), axis=-1)
+    q0_flat, rest_flat = s.q0, s.rest
     base_flat = None if s.base is None else detach(s.base)
     limits = (s.lower, s.upper, s.wrap, respect_limits)
 
@@ -349,9 +345,10 @@ def _solve(
             x = x[idx]
             return jnp.broadcast_to(x, (copies,) + x.shape).reshape((copies * idx.shape[0],) + x.shape[1:])
 
+        bound = spec.bind((tile(t) for t in s.targets), s.data)
         root = rg.IDENTITY if base_flat is None else rg.from_matrix(tile(base_flat))
         locked_values = tile(s.locked_q).T if s.locked_q is not None else jnp.zeros((dof, 1), dtype)
-        return spec.problem(s.model, tuple(tile(t) for t in s.targets), s.data, root, locked_values, limits)
+        return spec.problem(s.model, bound, root, locked_values, limits)
 
     moves = _moves(s.model, spec.terms)
     still = ~np.any(moves, axis=1)  # joints that move no target
@@ -410,17 +407,18 @@ def _solve(
         x, ev = _secondary.refine(build(everything, 1), x, ev, best.success, h_of(everything), pos_tol, rot_tol)
     solved_root = s.base if base is not None and not spec.solve_base else None
     x = implicit(spec, s.differentiable, s.safe, solved_root, x)
-    success = best.success & valid if s.base_ok is None else best.success & valid & s.base_ok
+    success = best.success & s.valid if s.base_ok is None else best.success & s.valid & s.base_ok
     values, met = constraints_at(spec, build(jnp.arange(n), 1), x)
-    return result(spec, x, ev.pos_err[:k], ev.rot_err[:k], valid, success & met, best.iters, batch, values)
+    success = success if met is None else success & met
+    return result(spec, x, ev.pos_err[:k], ev.rot_err[:k], s.valid, success, best.iters, batch, values)
 
 
-def constraints_at(spec: Spec, problem: Problem, x: jax.Array) -> tuple[dict[str, jax.Array], jax.Array | bool]:
+def constraints_at(spec: Spec, problem: Problem, x: jax.Array) -> tuple[dict[str, jax.Array], jax.Array | None]:
     """The constraint's value at the returned states ``x`` ``(n_state, P)``, exactly (``{"clearance": (P,)}``,
-    empty without a constraint), and ``(P,)`` whether it is met (``True`` without one). ``IKResult`` has
+    empty without a constraint), and ``(P,)`` whether it is met (``None`` without one). ``IKResult`` has
     one field for a constraint's value: one constraint (``avoid``'s) at most."""
     if not spec.constraints:
-        return {}, True
+        return {}, None
     kin = Kinematics(problem, x)
     ((constraint, bound),) = zip(spec.constraints, problem.bound[len(spec.targets) :], strict=True)
     return {"clearance": constraint.clearance(kin, bound)}, constraint.met(kin, bound)

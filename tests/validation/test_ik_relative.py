@@ -140,7 +140,8 @@ def test_term_jacobian_equals_autodiff_of_its_residual(kind, solve_base):
     targets, given = (value, {}) if keyword == "target" else ({}, {keyword: value})
     terms = terms_of(panda, targets, given, weights)
     locked = tuple(i == 2 for i in range(dof))
-    problem = Spec(terms.targets, (), locked, (), solve_base, True).problem(panda, tuple(terms.data), ())
+    spec = Spec(terms.targets, (), locked, (), solve_base, True)
+    problem = spec.problem(panda, spec.bind(tuple(terms.data), ()))
     J = np.asarray(problem.evaluate(x).J)  # (m, n, P)
 
     def residual(step):  # (n, P) -> (m, P): joints moved by q + dq, the root by T exp([dv; dw])
