@@ -23,11 +23,10 @@ limits, coal clearance >= 0); the 5 mm / 0.05 rad column judges every returned c
 (successful or not) the same way at cuRobo's tolerance. Successes in contact (coal < 0) must be 0;
 successes below the margin by coal and successes off the pose are counted too.
 
-Each problem has its own obstacles. Until ``dk.ik.solve`` takes one world per target, a scene is
-solved problem by problem in a Python loop (:func:`solve_problems`, the one function to change for a
-batched call), every world padded to the same counts (11 boxes, 10 cylinders, far-away dummies) so
-that one compilation serves all 700. Times: the first call (compile included) apart, then each scene's
-loop once, warm.
+Each problem has its own obstacles: a scene is solved in one call with a world per target (a
+``World`` with problem axes; ``--loop``: problem by problem in a Python loop, to compare), every
+world padded to the same counts (11 boxes, 10 cylinders, far-away dummies) so that one compilation
+serves every scene. Times: the first call (compile included) apart, then each scene once, warm.
 
 A second part reproduces cuRobo's collision-free IK benchmark (its ``benchmark/ik_benchmark.py`` at
 NVlabs/curobo a35a708: the world ``collision_table.yml``, a 4 x 4 x 0.2 m slab under the robot;
@@ -82,13 +81,15 @@ CUROBO_PUBLISHED = {"IK": (2.60138, 100.0), "collision-free IK": (2.72574, 100.0
 
 
 def solve_problems(
-    robot, geom, targets: np.ndarray, worlds: list, locked: dict, dtype, desc: str = "solve"
+    robot, geom, targets: np.ndarray, worlds: list, locked: dict, dtype, desc: str = "solve", loop: bool = False
 ) -> dk.ik.IKResult:
-    """``(N,)`` results of the targets ``(N, 4, 4)``, target ``k`` among ``worlds[k]`` (same counts).
-
-    Today a Python loop of one problem per call (``dk.ik.solve`` compiles once for the padded counts);
-    with per-target worlds in the library, this function becomes one batched call.
-    """
+    """``(N,)`` results of the targets ``(N, 4, 4)``, target ``k`` among ``worlds[k]`` (same counts): one call
+    with a world per target (``World`` of problem axes ``(N,)``), or, with ``loop``, a Python loop of one
+    problem per call (``dk.ik.solve`` compiles once for the padded counts)."""
+    if not loop:
+        world = jax.tree.map(lambda *x: jnp.stack(x), *worlds)  # (N, n_kind, ...): a world per target
+        avoid = dk.ik.Avoid(geom, world, margin=MARGIN)
+        return jax.block_until_ready(dk.ik.solve(robot, {EE: jnp.asarray(targets, dtype)}, avoid=avoid, locked=locked))
     out = []
     for T, world in zip(progress(targets, desc), worlds, strict=True):
         avoid = dk.ik.Avoid(geom, world, margin=MARGIN)
@@ -194,21 +195,31 @@ def subset(problems: list, per_scene: int | None) -> list:
     return [problems[k] for k in np.linspace(0, len(problems) - 1, per_scene).round().astype(int)]
 
 
-def mbm(robot, geom, judge: Judge, scenes: dict, dtype) -> tuple[list, list, float]:
+def mbm(robot, geom, judge: Judge, scenes: dict, dtype, loop: bool) -> tuple[list, list, float]:
     """Per scene: the solves and their judgement; returns the table's rows, the misses and the first call (s)."""
     locked = {"panda_finger_joint1": FINGER}
     goal_clearance = jax.jit(lambda q, w: C.clearance(robot, geom, q, w))  # diffkin's model at goal_q, float64
-    first_problem = next(iter(scenes.values()))[0]
+    # the first call, compile included: one problem (the loop's call), or the first scene's batch
+    first_problems = next(iter(scenes.values()))[:1] if loop else next(iter(scenes.values()))
     start = time.perf_counter()
-    solve_problems(robot, geom, target_of(first_problem)[None], [world_of(first_problem)], locked, dtype, "first call")
+    solve_problems(
+        robot,
+        geom,
+        np.stack([target_of(p) for p in first_problems]),
+        [world_of(p, PAD) for p in first_problems],
+        locked,
+        dtype,
+        "first call",
+        loop,
+    )
     first = time.perf_counter() - start
-    print(f"# first call (one problem, compile included): {first:.1f} s", flush=True)
+    print(f"# first call ({len(first_problems)} problem(s), compile included): {first:.1f} s", flush=True)
     rows, misses, totals = [], [], {}
     for scene, problems in scenes.items():
         T = np.stack([target_of(p) for p in problems])
         worlds = [world_of(p, PAD) for p in problems]
         start = time.perf_counter()
-        res = solve_problems(robot, geom, T, worlds, locked, dtype, scene)
+        res = solve_problems(robot, geom, T, worlds, locked, dtype, scene, loop)
         warm = time.perf_counter() - start
         obstacles = [judge.coal.obstacles(p) for p in problems]
         goal_q = np.stack([configuration(p["goal_q"]) for p in problems])
@@ -378,6 +389,7 @@ def main(argv=None) -> int:
     parser.add_argument("--dtype", choices=("float32", "float64"), default="float32", help="the solver's dtype")
     parser.add_argument("--curobo-draws", type=int, default=5, help="cuRobo's setting: batches of 100 (default 5)")
     parser.add_argument("--no-curobo", action="store_true", help="skip cuRobo's setting")
+    parser.add_argument("--loop", action="store_true", help="one problem per call (default: a scene per call)")
     parser.add_argument("--write", action="store_true", help="write experiments/results/<machine>-mbm.md")
     args = parser.parse_args(argv)
     command = "python experiments/bench_mbm.py " + " ".join(argv if argv is not None else sys.argv[1:])
@@ -397,7 +409,7 @@ def main(argv=None) -> int:
     judge = Judge(urdf, robot, geom)
     n = sum(len(p) for p in scenes.values())
     print(f"# {n} MBM problems, robot model {args.model!r}, {args.dtype}; pose judged by {judge.fk_name}", flush=True)
-    rows, misses, first = mbm(robot, geom, judge, scenes, dtype)
+    rows, misses, first = mbm(robot, geom, judge, scenes, dtype, args.loop)
     curobo_rows = None if args.no_curobo else curobo(robot, geom, judge, args.curobo_draws, dtype)
 
     parts = [
@@ -409,15 +421,21 @@ def main(argv=None) -> int:
         busy,
         f"## MotionBenchMaker: {n} problems\n\n`dk.ik.solve(robot, {{'{EE}': T}}, avoid=dk.ik.Avoid(geom, world, "
         f"margin={MARGIN}), locked={{'panda_finger_joint1': {FINGER}}})`, the solver's defaults otherwise "
-        f"(1e-5 m / 1e-4 rad); obstacles exact (boxes, cylinders). **Batch 1, one problem per call** in a Python "
-        f"loop (each problem has its own obstacles; every world padded to {PAD[0]} boxes and {PAD[1]} cylinders, "
-        f"so one compilation serves all). First call (one problem, compile included): **{first:.1f} s**.\n\n"
+        f"(1e-5 m / 1e-4 rad); obstacles exact (boxes, cylinders), each problem its own (every world padded to "
+        f"{PAD[0]} boxes and {PAD[1]} cylinders, so one compilation serves all). "
+        + (
+            "**Batch 1, one problem per call** in a Python loop. First call (one problem, compile included): "
+            if args.loop
+            else "**A scene per call**: its problems batched, each with its own world (`World` of problem axes). "
+            "First call (the first scene, compile included): "
+        )
+        + f"**{first:.1f} s**.\n\n"
         f"solvable: MBM's `goal_q` clears its obstacles and the self pairs by {1e3 * MARGIN:g} mm on the real "
         f"meshes (coal); goal_q clear (model): by {1e3 * MARGIN:g} mm in diffkin's {args.model} model. solved: "
         "diffkin's success confirmed (pose within 1e-5 m / 1e-4 rad, arm within limits, coal clearance >= 0). "
         "5 mm / 0.05 rad: every returned configuration within cuRobo's tolerance, limits, coal >= 0. Successes in "
         f"contact: coal < 0; below margin: 0 <= coal < {1e3 * MARGIN:g} mm; off pose / limits: a success the "
-        "judge puts beyond 1e-5 m / 1e-4 rad or the limits. warm: the scene's loop, once.\n",
+        "judge puts beyond 1e-5 m / 1e-4 rad or the limits. warm: the scene's call(s), once.\n",
         table(MBM_HEADER, rows),
     ]
     if misses:

@@ -110,6 +110,7 @@ def _general(pairs: list, batches: list, reach) -> list[tuple[jax.Array, jax.Arr
                     taken,
                     sides,
                 )
+        assert sides is not None  # (at least one block)
         a, b = sides
         n, pa, pb, s = _gjk.witnesses(a, b)
         return s - a.radius - b.radius, _wrench(-n, pa), _wrench(n, pb)

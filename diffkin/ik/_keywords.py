@@ -67,8 +67,8 @@ def terms_of(model, target, given: Mapping[str, Any], weights) -> Terms:
     """The terms of ``target`` (a chain's array, a robot's mapping) and of the keywords ``given``
     (``{name: value}``, ``None`` for absent), checked on the host."""
     if not isinstance(model, Robot):
-        array, position_only, batch = _args.check_target(target)
-        return Terms((pose.PoseTarget(None, position_only),), (), [array], batch)
+        array, position_only, shape = _args.check_target(target)
+        return Terms((pose.PoseTarget(None, position_only),), (), [array], shape)
     if weights is not None and not isinstance(weights, Mapping):
         raise TypeError(f"weights: expected a mapping from target frame names to weights, got {type(weights).__name__}")
     weights = {} if weights is None else weights
@@ -83,7 +83,7 @@ def terms_of(model, target, given: Mapping[str, Any], weights) -> Terms:
     for name in weights:
         if name not in keys:
             raise ValueError(f"weights: {name!r} is not one of the targets {list(keys)}")
-    batch = None
+    batch: tuple[int, ...] | None = None
     for term, array, label in found:
         b = tuple(array.shape[:-1] if term.position_only else array.shape[:-2])
         if batch is not None and b != batch:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import inspect
 from collections.abc import Mapping
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -144,8 +144,11 @@ def solve_path(model, targets, *, q0=None, max_step=None, **solve_kwargs) -> Pat
             f"(..., T, 3)), got batch shape {path_batch}"
         )
     bound = _max_step(max_step, model.dof)
-    first_given = {k.name: _waypoint(given[k.name], 0) if k.per_target else given[k.name] for k in KEYWORDS}
-    first_kw = {name: value for name, value in kw.items() if name not in ("key", "respect_limits")}  # plan's
+    first_given: dict[str, Any] = {
+        k.name: _waypoint(given[k.name], 0) if k.per_target else given[k.name] for k in KEYWORDS
+    }
+    # plan's keywords
+    first_kw: dict[str, Any] = {name: value for name, value in kw.items() if name not in ("key", "respect_limits")}
     checked = plan(model, _waypoint(targets, 0), first_given, q0=q0, rest=None, secondary=None, **first_kw)
     first = solve(
         model,
@@ -222,8 +225,8 @@ def _follow(
         lower, upper = jnp.full_like(lower, -jnp.inf), jnp.full_like(upper, jnp.inf)
     valid = s.valid.reshape(n, T).T  # (T, n)
     root, base_flat = rg.IDENTITY, None
-    if s.base is not None and not spec.solve_base:  # a non-finite root pose fails (as in solve), the identity solved
-        valid = valid & s.base_ok
+    if s.base is not None and s.base_ok is not None and not spec.solve_base:  # a non-finite root pose fails
+        valid = valid & s.base_ok  # (as in solve), the identity solved
         base_flat = s.base
         root = rg.from_matrix(detach(base_flat))
     locked_values = s.locked_q.T if s.locked_q is not None else jnp.zeros((dof, 1))

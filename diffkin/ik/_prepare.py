@@ -133,7 +133,7 @@ def prepare(
         valid=valid,
         safe=safe,
         targets=targets,
-        data=tuple(detach(d.cast(dtype)) for d in data[k:]),
+        data=tuple(detach(d.cast(dtype).flat(lead)) for d in data[k:]),
         q0=q0_flat,
         rest=rest_flat,
         locked_q=locked_flat,

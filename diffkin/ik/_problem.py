@@ -9,7 +9,7 @@ All arrays here are flat over ``P = seeds x targets`` problems, with that axis l
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import jax
 import jax.numpy as jnp
@@ -17,7 +17,7 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin._xla import materialize
-from diffkin.ik._terms import Term
+from diffkin.ik._terms import Constraint, Term
 from diffkin.models._ranges import into_cones
 
 BASE_ROWS = 12  # state rows of a solved root pose: p (3), then R row by row (9)
@@ -143,7 +143,13 @@ class Spec(NamedTuple):
             locked_q,
             root,
             self.solve_base,
+            len(self.targets),
         )
+
+
+#: how a target's rotation error counts in the targets' error a constraint is told (metres per
+#: radian: a point 10 cm from the frame, a gripper's size)
+OFF_PER_RADIAN = 0.1
 
 
 class Problem(NamedTuple):
@@ -161,6 +167,8 @@ class Problem(NamedTuple):
         locked: static, per joint, whether it is locked; ``locked_q``: ``(dof, P)`` its values.
         base: the root pose ``T_world_root`` (entries ``(P,)`` or constants) when not solved.
         solve_base: static; the root pose is part of the state.
+        targets: static; the leading terms that are targets (the others are constraints, whose rows
+            are told how far the targets are: :meth:`residual`).
     """
 
     model: Any
@@ -174,6 +182,7 @@ class Problem(NamedTuple):
     locked_q: jax.Array
     base: rg.Rigid
     solve_base: bool
+    targets: int = 0
 
     @property
     def dof(self) -> int:
@@ -214,9 +223,19 @@ class Problem(NamedTuple):
     def residual(self, x: jax.Array, jacobian: bool = True) -> Entries:
         """The entries of every term's residual, Jacobian and errors at ``x``, from one forward pass."""
         kin = Kinematics(self, x)
-        r, J, pos_err, rot_err, blocks = [], [], [], [], []
-        for term, bound in zip(self.terms, self.bound, strict=True):
-            rows = term.rows(kin, bound, jacobian)
+        r: list = []
+        J: list = []
+        pos_err: list = []
+        rot_err: list = []
+        blocks: list = []
+        for i, (term, bound) in enumerate(zip(self.terms, self.bound, strict=True)):
+            if i < self.targets:
+                rows = term.rows(kin, bound, jacobian)
+            else:  # a constraint, told the targets' largest error ``(P,)`` (None without targets)
+                errors = [rg.add(e, rg.mul(OFF_PER_RADIAN, a)) for e, a in zip(pos_err, rot_err, strict=True)]
+                zero = jnp.zeros(kin.shape, kin.dtype)
+                off = jnp.max(jnp.stack(jnp.broadcast_arrays(*errors, zero)), 0) if errors else None
+                rows = cast(Constraint, term).rows(kin, bound, jacobian, off)
             r += rows.r
             J += rows.J
             pos_err.append(rows.pos_err)
@@ -249,7 +268,7 @@ class Problem(NamedTuple):
     def deferred_met(self, x: jax.Array) -> jax.Array:
         """``(P,)`` bool: every deferred term holds at ``x`` (``met(kin, bound)``, exactly)."""
         kin = Kinematics(self, x)
-        met = [t.met(kin, b) for t, b in zip(self.terms, self.bound, strict=True) if t.deferred]
+        met = [cast(Constraint, t).met(kin, b) for t, b in zip(self.terms, self.bound, strict=True) if t.deferred]
         return jnp.all(jnp.stack(met), axis=0)
 
     def padded(self, x: jax.Array, ev: Eval, met: jax.Array) -> Eval:

@@ -345,7 +345,7 @@ def _solve(
             x = x[idx]
             return jnp.broadcast_to(x, (copies,) + x.shape).reshape((copies * idx.shape[0],) + x.shape[1:])
 
-        bound = spec.bind((tile(t) for t in s.targets), s.data)
+        bound = spec.bind((tile(t) for t in s.targets), tuple(d.tiled(tile) for d in s.data))
         root = rg.IDENTITY if base_flat is None else rg.from_matrix(tile(base_flat))
         locked_values = tile(s.locked_q).T if s.locked_q is not None else jnp.zeros((dof, 1), dtype)
         return spec.problem(s.model, bound, root, locked_values, limits)

@@ -78,7 +78,8 @@ def test_solutions_are_clear_on_target_and_a_target_inside_an_obstacle_fails(arm
     """60 hand targets from random configurations that clear everything by the margin + band, and one
     inside the box, each solved with and without ``avoid`` (float64; one test, so that one process
     compiles both solvers): every success clear and on target, the one inside failing with finite
-    values, and without ``avoid`` some solved through an obstacle."""
+    values, and without ``avoid`` some solved through an obstacle. The worlds are per target: a 62nd
+    target, inside the box again, has a world of its own whose box is elsewhere, and is solved."""
     robot, geom, world = arm
     margin = 0.02
     rng = np.random.default_rng(0)
@@ -87,18 +88,29 @@ def test_solutions_are_clear_on_target_and_a_target_inside_an_obstacle_fails(arm
     q = q[clear > margin + BAND][:60]
     targets = np.asarray(dk.fk(robot, q, "hand"))[:, :3, 3]
     inside = np.array([[0.45, -0.1, 0.25]])  # the box's centre
-    targets = np.concatenate([targets, inside])
-    res = dk.ik.solve(robot, {"hand": targets}, avoid=dk.ik.Avoid(geom, world, margin=margin))
+    targets = np.concatenate([targets, inside, inside])
+    sphere, box, floor = world.spheres, world.boxes, world.planes
+    poses = np.repeat(np.asarray(box.pose)[None], 62, axis=0)
+    poses[-1, :, :3, 3] += [0.0, 0.0, 2.0]  # the last target's box, 2 m higher
+    per_target = World(
+        Sphere(np.broadcast_to(sphere.center, (62, 1, 3)), np.broadcast_to(sphere.radius, (62, 1))),
+        Box(poses, np.broadcast_to(box.half_extents, (62, 1, 3))),
+        Plane(floor.normal[0], floor.offset[0]),
+    )
+    res = dk.ik.solve(robot, {"hand": targets}, avoid=dk.ik.Avoid(geom, per_target, margin=margin))
     plain = dk.ik.solve(robot, {"hand": targets})
 
-    ok = np.asarray(res.success[:-1])
+    ok = np.asarray(res.success[:-2])
     assert ok.mean() >= 0.95
     q = np.asarray(res.q)
-    clearance = np.asarray(dk.collision.clearance(robot, geom, q, world))
+    clearance = np.asarray(dk.collision.clearance(robot, geom, q, per_target))
     np.testing.assert_allclose(np.asarray(res.clearance), clearance, rtol=0, atol=1e-12)
-    assert np.all(clearance[:-1][ok] >= margin)
+    np.testing.assert_allclose(
+        clearance[:-1], np.asarray(dk.collision.clearance(robot, geom, q[:-1], world)), atol=1e-15
+    )
+    assert np.all(clearance[:-2][ok] >= margin)
     reached = np.stack([robot_poses(robot, qk)[robot.frame_names.index("hand"), :3, 3] for qk in q])
-    assert np.all(np.linalg.norm(reached - targets, axis=-1)[:-1][ok] <= 1e-5)
+    assert np.all(np.linalg.norm(reached - targets, axis=-1)[:-2][ok] <= 1e-5)
     lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
     assert np.all((q >= lo) & (q <= hi))
     # without avoid, some of the same targets (the one inside the box too) are solved through an obstacle
@@ -106,11 +118,15 @@ def test_solutions_are_clear_on_target_and_a_target_inside_an_obstacle_fails(arm
     assert np.sum(np.asarray(plain.success) & (plain_clear < margin)) >= 2
 
     # the target inside the box: reachable (through the box), not solved with avoid, finite
-    assert bool(plain.success[-1])
-    assert not bool(res.success[-1])
-    for field in (res.q[-1], res.pos_err[-1], res.clearance[-1]):
+    assert bool(plain.success[-2])
+    assert not bool(res.success[-2])
+    for field in (res.q[-2], res.pos_err[-2], res.clearance[-2]):
         assert np.all(np.isfinite(np.asarray(field)))
-    assert float(res.clearance[-1]) < margin
+    assert float(res.clearance[-2]) < margin
+    # the same point with its own world, whose box is elsewhere: solved, clear of that world
+    assert bool(res.success[-1]) and clearance[-1] >= margin
+    with pytest.raises(ValueError, match="Avoid.world: its problem axes"):
+        dk.ik.solve(robot, {"hand": targets[:-1]}, avoid=dk.ik.Avoid(geom, per_target, margin=margin))
 
 
 def test_floating_locked_secondary_with_avoid(arm):

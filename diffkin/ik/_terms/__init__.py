@@ -57,7 +57,9 @@ class Term(Protocol):
     """What the solver asks of every term (see the package docstring)."""
 
     deferred: ClassVar[bool]
-    frames: tuple[int | None, ...]
+
+    @property
+    def frames(self) -> tuple[int | None, ...]: ...
 
     def bind(self, data) -> tuple: ...
 
@@ -85,9 +87,17 @@ class Constraint(Term, Protocol):
     """A term that reports its own value, ``clearance(kin, bound) -> (P,)`` (``IKResult.clearance``),
     computed exactly at the returned states, and ``met(kin, bound) -> (P,)`` bool, which success needs.
 
-    ``bind(data)`` takes data every problem shares (a pytree in the solver's dtype); its
+    ``bind(data)`` takes its data (a pytree in the solver's dtype: :class:`~diffkin.ik.Avoid`), which
+    has ``cast(dtype)``, ``flat(lead)`` (parts per problem, of problem axes broadcasting to the
+    targets' ``lead``, flattened to ``(n, ...)``; shared parts as they are) and ``tiled(tile)``
+    (``tile`` applied to the flat parts per problem: the problems a search runs). Its
     ``Rows.pos_err`` is 0 where it is met and the largest float elsewhere.
     """
+
+    def rows(self, kin, bound, jacobian: bool, off=None) -> Rows:
+        """As :meth:`Term.rows`, told ``off`` ``(P,)``: the targets' largest error at the state (metres, a
+        radian counting as :data:`diffkin.ik._problem.OFF_PER_RADIAN`), ``None`` without targets."""
+        ...
 
     def clearance(self, kin, bound) -> jax.Array: ...
 

@@ -1,6 +1,7 @@
 """Clearance: the robot's collision shapes kept apart from each other and from the obstacles.
 
-One-sided residuals, zero where every distance is at least ``margin + BAND``:
+One-sided residuals, zero where every distance is at least ``margin + BAND`` (the band narrows to
+the targets' error as they converge: :meth:`AvoidTerm.rows`):
 
 - one row per self-collision pair: ``a = max(0, margin + BAND - d)``;
 - one row per robot shape against the world: ``sqrt(sum_o a_o^2)`` over the obstacles ``o``.
@@ -74,17 +75,44 @@ class Avoid:
             raise ValueError(f"Avoid.margin: expected a scalar (metres), got shape {jnp.shape(self.margin)}")
         if concrete and not (np.isfinite(float(self.margin)) and float(self.margin) >= 0):
             raise ValueError(f"Avoid.margin: expected a finite distance >= 0 (metres), got {float(self.margin)}")
-        if self.world is not None and self.world.batch:
-            raise ValueError(
-                f"Avoid.world: a world per problem (problem axes {self.world.batch}) is not accepted by IK yet; "
-                "solve the problems with a world each"
-            )
         if _obstacles(self) is None and not (self.self_collision and len(self.geom.pairs)):
             raise ValueError("Avoid: nothing to keep clear (no obstacles in world and no self-collision pairs)")
 
     def cast(self, dtype) -> Avoid:
         """The arrays in ``dtype`` (the solver's)."""
         return jax.tree.map(lambda x: jnp.asarray(x, dtype), self)
+
+    def flat(self, batch: tuple[int, ...]) -> Avoid:
+        """A world per problem broadcast to the targets' ``batch`` (of a path: its paths) and flattened:
+        obstacles ``(n, n_kind, ...)`` (a shared world as it is).
+
+        Raises:
+            ValueError: the world's problem axes do not broadcast to ``batch`` (shapes are static: at
+                the call, before anything runs).
+        """
+        if self.world is None or not self.world.batch:
+            return self
+        try:
+            joint = jnp.broadcast_shapes(self.world.batch, batch)
+        except ValueError:
+            joint = None
+        if joint != tuple(batch):
+            raise ValueError(
+                f"Avoid.world: its problem axes {self.world.batch} must broadcast to the targets' batch shape "
+                f"{tuple(batch)} (a world per target; along a path, per path)"
+            )
+        lead, n = len(self.world.batch), int(np.prod(batch, dtype=np.int64))
+        world = jax.tree.map(
+            lambda v: jnp.broadcast_to(v, batch + v.shape[lead:]).reshape((n,) + v.shape[lead:]), self.world
+        )
+        return dataclasses.replace(self, world=world)
+
+    def tiled(self, tile) -> Avoid:
+        """A flat world per problem (:meth:`flat`) with ``tile`` (``(n, ...) -> (P, ...)``: the problems a
+        search runs, from their targets) applied to its obstacles."""
+        if self.world is None or not self.world.batch:
+            return self
+        return dataclasses.replace(self, world=jax.tree.map(tile, self.world))
 
     def clearance(self, robot, q, base=None) -> jax.Array:
         """``(...,)`` metres: the smallest distance this checks at ``q`` ``(..., dof)`` (the self pairs
@@ -141,10 +169,10 @@ class AvoidTerm:
     def bind(self, avoid: Avoid) -> Avoid:
         return avoid
 
-    def _measure(self, kin, avoid: Avoid, jacobian: bool = False):
+    def _measure(self, kin, avoid: Avoid, reach, jacobian: bool = False):
         """The self pairs' blocks (:func:`pair_blocks`) with their distances ``(n_pairs, P)`` each and the
-        world distances ``(S, W, P)`` at the state, exact below the reach ``margin + BAND`` and lower
-        bounds above it (:func:`near_motions`); with ``jacobian``, also the wrenches of the self pairs'
+        world distances ``(S, W, P)`` at the state, exact below ``reach`` and lower bounds above it
+        (:func:`near_motions`); with ``jacobian``, also the wrenches of the self pairs'
         two sides ``(n_pairs, P, 6)`` and of the robot shapes against each obstacle kind
         (``[[(n_kind, n_obstacles, P, 6)]]``)."""
         T = rg.to_matrices([kin.pose(f) for f in self.frames], kin.shape, kin.dtype)  # (P, F, 4, 4)
@@ -155,7 +183,7 @@ class AvoidTerm:
         pairs = [(take(shapes[ka], ia), take(shapes[kb], ib)) for _, ka, kb, ia, ib in blocks]
         if world is not None:  # each robot kind against each obstacle kind: (n_kind, n_obstacles, P)
             pairs += [(expanded(shape), obstacles) for shape in shapes for obstacles in obstacles_last(world)]
-        measured = near_motions(pairs, avoid.margin + BAND)
+        measured = near_motions(pairs, reach)
         d_self = [d for d, _, _ in measured[: len(blocks)]]
         w_self = [(Wa, Wb) for _, Wa, Wb in measured[: len(blocks)]] if jacobian else []
         d_world, w_world = None, []
@@ -166,19 +194,28 @@ class AvoidTerm:
             w_world = [[Wa for _, Wa, _ in row] for row in rows] if jacobian else []
         return blocks, d_self, d_world, w_self, w_world
 
-    def clearance(self, kin, avoid: Avoid) -> jax.Array:
-        """``(P,)`` the smallest checked distance: exact below ``margin + BAND``, a lower bound above it."""
-        _, d_self, d_world, _, _ = self._measure(kin, avoid)
+    def _smallest(self, kin, avoid: Avoid, reach) -> jax.Array:
+        """``(P,)`` the smallest checked distance: exact below ``reach``, a lower bound above it."""
+        _, d_self, d_world, _, _ = self._measure(kin, avoid, reach)
         d = d_self + ([] if d_world is None else [d_world.reshape(-1, kin.shape[0])])
         return jnp.min(jnp.concatenate(d), axis=0)
 
-    def met(self, kin, avoid: Avoid) -> jax.Array:
-        """``(P,)`` bool: the clearance is at least the margin (exactly)."""
-        return self.clearance(kin, avoid) >= avoid.margin
+    def clearance(self, kin, avoid: Avoid) -> jax.Array:
+        """``(P,)`` the smallest checked distance (exact)."""
+        return self._smallest(kin, avoid, jnp.inf)
 
-    def rows(self, kin, avoid: Avoid, jacobian: bool) -> Rows:
-        dtype, reach = kin.dtype, avoid.margin + BAND
-        blocks, d_self, d_world, w_self, w_world = self._measure(kin, avoid, jacobian)
+    def met(self, kin, avoid: Avoid) -> jax.Array:
+        """``(P,)`` bool: the clearance is at least the margin (exactly: only the distances below the
+        reach need computing)."""
+        return self._smallest(kin, avoid, avoid.margin + BAND) >= avoid.margin
+
+    def rows(self, kin, avoid: Avoid, jacobian: bool, off=None) -> Rows:
+        """The rows of the module docstring, their band narrowed to the targets' error ``off`` ``(P,)``
+        where given: a goal that clears the margin is then reached exactly (the rows vanish there),
+        not left where the band's push balances the pose's pull."""
+        dtype = kin.dtype
+        reach = avoid.margin + (BAND if off is None else jnp.minimum(BAND, off))
+        blocks, d_self, d_world, w_self, w_world = self._measure(kin, avoid, avoid.margin + BAND, jacobian)
         a_self = [jnp.maximum(reach - d, 0.0) for d in d_self]  # (n_pairs, P) each
         r = list(a_self)
         if d_world is not None:
@@ -215,8 +252,8 @@ class AvoidTerm:
         return rg.stack(entries, kin.shape, kin.dtype, axis=0).reshape(shape)
 
     def screen(self, kin, avoid: Avoid) -> rg.Entry:
-        _, d_self, d_world, _, _ = self._measure(kin, avoid)
         reach = avoid.margin + BAND
+        _, d_self, d_world, _, _ = self._measure(kin, avoid, reach)
         cost = sum(jnp.sum(jnp.maximum(reach - d, 0.0) ** 2, axis=0) for d in d_self)
         if d_world is not None:
             cost = cost + jnp.sum(jnp.maximum(reach - d_world, 0.0) ** 2, axis=(0, 1))
