@@ -57,9 +57,7 @@ class Term(Protocol):
     """What the solver asks of every term (see the package docstring)."""
 
     deferred: ClassVar[bool]
-
-    @property
-    def frames(self) -> tuple[int | None, ...]: ...
+    frames: tuple[int | None, ...]
 
     def bind(self, data) -> tuple: ...
 

@@ -110,7 +110,7 @@ class PoseTarget(Target):
     weights: tuple[float, ...] = ONES
 
     @property
-    def frames(self) -> tuple[int | None, ...]:
+    def frames(self) -> tuple[int | None, ...]:  # type: ignore[override]  # (Term's field, derived here)
         return (self.frame,)
 
     def bind(self, target: jax.Array) -> tuple:

@@ -44,7 +44,7 @@ class RelativeTarget(Target):
     weights: tuple[float, ...] = ONES
 
     @property
-    def frames(self) -> tuple[int | None, ...]:
+    def frames(self) -> tuple[int | None, ...]:  # type: ignore[override]  # (Term's field, derived here)
         return (self.a, self.b)
 
     def bind(self, target: jax.Array) -> tuple:
