@@ -22,18 +22,11 @@ import numpy as np
 
 from diffkin.collision import _gjk
 from diffkin.collision._distance import BOUNDED, GENERAL, lower_bound, motion
+from diffkin.collision._robot import batch_shape
+from diffkin.collision._shapes import unchecked
 
 #: the exact motion of the near pairs is computed for 1 / NEAR_SHARE of the pairs at a time.
 NEAR_SHARE = 8
-
-
-def _batch(shape) -> tuple[int, ...]:
-    fields = type(shape).TRAILING
-    return jnp.broadcast_shapes(*(jnp.shape(v)[: jnp.ndim(v) - fields[k]] for k, v in _fields(shape).items()))
-
-
-def _fields(shape) -> dict[str, jax.Array]:
-    return {name: getattr(shape, name) for name in type(shape).TRAILING}
 
 
 def _taken(shape, batch: tuple[int, ...], idx: jax.Array):
@@ -41,18 +34,15 @@ def _taken(shape, batch: tuple[int, ...], idx: jax.Array):
     without broadcasting the fields first (a robot's polytope vertices are not copied per pair)."""
     multi = jnp.unravel_index(idx, batch) if batch else ()
     out = {}
-    for name, v in _fields(shape).items():
-        r = type(shape).TRAILING[name]
+    for name, r in type(shape).TRAILING.items():
+        v = getattr(shape, name)
         own = (1,) * (len(batch) - (jnp.ndim(v) - r)) + jnp.shape(v)[: jnp.ndim(v) - r]
         flat = jnp.zeros_like(idx)
         for m, size in zip(multi, own, strict=True):
             flat = flat * size + (m if size > 1 else 0)
         tail = jnp.shape(v)[jnp.ndim(v) - r :]
         out[name] = jnp.reshape(v, (int(np.prod(own)),) + tail)[flat]
-    obj = object.__new__(type(shape))
-    for name, value in out.items():
-        object.__setattr__(obj, name, value)
-    return obj
+    return unchecked(type(shape), **out)
 
 
 def _wrench(n: jax.Array, p: jax.Array) -> jax.Array:
@@ -127,7 +117,7 @@ def near_motions(pairs: list, reach) -> list[tuple[jax.Array, jax.Array, jax.Arr
     and the wrenches ``B + (6,)`` of :func:`diffkin.collision._distance.motion`, exact where the
     distance is below ``reach``; elsewhere ``d`` is a lower bound at least ``reach`` and the wrenches
     are zero (the module docstring)."""
-    batches = [tuple(jnp.broadcast_shapes(_batch(a), _batch(b))) for a, b in pairs]
+    batches = [tuple(jnp.broadcast_shapes(batch_shape(a), batch_shape(b))) for a, b in pairs]
     out: list = [None] * len(pairs)
     general = [k for k, (a, b) in enumerate(pairs) if (type(a), type(b)) in GENERAL and np.prod(batches[k]) > 0]
     if general:
