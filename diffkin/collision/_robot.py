@@ -31,17 +31,6 @@ def batch_shape(shape) -> tuple[int, ...]:
     )
 
 
-def flattened(shape, batch: tuple[int, ...]):
-    """The shapes broadcast to the batch shape ``batch`` and flattened: every field ``(prod(batch), ...)``."""
-    size = int(np.prod(batch))
-
-    def flat(v, r):
-        tail = v.shape[v.ndim - r :]
-        return jnp.broadcast_to(v, batch + tail).reshape((size,) + tail)
-
-    return _map(shape, flat)
-
-
 def _map(shape, fn):
     """A shape of the same kind with ``fn(value, trailing_rank)`` applied to every field (unchecked)."""
     return unchecked(type(shape), **{k: fn(v, type(shape).TRAILING[k]) for k, v in _fields(shape).items()})
@@ -211,11 +200,6 @@ def expanded(shape):
     """The shapes with a new axis 1: robot shapes ``(n_kind, 1, N, ...)``, obstacles ``(n_obstacles, 1, ...)``,
     whose distances broadcast to ``(n_kind, n_obstacles, N)``."""
     return _map(shape, lambda v, r: jnp.expand_dims(v, 1))
-
-
-def kind_size(shape) -> int:
-    """The number of shapes of a stacked kind (its first batch axis)."""
-    return int(batch_shape(shape)[0])
 
 
 def take(shape, idx):
