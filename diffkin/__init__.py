@@ -3,13 +3,17 @@
 The public names of the API contract: models, forward kinematics, Jacobians, and the
 ``robots``, ``ik``, ``se3``, ``srs``, ``workspace`` and ``collision`` modules. They are imported on first use
 (``dk.fk``, ``from diffkin import fk``), so that ``import diffkin`` alone does not import JAX and
-the ``diffkin`` command answers ``--help`` and usage errors at once.
+the ``diffkin`` command answers ``--help`` and usage errors at once. Importing it switches JAX's
+persistent compilation cache on unless the user configured one or set ``DIFFKIN_CACHE_DIR=off``
+(:mod:`diffkin._cache`).
 """
 
 from __future__ import annotations
 
 import importlib
 from typing import TYPE_CHECKING
+
+from diffkin._cache import use_cache_by_default
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from diffkin import collision, ik, robots, se3, srs, workspace
@@ -61,6 +65,8 @@ __all__ = [
     "workspace",
 ]
 __version__ = "0.1.0"  # the package version (pyproject.toml reads it from here)
+
+use_cache_by_default()
 
 
 def __getattr__(name: str):

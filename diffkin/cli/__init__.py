@@ -15,8 +15,8 @@ the chain from the root to ``--end-link``). Every computation runs in float64 (`
 switched on by the commands).
 User errors (and a missing optional dependency) print one line ``diffkin: error: ...`` to stderr and
 exit with status 2; Ctrl-C exits with status 130. Compiled programs are kept in JAX's persistent
-compilation cache (``--cache-dir``, ``--no-cache``, ``DIFFKIN_CACHE_DIR``; see
-:func:`diffkin.cli._cache.cache_dir`).
+compilation cache, as every use of the library does (``--cache-dir``, ``--no-cache``, ``DIFFKIN_CACHE_DIR``; see
+:mod:`diffkin._cache`).
 
 One module per job: ``_parser`` (options), ``_errors`` (one-line errors), ``_cache`` (compilation
 cache), ``_robots`` (robots by name or file), ``_scene`` (obstacles of ``--avoid``), ``_compiled``
@@ -29,7 +29,7 @@ from __future__ import annotations
 import os
 import sys
 
-from diffkin.cli._cache import cache_dir, use_cache
+from diffkin.cli._cache import use_options
 from diffkin.cli._errors import EXTRAS, CLIError, with_flags
 from diffkin.cli._parser import build_parser
 
@@ -49,10 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     try:
         args = build_parser().parse_args(argv)
-        use_cache(
-            cache_dir(args.cache_dir, args.no_cache),
-            chosen=args.cache_dir is not None or bool(os.environ.get("DIFFKIN_CACHE_DIR")),
-        )
+        use_options(args.cache_dir, args.no_cache)
         return args.func(args)
     except SystemExit as e:  # --help, --version
         return e.code if isinstance(e.code, int) else 0
