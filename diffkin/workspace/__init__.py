@@ -29,46 +29,21 @@ plot (``_plot.py``).
 
 from __future__ import annotations
 
-import math
-import sys
 from collections.abc import Sequence
 
 import jax
-import jax.numpy as jnp
-import numpy as np
-from jax.sharding import Mesh, NamedSharding
-from jax.sharding import PartitionSpec as P
 
 from diffkin._checks import positive_int
-from diffkin._static import partition
+from diffkin.workspace._driver import run
 from diffkin.workspace._map import ReachabilityMap
 from diffkin.workspace._plot import plot_slice
-from diffkin.workspace._sampling import _as_chain, _grid, sample_configs
-from diffkin.workspace._step import _AXIS, _collision_check, _compiled
+from diffkin.workspace._sampling import _grid, sample_configs  # noqa: F401  # _grid: the CLI's grid in advance
+from diffkin.workspace._step import _compiled  # noqa: F401  # its cache, for the tests
 
 MAX_GRID_BYTES = 2 * 1024**3
 """Largest memory of the maps of :func:`reachability` (an estimate: every device's counts, manipulability
 and orientation flags per voxel, their reduction and the host's copies); a finer grid is a ValueError
 naming ``voxel_size``. Raise it (``diffkin.workspace.MAX_GRID_BYTES = ...``) to allow more."""
-_INT32_MAX = 2**31 - 1
-
-
-def _host(x: jax.Array) -> np.ndarray:
-    """A replicated array as numpy (one local copy; works on every process of a multi-host run)."""
-    return np.asarray(x.addressable_data(0))
-
-
-def _progress(total: int, show: bool | None):
-    """A tqdm bar over chunks, or ``None``: ``show=None`` shows it on a terminal on process 0."""
-    if show is False or jax.process_index() != 0:
-        return None
-    try:
-        from tqdm import tqdm
-    except ImportError:
-        return None
-    if show is None and not sys.stderr.isatty():
-        return None
-    return tqdm(total=total, unit="sample", unit_scale=True, desc="reachability")
 
 
 def reachability(
@@ -126,87 +101,37 @@ def reachability(
     Raises:
         ValueError, TypeError: bad arguments (named in the message).
     """
-    collision = None if avoid is None else _collision_check(chain, avoid)
-    chain = _as_chain(chain)
-    n_samples = positive_int(n_samples, "n_samples")
-    chunk = positive_int(chunk, "chunk")
     orientation_bins = positive_int(orientation_bins, "orientation_bins")
     if orientation_bins % 6:
         raise ValueError(
             f"orientation_bins: expected a multiple of 6 (6 cube faces x roll sectors), got {orientation_bins}"
         )
-    origin, voxel_size, shape = _grid(chain, voxel_size, bounds)
-    n_chunks = -(-n_samples // chunk)
-    if n_chunks > _INT32_MAX:
-        raise ValueError(f"n_samples: expected at most {_INT32_MAX} chunks of {chunk} samples, got {n_samples} samples")
-    chunk = min(chunk, n_samples)  # a larger chunk would only compute masked samples
-    n_slots = math.prod(shape) * orientation_bins
-    if n_slots >= _INT32_MAX:
-        raise ValueError(
-            f"voxel_size: grid of {shape} voxels x {orientation_bins} orientation bins exceeds 2**31 "
-            f"cells; expected a coarser voxel_size, smaller bounds or fewer orientation_bins"
-        )
-    devices = list(jax.devices() if devices is None else devices)
-    if not devices or not all(isinstance(d, jax.Device) for d in devices):
-        raise TypeError(f"devices: expected a non-empty sequence of jax.Device, got {devices!r}")
-    dtype = jnp.dtype(dtype or jnp.result_type(float))
-    # Per voxel: every device's counts, best manipulability and orientation flags; the reduction's
-    # maximum of the flags and its three maps; the host's int64 counts and copies of the maps.
-    item = dtype.itemsize
-    grid_bytes = math.prod(shape) * (
-        len(devices) * (4 + item + orientation_bins) + orientation_bins + 2 * (8 + item) + 8
-    )
-    if grid_bytes > MAX_GRID_BYTES:
-        raise ValueError(
-            f"voxel_size: {voxel_size} m gives a grid of {shape} voxels x {orientation_bins} orientation "
-            f"bins on {len(devices)} device(s), about {grid_bytes / 2**30:.1f} GiB of maps (limit "
-            f"diffkin.workspace.MAX_GRID_BYTES = {MAX_GRID_BYTES / 2**30:.1f} GiB); expected a coarser "
-            f"voxel_size, smaller bounds or fewer orientation_bins"
-        )
-    mesh = Mesh(np.array(devices), (_AXIS,))
-    zeros, step, reduce = _compiled(partition(chain)[0], shape, orientation_bins, chunk, dtype, mesh, collision)
-
-    n_full, n_last = divmod(n_samples, chunk)
-    n_steps = -(-(n_full + (n_last > 0)) // len(devices))
-    steps_per_flush = max(1, _INT32_MAX // (chunk * len(devices)))  # int32 device counts cannot overflow
-    args = (
-        jnp.asarray(n_full, jnp.int32),
-        jnp.asarray(n_last, jnp.int32),
-        jnp.asarray(origin, dtype),
-        jnp.asarray(1.0 / voxel_size, dtype),
-        jnp.asarray(n_slots, jnp.int32),
-        jnp.zeros((), dtype) if avoid is None else avoid.cast(dtype),
-    )
-    sharded = NamedSharding(mesh, P(_AXIS))
-    state, counts, bar = zeros(), np.zeros(shape, np.int64), _progress(n_samples, progress)
-    done: jax.Array | None = None  # the valid samples of the step in flight
-    for s in range(n_steps):
-        indices = np.arange(s * len(devices), (s + 1) * len(devices), dtype=np.int32)
-        chunks = jax.make_array_from_callback(indices.shape, sharded, indices.__getitem__)
-        *state, n_step = step(*state, key, chunks, *args)
-        if bar is not None:
-            if done is not None:
-                bar.update(int(done))  # waits for the previous step only: one step stays in flight
-            done = n_step
-        if (s + 1) % steps_per_flush == 0 or s + 1 == n_steps:
-            counts_s, best, dexterity = reduce(*state)
-            counts += _host(counts_s).reshape(shape)
-            if s + 1 < n_steps:
-                state = [zeros()[0], *state[1:]]
-    if bar is not None and done is not None:
-        bar.update(int(done))
-    if bar is not None:
-        bar.close()
-    return ReachabilityMap(
-        counts=counts,
-        manipulability=_host(best).reshape(shape),
-        dexterity=_host(dexterity).reshape(shape),
-        origin=origin,
+    maps = run(
+        chain,
+        n_samples,
+        key=key,
         voxel_size=voxel_size,
-        n_samples=n_samples,
-        n_outside=n_samples - int(counts.sum()),
+        bounds=bounds,
+        chunk=chunk,
+        devices=devices,
         orientation_bins=orientation_bins,
-        chain_name=chain.name,
+        n_dir=1,
+        dtype=dtype,
+        progress=progress,
+        avoid=avoid,
+        max_grid_bytes=MAX_GRID_BYTES,
+        desc="reachability",
+    )
+    return ReachabilityMap(
+        counts=maps.counts,
+        manipulability=maps.best,
+        dexterity=maps.dexterity,
+        origin=maps.origin,
+        voxel_size=maps.voxel_size,
+        n_samples=n_samples,
+        n_outside=n_samples - int(maps.counts.sum()),
+        orientation_bins=orientation_bins,
+        chain_name=maps.chain.name,
     )
 
 

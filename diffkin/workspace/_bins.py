@@ -14,24 +14,47 @@ from diffkin._trig import atan2, sincos
 from diffkin.models.forward import Pass
 
 
-def _orientation_bin(R: rg.Mat3, n_roll: int) -> jax.Array:
-    """Orientation bin in ``[0, 6 n_roll)`` of rotations given by entries (see the module docstring)."""
+def _sector(y, x, n: int, start: float, width: float) -> jax.Array:
+    """Sector in ``[0, n)`` of the angle of ``(x, y)`` over ``n`` sectors of ``width`` radians from ``start``.
+
+    A first guess from ``atan2``, then settled by the side of the sector's edges that ``(x, y)`` is on:
+    products and sums, which round the same however XLA compiles them (atan2's division may not: see
+    :func:`_flat_index`).
+    """
+    sector = jnp.clip(jnp.floor((atan2(y, x) - start) * (1 / width)), 0, n - 1).astype(jnp.int32)
+    if n > 1:
+        edge = sector.astype(x.dtype) * width + start
+        (s0, c0), (s1, c1) = sincos(edge), sincos(edge + width)
+        sector = sector - ((c0 * y - s0 * x) < 0) + ((c1 * y - s1 * x) >= 0)
+        sector = jnp.clip(sector, 0, n - 1)
+    return sector
+
+
+def _orientation_bin(R: rg.Mat3, n_roll: int, n_dir: int = 1) -> jax.Array:
+    """Orientation bin in ``[0, 6 n_dir^2 n_roll)`` of rotations given by entries (see the module docstring).
+
+    The tool z axis picks a cube face ``(a, sign)`` and, with ``n_dir > 1``, one of ``n_dir x n_dir``
+    cells of that face, equal in angle: the sectors of ``atan2(z_u, |z_a|)`` and ``atan2(z_v, |z_a|)``
+    over ``[-45, 45]`` degrees (``u, v = (a + 1) % 3, (a + 2) % 3``); the roll sector is as for
+    ``n_dir = 1``. The bin is ``((2 a + (z_a < 0)) n_dir^2 + i_u n_dir + i_v) n_roll + sector``.
+    """
     z = [jnp.abs(R[i][2]) for i in range(3)]
     a = jnp.where((z[0] >= z[1]) & (z[0] >= z[2]), 0, jnp.where(z[1] >= z[2], 1, 2))
-    z_a = jnp.where(a == 0, R[0][2], jnp.where(a == 1, R[1][2], R[2][2]))
-    x_u = jnp.where(a == 0, R[1][0], jnp.where(a == 1, R[2][0], R[0][0]))
-    y_u = jnp.where(a == 0, R[1][1], jnp.where(a == 1, R[2][1], R[0][1]))
-    roll = atan2(-y_u, x_u)  # [-pi, pi]
-    sector = jnp.clip(jnp.floor((roll + jnp.pi) * (n_roll / (2 * jnp.pi))), 0, n_roll - 1).astype(jnp.int32)
-    if n_roll > 1:
-        # Settled by the side of the sector's edges that (x_u, -y_u) is on: products and sums, which
-        # round the same however XLA compiles them (atan2's division may not: see _flat_index).
-        width = 2 * np.pi / n_roll
-        start = sector.astype(x_u.dtype) * width - np.pi
-        (s0, c0), (s1, c1) = sincos(start), sincos(start + width)
-        sector = sector - ((c0 * -y_u - s0 * x_u) < 0) + ((c1 * -y_u - s1 * x_u) >= 0)
-        sector = jnp.clip(sector, 0, n_roll - 1)
-    return (2 * a + (z_a < 0)) * n_roll + sector
+
+    def pick(entries):  # entries[a] of each sample
+        return jnp.where(a == 0, entries[0], jnp.where(a == 1, entries[1], entries[2]))
+
+    z_a = pick([R[0][2], R[1][2], R[2][2]])
+    x_u = pick([R[1][0], R[2][0], R[0][0]])
+    y_u = pick([R[1][1], R[2][1], R[0][1]])
+    sector = _sector(-y_u, x_u, n_roll, -np.pi, 2 * np.pi / n_roll)  # roll in [-pi, pi]
+    face = 2 * a + (z_a < 0)
+    if n_dir > 1:
+        z_u, z_v, width = pick([R[1][2], R[2][2], R[0][2]]), pick([R[2][2], R[0][2], R[1][2]]), np.pi / 2 / n_dir
+        i_u = _sector(z_u, jnp.abs(z_a), n_dir, -np.pi / 4, width)
+        i_v = _sector(z_v, jnp.abs(z_a), n_dir, -np.pi / 4, width)
+        face = (face * n_dir + i_u) * n_dir + i_v
+    return face * n_roll + sector
 
 
 def _manipulability(kin: Pass, dof: int) -> jax.Array:

@@ -59,13 +59,18 @@ def _compiled(
     dtype,
     mesh: Mesh,
     collision: _Collision | None = None,
+    n_dir: int = 1,
 ):
-    """Jitted ``(zeros, step, reduce)`` of one map: compiled once per chain, grid shape, chunk, mesh and
-    collision check (the step's last argument: the :class:`~diffkin.ik.Avoid`, or ``None``).
+    """Jitted ``(zeros, step, reduce)`` of one map: compiled once per chain, grid shape, chunk, mesh,
+    collision check (the step's last argument: the :class:`~diffkin.ik.Avoid`, or ``None``) and
+    orientation binning (``n_bins = 6 n_dir^2 n_roll``, see :func:`_orientation_bin`).
 
     The state is, per device, ``counts (nvox,)`` int32, ``best (nvox,)`` manipulability and
     ``seen (nvox * n_bins,)`` uint8 flags of the orientation bins reached, stacked on a leading
     device axis sharded over the mesh. Step ``s`` runs chunk ``s * n_devices + d`` on device ``d``.
+    With ``n_dir > 1`` (a capability map: too many cells for dense flags) ``seen`` is a placeholder
+    ``(n_devices, 1)`` and the step also returns every sample's cell ``voxel * n_bins + bin``
+    (``(n_devices * chunk,)`` int32, ``n_slots`` for a sample not counted), for the caller to count.
     """
     chain = chain_key.model
     lo, hi = sampling_ranges(chain)
@@ -76,7 +81,7 @@ def _compiled(
         return (
             jnp.zeros((n_dev, nvox), jnp.int32),
             jnp.zeros((n_dev, nvox), dtype),
-            jnp.zeros((n_dev, nvox * n_bins), jnp.uint8),
+            jnp.zeros((n_dev, nvox * n_bins if n_dir == 1 else 1), jnp.uint8),
         )
 
     def local_step(counts, best, seen, key, chunk_index, n_full, n_last, origin, inv_voxel, n_slots, avoid):
@@ -95,12 +100,14 @@ def _compiled(
         R = tuple(tuple(jnp.broadcast_to(jnp.asarray(x, dtype), (chunk,)) for x in row) for row in ee.R)
         flat, inside = _flat_index(p, origin, inv_voxel, shape)
         slot = jnp.where(
-            inside & counted, flat * n_bins + _orientation_bin(R, n_bins // 6), n_slots
+            inside & counted, flat * n_bins + _orientation_bin(R, n_bins // (6 * n_dir**2), n_dir), n_slots
         )  # out of range: dropped by the scatters
         slot = opaque_index(slot, n_slots + 1)  # one forward pass for the three scatters, not one per scatter
         m = _manipulability(kin, chain.dof).astype(dtype)
         counts = counts.reshape(-1).at[slot // n_bins].add(1, mode="drop").reshape(counts.shape)
         best = best.reshape(-1).at[slot // n_bins].max(m, mode="drop").reshape(best.shape)
+        if n_dir > 1:
+            return counts, best, seen, jnp.sum(n_valid), slot
         seen = seen.reshape(-1).at[slot].set(1, mode="drop").reshape(seen.shape)
         return counts, best, seen, jnp.sum(n_valid)
 
@@ -109,13 +116,15 @@ def _compiled(
             local_step,
             mesh=mesh,
             in_specs=(P(_AXIS),) * 3 + (P(), P(_AXIS)) + (P(),) * 6,
-            out_specs=(P(_AXIS),) * 3 + (P(),),
+            out_specs=(P(_AXIS),) * 3 + (P(),) + ((P(_AXIS),) if n_dir > 1 else ()),
             check_vma=False,
         ),
         donate_argnums=(0, 1, 2),
     )
 
     def reduce(counts, best, seen):
+        if n_dir > 1:  # the caller counts the cells
+            return counts.sum(axis=0), best.max(axis=0), jnp.zeros(nvox, jnp.int32)
         dexterity = jnp.max(seen, axis=0).reshape(nvox, n_bins).sum(axis=1, dtype=jnp.int32)
         return counts.sum(axis=0), best.max(axis=0), dexterity
 
