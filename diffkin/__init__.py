@@ -3,8 +3,8 @@
 The public names of the API contract: models, forward kinematics, Jacobians, and the
 ``robots``, ``ik``, ``se3``, ``srs``, ``workspace`` and ``collision`` modules. They are imported on first use
 (``dk.fk``, ``from diffkin import fk``), so that ``import diffkin`` alone does not import JAX and
-the ``diffkin`` command answers ``--help`` and usage errors at once. Importing it switches JAX's
-persistent compilation cache on unless the user configured one or set ``DIFFKIN_CACHE_DIR=off``
+the ``diffkin`` command answers ``--help`` and usage errors at once. The first use of a model switches
+JAX's persistent compilation cache on unless the user configured one or set ``DIFFKIN_CACHE_DIR=off``
 (:mod:`diffkin._cache`).
 """
 
@@ -13,10 +13,8 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING
 
-from diffkin._cache import use_cache_by_default
-
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
-    from diffkin import collision, ik, robots, se3, srs, workspace
+    from diffkin import collision, ik, robots, se3, srs, traj, workspace
     from diffkin.kinematics import com, com_jacobian, fk, jacobian, link_poses, loop_closure, manipulability
     from diffkin.models import DHChain, PoEChain, Robot, load_robot, load_urdf, to_poe
 
@@ -26,6 +24,7 @@ _HOMES = {
     "robots": None,
     "se3": None,
     "srs": None,
+    "traj": None,
     "workspace": None,  # submodules
     "viewer": None,  # optional: needs viser and trimesh (pip install "diffkin[viewer]")
     "com": "diffkin.kinematics",
@@ -62,11 +61,10 @@ __all__ = [
     "se3",
     "srs",
     "to_poe",
+    "traj",
     "workspace",
 ]
 __version__ = "0.1.0"  # the package version (pyproject.toml reads it from here)
-
-use_cache_by_default()
 
 
 def __getattr__(name: str):

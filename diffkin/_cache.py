@@ -1,25 +1,25 @@
 """JAX's persistent compilation cache, on by default: a script's second run reads back what its first compiled.
 
-When ``diffkin`` is imported, JAX's cache is pointed at ``$DIFFKIN_CACHE_DIR``, else at
-``$XDG_CACHE_HOME/diffkin/jax`` (``~/.cache/diffkin/jax``), with every program kept (JAX's own default
-skips those compiling in under a second, most of a script's programs), unless the user chose otherwise:
-``DIFFKIN_CACHE_DIR=off`` (or empty, ``0``, ``false``, ``no``, ``none``) turns it off, and a cache the
-user configured for JAX (``JAX_COMPILATION_CACHE_DIR``, ``jax.config.jax_compilation_cache_dir``) is
-left as it is. ``import diffkin`` does not import JAX: before JAX is imported the settings go through
-JAX's environment variables, after it through ``jax.config``. A process that used the cache trims the
-folder to :data:`MAX_BYTES` at exit, oldest files first (JAX's own size bound lists the folder on every
-write, which costs more than it saves when every small program is kept).
+When ``diffkin.models`` is first imported (by any use of a model), JAX's cache is pointed at
+``$DIFFKIN_CACHE_DIR``, else at ``$XDG_CACHE_HOME/diffkin/jax`` (``~/.cache/diffkin/jax``), with every
+program kept (JAX's own default skips those compiling in under a second, most of a script's programs),
+unless the user chose otherwise: ``DIFFKIN_CACHE_DIR=off`` (or empty, ``0``, ``false``, ``no``,
+``none``) turns it off, and a cache the user configured for JAX (``JAX_COMPILATION_CACHE_DIR``,
+``jax.config.jax_compilation_cache_dir``) is left as it is. ``import diffkin`` alone imports neither JAX
+nor this. Nothing goes through the environment, so subprocesses choose for themselves. A process that
+used the cache trims the folder to :data:`MAX_BYTES` at exit, oldest files first (JAX's own size bound
+lists the folder on every write, which costs more than it saves when every small program is kept).
 """
 
 from __future__ import annotations
 
 import atexit
 import os
-import sys
 from pathlib import Path
 
 OFF = ("", "0", "off", "false", "no", "none")  # DIFFKIN_CACHE_DIR values that turn the cache off
 MAX_BYTES = 2 * 2**30  # the folder's bound, kept at exit
+_chosen = False  # whether use_cache ran: a choice made (by the CLI's options, say) stands
 _KEEP_EVERY_PROGRAM = {  # JAX option -> value: every program is cached, however fast it compiled or small
     "jax_persistent_cache_min_compile_time_secs": 0,
     "jax_persistent_cache_min_entry_size_bytes": 0,
@@ -46,10 +46,13 @@ def cache_dir(option: str | None = None, disabled: bool = False) -> Path | None:
 
 def use_cache(folder: Path | None) -> None:
     """Point JAX's persistent compilation cache at ``folder``, keeping every program; ``None`` turns it off.
+    The choice stands: :func:`use_cache_by_default` does not change it afterwards.
 
     Raises:
         OSError: ``folder`` cannot be created.
     """
+    global _chosen
+    _chosen = True
     if folder is not None:
         folder.mkdir(parents=True, exist_ok=True)
     import jax
@@ -64,24 +67,16 @@ def use_cache(folder: Path | None) -> None:
 
 
 def use_cache_by_default() -> None:
-    """Switch the cache on as the module docstring says (called when ``diffkin`` is imported)."""
+    """Switch the cache on as the module docstring says (called when ``diffkin.models`` is imported)."""
+    import jax
+
     folder = cache_dir()
-    if folder is None or os.environ.get("JAX_COMPILATION_CACHE_DIR"):
-        return
-    jax = sys.modules.get("jax")
-    if jax is not None and jax.config.jax_compilation_cache_dir is not None:
+    if _chosen or folder is None or jax.config.jax_compilation_cache_dir is not None:
         return
     try:
-        folder.mkdir(parents=True, exist_ok=True)
+        use_cache(folder)
     except OSError:  # a read-only home, say: no cache, nothing else changes
         return
-    if jax is not None:
-        use_cache(folder)
-        return
-    os.environ["JAX_COMPILATION_CACHE_DIR"] = str(folder)
-    for option, value in _KEEP_EVERY_PROGRAM.items():
-        os.environ[option.upper()] = str(value)
-    _trim_at_exit(folder)
 
 
 _TRIMMED: set[Path] = set()

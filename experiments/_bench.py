@@ -25,9 +25,13 @@ import numpy as np
 
 import diffkin as dk
 
+# First calls are timed cold: JAX's persistent cache, on by default for diffkin's users, stays off in the
+# benchmarks and their subprocesses unless DIFFKIN_CACHE_DIR names a folder.
+os.environ.setdefault("DIFFKIN_CACHE_DIR", "off")
+
 if "TORCHINDUCTOR_CACHE_DIR" not in os.environ:
     # torch.compile keeps what it compiled on disk and reuses it in later processes: a fresh folder per run makes
-    # pytorch-kinematics' compiled first call a cold start, as diffkin's is (no persistent JAX cache here).
+    # pytorch-kinematics' compiled first call a cold start, as diffkin's is.
     os.environ["TORCHINDUCTOR_CACHE_DIR"] = tempfile.mkdtemp(prefix="diffkin-bench-inductor-")
     atexit.register(shutil.rmtree, os.environ["TORCHINDUCTOR_CACHE_DIR"], ignore_errors=True)
 

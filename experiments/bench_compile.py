@@ -180,6 +180,7 @@ def measure(work: str, model: str, timeout: float, max_gb: float) -> dict:
     """One case in a fresh subprocess, stopped beyond ``timeout`` seconds or ``max_gb`` of resident memory."""
     env = dict(
         os.environ,
+        DIFFKIN_CACHE_DIR=os.environ.get("DIFFKIN_CACHE_DIR", "off"),  # cold: JAX's persistent cache off
         PYTHONPATH=os.pathsep.join([str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")]),
     )
     proc = subprocess.Popen(

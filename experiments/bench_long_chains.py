@@ -16,6 +16,7 @@ the length: minutes at 200 joints).
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -25,6 +26,7 @@ import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+os.environ.setdefault("DIFFKIN_CACHE_DIR", "off")  # compiles timed cold: JAX's persistent cache off
 
 
 def _case(robot, n: int, what: str, q) -> tuple[float, float]:
