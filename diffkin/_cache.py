@@ -71,7 +71,8 @@ def use_cache_by_default() -> None:
     import jax
 
     folder = cache_dir()
-    if _chosen or folder is None or jax.config.jax_compilation_cache_dir is not None:
+    configured = jax.config.jax_compilation_cache_dir is not None  # type: ignore[attr-defined]  # untyped flag
+    if _chosen or folder is None or configured:
         return
     try:
         use_cache(folder)
