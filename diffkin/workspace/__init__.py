@@ -21,10 +21,11 @@ orthogonal to the tool z axis (never degenerate, since that axis is at most 54.8
 ``a``). For a planar arm (rotation about the base z axis by ``phi``) the bin is the sector of
 ``phi``, so different planar angles land in different bins.
 
-The package: the driver :func:`reachability` here; the map and its file format
-(``_map.py``), what is sampled and the grid (``_sampling.py``), the per-sample bins and
-manipulability (``_bins.py``), the compiled sharded step and its reduction (``_step.py``), the
-plot (``_plot.py``).
+The package: the front doors :func:`reachability` and :func:`capability` here; the loop they share
+(``_driver.py``); the map and its file format (``_map.py``), the capability map's (``_capability.py``),
+what is sampled and the grid (``_sampling.py``), the per-sample bins and manipulability
+(``_bins.py``), the compiled sharded step and its reduction (``_step.py``), base placement
+(``_placement.py``), the plots (``_plot.py``).
 """
 
 from __future__ import annotations
@@ -34,9 +35,11 @@ from collections.abc import Sequence
 import jax
 
 from diffkin._checks import positive_int
+from diffkin.workspace._capability import CapabilityMap, bin_rotations, split_bins
 from diffkin.workspace._driver import run
 from diffkin.workspace._map import ReachabilityMap
-from diffkin.workspace._plot import plot_slice
+from diffkin.workspace._placement import Placement, Verification, base_placement
+from diffkin.workspace._plot import plot_placement, plot_slice
 from diffkin.workspace._sampling import _grid, sample_configs  # noqa: F401  # _grid: the CLI's grid in advance
 from diffkin.workspace._step import _compiled  # noqa: F401  # its cache, for the tests
 
@@ -135,4 +138,113 @@ def reachability(
     )
 
 
-__all__ = ["MAX_GRID_BYTES", "ReachabilityMap", "plot_slice", "reachability", "sample_configs"]
+def capability(
+    chain,
+    n_samples: int,
+    *,
+    key,
+    voxel_size: float = 0.05,
+    orientation_bins: int = 5184,
+    bounds=None,
+    avoid=None,
+    chunk: int = 1 << 16,
+    devices: Sequence[jax.Device] | None = None,
+    dtype=None,
+    progress: bool | None = None,
+) -> CapabilityMap:
+    """Which tool poses ``chain`` reaches: sample counts per position voxel and orientation bin.
+
+    Sampled, sharded and chunked as :func:`reachability` (the same configurations for the same key,
+    ``avoid`` alike, identical for any number of devices); each sample counts in the cell of its
+    position voxel and orientation bin, and the cells reached are counted on the host (memory
+    ``O(chunk + grid + cells reached)``). :meth:`CapabilityMap.reaches` looks poses up;
+    :func:`base_placement` inverts the map to place the robot.
+
+    The orientation bins: the tool z axis picks a face of the cube (its largest component and that
+    component's sign) and one of ``d x d`` cells of that face, equal in angle (``90 / d`` degrees:
+    the sectors of ``atan2(z_u, |z_a|)`` and ``atan2(z_v, |z_a|)`` over ``[-45, 45]`` degrees, ``z_a``
+    the face's component and ``u, v`` the next two axes), and the roll about the tool z axis one of
+    ``4 d`` sectors of ``90 / d`` degrees (measured as :func:`reachability`'s): ``orientation_bins =
+    6 d^2 x 4 d = 24 d^3``. Every bin's rotations lie within an angle of its centre
+    (:func:`bin_rotations`) measured over 400,000 uniform rotations (the worst angular error of a
+    look-up; two rotations of one bin differ by at most twice it):
+
+    ====  ================  ============  ========================
+    d     orientation_bins  cell (deg)    worst error (deg)
+    ====  ================  ============  ========================
+    1     24                90            78.6
+    2     192               45            45.7
+    3     648               30            31.3
+    4     1536              22.5          24.0
+    6     5184 (default)    15            16.1
+    ====  ================  ============  ========================
+
+    Args:
+        chain: a :class:`DHChain` or :class:`PoEChain` with concrete numbers, or a ``(robot,
+            frame_name)`` pair (the map of that frame, in the robot's root frame).
+        n_samples: number of configurations.
+        key: a JAX PRNG key.
+        voxel_size: voxel edge, metres.
+        orientation_bins: ``24 d^3`` for ``d`` in 1..12 (see above).
+        bounds: ``(2, 3)`` box in the base frame, metres (default: a cube holding the reach), as
+            :func:`reachability`'s.
+        avoid: for a ``(robot, frame_name)`` pair, a :class:`~diffkin.ik.Avoid`: only samples clear of
+            the obstacles (and of the robot itself) by its margin count.
+        chunk: samples per device per step.
+        devices: devices to use; default ``jax.devices()``.
+        dtype: float dtype of the computation; default the default float.
+        progress: show a tqdm progress bar; ``None`` (default): only on a terminal.
+
+    Returns:
+        The :class:`CapabilityMap`.
+
+    Raises:
+        ValueError, TypeError: bad arguments (named in the message).
+    """
+    n_dir, _ = split_bins(orientation_bins)
+    orientation_bins = int(orientation_bins)
+    maps = run(
+        chain,
+        n_samples,
+        key=key,
+        voxel_size=voxel_size,
+        bounds=bounds,
+        chunk=chunk,
+        devices=devices,
+        orientation_bins=orientation_bins,
+        n_dir=n_dir,
+        dtype=dtype,
+        progress=progress,
+        avoid=avoid,
+        max_grid_bytes=MAX_GRID_BYTES,
+        desc="capability",
+    )
+    assert maps.cells is not None and maps.cell_counts is not None
+    return CapabilityMap(
+        cells=maps.cells,
+        cell_counts=maps.cell_counts,
+        counts=maps.counts,
+        manipulability=maps.best,
+        origin=maps.origin,
+        voxel_size=maps.voxel_size,
+        n_samples=n_samples,
+        n_outside=n_samples - int(maps.counts.sum()),
+        orientation_bins=orientation_bins,
+        chain_name=maps.chain.name,
+    )
+
+
+__all__ = [
+    "MAX_GRID_BYTES",
+    "CapabilityMap",
+    "Placement",
+    "ReachabilityMap",
+    "Verification",
+    "base_placement",
+    "bin_rotations",
+    "capability",
+    "plot_placement",
+    "plot_slice",
+    "reachability",
+    "sample_configs",
+]

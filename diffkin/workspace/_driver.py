@@ -153,12 +153,12 @@ def run(
     for s in range(n_steps):
         indices = np.arange(s * len(devices), (s + 1) * len(devices), dtype=np.int32)
         chunks = jax.make_array_from_callback(indices.shape, sharded, indices.__getitem__)
-        *state, n_step = step(*state, key, chunks, *args)
-        if counter is not None:
-            state, new_slots = state[:3], state[3]
+        out = step(*state, key, chunks, *args)
+        state, n_step = list(out[:3]), out[3]
+        if counter is not None:  # a capability map's step also gives its cells
             if slots is not None:
                 counter.add(np.asarray(slots))  # waits for the previous step only
-            slots = new_slots
+            slots = out[4]
         if bar is not None:
             if done is not None:
                 bar.update(int(done))  # waits for the previous step only: one step stays in flight

@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from diffkin.workspace._map import ReachabilityMap
+from diffkin.workspace._placement import Placement
 
 _QUANTITIES = ("count", "manipulability", "dexterity")
 _AXES = ("x", "y", "z")
@@ -78,6 +79,62 @@ def plot_slice(
         aspect="equal",
         title=f"{m.chain_name} {what}\nslab {axis} in [{slab[0]:.3g}, {slab[1]:.3g}) m ({m.voxel_size:g} m "
         f"voxels)\n{m.n_samples:,} samples uniform in joint space; blank: none reached",
+    )
+    ax.title.set_fontsize("medium")
+    if path is not None:
+        ax.figure.savefig(path, dpi=120)
+    return ax
+
+
+def plot_placement(placement: Placement, yaw: int | None = None, *, path=None, ax=None):
+    """Heatmap of a base placement's score over ``(x, y)`` at one yaw, with the tasks drawn.
+
+    Each pixel is a base cell: the fraction of the tasks the capability map says a base there
+    reaches. The tasks are drawn at their ``(x, y)`` in the world (their tool x axis as a short
+    arrow), and the best base of that yaw as a cross with its heading. Needs matplotlib (the
+    ``plot`` extra), imported here only.
+
+    Args:
+        placement: the :class:`Placement`.
+        yaw: index into ``placement.yaw``; default the yaw of the best base.
+        path: if given, the figure is written there as a PNG.
+        ax: a matplotlib axes to draw into; default a new figure.
+
+    Returns:
+        The matplotlib axes.
+    """
+    p = placement
+    if yaw is None:
+        yaw = int(p.best_cells(1)[0, 2])
+    if isinstance(yaw, bool) or not isinstance(yaw, (int, np.integer)) or not 0 <= yaw < len(p.yaw):
+        raise ValueError(f"yaw: expected an index in [0, {len(p.yaw)}), got {yaw!r}")
+    if ax is None:
+        from matplotlib.figure import Figure  # no pyplot: no global figure state, no GUI backend
+
+        ax = Figure(figsize=(7, 5.5), layout="constrained").add_subplot()
+    score = p.score[:, :, yaw]
+    half_x = (p.x[1] - p.x[0]) / 2 if len(p.x) > 1 else 0.5
+    half_y = (p.y[1] - p.y[0]) / 2 if len(p.y) > 1 else 0.5
+    extent = [p.x[0] - half_x, p.x[-1] + half_x, p.y[0] - half_y, p.y[-1] + half_y]
+    image = ax.imshow(score.T, origin="lower", extent=extent, interpolation="nearest", vmin=0, vmax=1)
+    ax.figure.colorbar(image, ax=ax, label="fraction of the tasks reached (capability map)")
+    tasks = p.tasks[:, :3, 3]
+    ax.quiver(
+        tasks[:, 0], tasks[:, 1], p.tasks[:, 0, 0], p.tasks[:, 1, 0], color="white", width=0.003, scale=40, alpha=0.8
+    )
+    ax.scatter(tasks[:, 0], tasks[:, 1], s=6, c="red", label=f"{len(tasks)} tasks (tool x axis)")
+    i, j = np.unravel_index(np.argmax(score), score.shape)
+    heading = p.yaw[yaw]
+    ax.plot(p.x[i], p.y[j], "wx", ms=12, mew=3)
+    ax.arrow(p.x[i], p.y[j], 0.15 * np.cos(heading), 0.15 * np.sin(heading), color="w", width=0.01)
+    ax.plot([], [], "wx", label=f"best base at this yaw: {score[i, j]:.0%}")
+    ax.legend(loc="upper right", fontsize="small")
+    ax.set(
+        xlabel="base x (m, world)",
+        ylabel="base y (m, world)",
+        aspect="equal",
+        title=f"base placement: tasks reached from each base cell\nyaw {np.degrees(heading):.0f} deg "
+        f"(of {len(p.yaw)}), base height {p.base_height:g} m; best overall {p.score.max():.0%}",
     )
     ax.title.set_fontsize("medium")
     if path is not None:

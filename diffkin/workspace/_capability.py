@@ -1,0 +1,222 @@
+"""The capability map of :func:`diffkin.workspace.capability`: sample counts per position voxel and
+orientation bin, its look-up of poses (:meth:`CapabilityMap.reaches`) and its file format (``.npz``,
+read without pickle)."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import os
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffkin._npz import read_npz
+from diffkin.workspace._bins import _orientation_bin
+from diffkin.workspace._map import ReachabilityMap
+
+BIN_COUNTS = {24 * d**3: d for d in range(1, 13)}
+"""The valid ``orientation_bins`` of a capability map, ``24 d^3``, and their ``d``: ``6 d^2`` cells of
+the tool z axis times ``4 d`` roll sectors, cells ``90 / d`` degrees wide."""
+
+
+def split_bins(orientation_bins) -> tuple[int, int]:
+    """``(n_dir, n_roll)`` of ``orientation_bins = 24 d^3`` (``n_dir = d``, ``n_roll = 4 d``), checked."""
+    if isinstance(orientation_bins, bool) or not isinstance(orientation_bins, (int, np.integer)):
+        raise TypeError(f"orientation_bins: expected an int, got {type(orientation_bins).__name__}")
+    d = BIN_COUNTS.get(int(orientation_bins))
+    if d is None:
+        raise ValueError(
+            f"orientation_bins: expected 24 d^3 (6 d^2 directions x 4 d roll sectors, 90/d degree cells), one of "
+            f"{sorted(BIN_COUNTS)}, got {orientation_bins}"
+        )
+    return d, 4 * d
+
+
+def bin_rotations(orientation_bins: int) -> np.ndarray:
+    """The centre of every orientation bin, ``(orientation_bins, 3, 3)`` rotation matrices (float64).
+
+    The centre of bin ``((face n_dir + i_u) n_dir + i_v) n_roll + r``: the tool z axis at the middle
+    angles of its direction cell, the roll at the middle of its sector (see
+    :func:`diffkin.workspace.capability`).
+    """
+    n_dir, n_roll = split_bins(orientation_bins)
+    rotations = np.zeros((6, n_dir, n_dir, n_roll, 3, 3))
+    mid_dir = np.tan(-np.pi / 4 + (np.arange(n_dir) + 0.5) * np.pi / 2 / n_dir)
+    rolls = -np.pi + (np.arange(n_roll) + 0.5) * 2 * np.pi / n_roll
+    eye = np.eye(3)
+    for face in range(6):
+        a, sign = face // 2, -1.0 if face % 2 else 1.0
+        u, v = (a + 1) % 3, (a + 2) % 3
+        for i, tu in enumerate(mid_dir):
+            for j, tv in enumerate(mid_dir):
+                z = sign * eye[a] + tu * eye[u] + tv * eye[v]
+                z /= np.linalg.norm(z)
+                p = eye[u] - (eye[u] @ z) * z
+                p /= np.linalg.norm(p)
+                for r, roll in enumerate(rolls):  # roll = atan2(-R[u, 1], R[u, 0]): p = cos x - sin y
+                    x = np.cos(roll) * p + np.sin(roll) * np.cross(z, p)
+                    rotations[face, i, j, r] = np.stack([x, np.cross(z, x), z], axis=1)
+    return rotations.reshape(-1, 3, 3)
+
+
+def _bucket(n: int) -> int:
+    """``n`` rounded up to a power of two (at least 64): the look-ups compile once per bucket, not per size."""
+    return max(64, 1 << (n - 1).bit_length())
+
+
+@functools.partial(jax.jit, static_argnums=(1, 2))
+def pose_cells(T, n_dir: int, n_roll: int, origin, inv_voxel, shape_array):
+    """Voxel and orientation bin of poses ``T (M, 4, 4)``: ``(cell (M, 3) int32, bin (M,) int32, inside
+    (M,) bool)``, binned as the map's samples are (``cell`` 0 where not inside)."""
+    R = tuple(tuple(T[:, i, j] for j in range(3)) for i in range(3))
+    cell = jnp.floor((T[:, :3, 3] - origin) * inv_voxel)
+    inside = jnp.all((cell >= 0) & (cell < shape_array), axis=1)
+    cell = jnp.where(inside[:, None], cell, 0).astype(jnp.int32)
+    return cell, _orientation_bin(R, n_roll, n_dir), inside
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class CapabilityMap:
+    """Sample counts per position voxel and orientation bin (see :func:`diffkin.workspace.capability`).
+
+    Voxel ``(i, j, k)`` is the box ``origin + voxel_size * ([i, i+1) x [j, j+1) x [k, k+1))`` in the
+    chain's base frame (a robot's root frame), as in :class:`ReachabilityMap`; the cells
+    ``voxel * orientation_bins + bin`` (``voxel`` the flat C-order index of ``(i, j, k)``) that any
+    sample reached are stored sparsely, sorted.
+
+    Attributes:
+        cells: ``(M,)`` int64, the sorted flat cells reached.
+        cell_counts: ``(M,)`` int64, the samples in each of them.
+        counts: ``(nx, ny, nz)`` int64, samples per voxel (any orientation).
+        manipulability: ``(nx, ny, nz)`` float, best Yoshikawa manipulability per voxel, 0 where none.
+        origin: ``(3,)`` float64, corner of voxel ``(0, 0, 0)``, metres, base frame.
+        voxel_size: edge of the cubic voxels, metres.
+        n_samples: number of sampled configurations.
+        n_outside: number of samples outside the grid (or, with ``avoid``, in collision).
+        orientation_bins: number of orientation bins, ``24 d^3``.
+        chain_name: name of the chain (informational).
+    """
+
+    cells: np.ndarray
+    cell_counts: np.ndarray
+    counts: np.ndarray
+    manipulability: np.ndarray
+    origin: np.ndarray
+    voxel_size: float
+    n_samples: int
+    n_outside: int
+    orientation_bins: int
+    chain_name: str = ""
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(nx, ny, nz)``, the voxel grid."""
+        return self.counts.shape  # type: ignore[return-value]
+
+    def dexterity(self) -> np.ndarray:
+        """``(nx, ny, nz)`` int64, the number of orientation bins reached in each voxel."""
+        flat = np.bincount(self.cells // self.orientation_bins, minlength=self.counts.size)
+        return flat.reshape(self.shape)
+
+    def as_reachability(self) -> ReachabilityMap:
+        """The map as a :class:`ReachabilityMap` (its dexterity: the capability bins reached per voxel),
+        e.g. for :func:`diffkin.workspace.plot_slice`."""
+        return ReachabilityMap(
+            counts=self.counts,
+            manipulability=self.manipulability,
+            dexterity=self.dexterity().astype(np.int32),
+            origin=self.origin,
+            voxel_size=self.voxel_size,
+            n_samples=self.n_samples,
+            n_outside=self.n_outside,
+            orientation_bins=self.orientation_bins,
+            chain_name=self.chain_name,
+        )
+
+    def count(self, T) -> np.ndarray:
+        """The samples in the cell of each pose (binned in the default float dtype, as the map's samples
+        were unless ``capability`` was given another).
+
+        Args:
+            T: ``(..., 4, 4)`` poses of the tool in the map's base frame (metres).
+
+        Returns:
+            ``(...,)`` int64, 0 for a pose outside the grid.
+        """
+        dtype = jnp.result_type(float)
+        T = np.asarray(T, dtype)
+        if T.ndim < 2 or T.shape[-2:] != (4, 4):
+            raise ValueError(f"T: expected poses of shape (..., 4, 4), got {T.shape}")
+        if self.cells.size == 0 or T.size == 0:
+            return np.zeros(T.shape[:-2], np.int64)
+        n_dir, n_roll = split_bins(self.orientation_bins)
+        flat_T = T.reshape(-1, 4, 4)
+        pad = np.broadcast_to(np.eye(4, dtype=dtype), (_bucket(len(flat_T)) - len(flat_T), 4, 4))
+        padded = np.concatenate([flat_T, pad])
+        cell, bins, inside = pose_cells(
+            jnp.asarray(padded),
+            n_dir,
+            n_roll,
+            jnp.asarray(self.origin, dtype),
+            jnp.asarray(1 / self.voxel_size, dtype),
+            jnp.asarray(self.shape, dtype),
+        )
+        n = len(flat_T)
+        cell, bins, inside = np.asarray(cell[:n], np.int64), np.asarray(bins[:n], np.int64), np.asarray(inside[:n])
+        flat = np.ravel_multi_index(tuple(cell.T), self.shape) * self.orientation_bins + bins
+        at = np.minimum(np.searchsorted(self.cells, flat), self.cells.size - 1)
+        counts = np.where(inside & (self.cells[at] == flat), self.cell_counts[at], 0)
+        return counts.reshape(T.shape[:-2])
+
+    def reaches(self, T, *, min_count: int = 1) -> np.ndarray:
+        """Whether the map holds each pose: its cell has at least ``min_count`` samples.
+
+        Args:
+            T: ``(..., 4, 4)`` poses of the tool in the map's base frame (metres).
+            min_count: samples needed (a higher count trades recall for precision at the workspace's
+                boundary, where a cell holds reachable and unreachable poses).
+
+        Returns:
+            ``(...,)`` bool.
+        """
+        return self.count(T) >= min_count
+
+    def save(self, path) -> None:
+        """Write the map to ``path`` as a ``.npz`` archive (numpy appends ``.npz`` if missing)."""
+        fields = {f.name: np.asarray(getattr(self, f.name)) for f in dataclasses.fields(self)}
+        np.savez_compressed(path, **fields)  # type: ignore[arg-type]  # numpy's stub reads **fields as allow_pickle
+
+    @classmethod
+    def load(cls, path) -> CapabilityMap:
+        """Read a map written by :meth:`save` (``load("map")`` reads the ``map.npz`` that ``save("map")`` wrote).
+
+        Raises:
+            ValueError: a file that is empty, truncated, not a ``.npz`` archive, or lacks a field of the
+                map (the message names the file and the field).
+            FileNotFoundError: no such file.
+        """
+        path = os.fspath(path)
+        if not os.path.exists(path) and not path.endswith(".npz") and os.path.exists(path + ".npz"):
+            path += ".npz"  # as np.savez named it
+        fields = read_npz(path, "written by CapabilityMap.save")
+        missing = [f.name for f in dataclasses.fields(cls) if f.name not in fields]
+        if missing:
+            raise ValueError(f"{path}: not a complete capability map, missing field(s) {', '.join(missing)}")
+        if fields["counts"].ndim != 3:
+            raise ValueError(f"{path}: field counts: expected a 3-d grid, got shape {fields['counts'].shape}")
+        if fields["cells"].shape != fields["cell_counts"].shape or fields["cells"].ndim != 1:
+            raise ValueError(f"{path}: field cells: expected one count per cell, got {fields['cells'].shape} cells")
+        return cls(
+            cells=fields["cells"].astype(np.int64),
+            cell_counts=fields["cell_counts"].astype(np.int64),
+            counts=fields["counts"],
+            manipulability=fields["manipulability"],
+            origin=fields["origin"],
+            voxel_size=float(fields["voxel_size"]),
+            n_samples=int(fields["n_samples"]),
+            n_outside=int(fields["n_outside"]),
+            orientation_bins=int(fields["orientation_bins"]),
+            chain_name=str(fields["chain_name"]),
+        )
