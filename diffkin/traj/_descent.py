@@ -1,0 +1,123 @@
+"""Levenberg-Marquardt on a curve's free control points: smoothness rows and clearance rows.
+
+The state of a curve is its free control points ``X (n, dof)`` (:mod:`diffkin.traj._spline`). Its
+residual stacks
+
+- smoothness: the control polygon's first differences (weight :data:`W_LENGTH`: short, evenly spread)
+  and second differences (weight :data:`W_BEND`: little acceleration), linear in ``X``;
+- clearance: at :data:`SAMPLES` points per segment, the rows of collision-aware IK's clearance term
+  (:class:`diffkin.ik._terms.avoid.AvoidTerm`: one per self pair and one per robot shape against the
+  world, zero beyond ``margin + band``, with the motion Jacobians of the distances), pushed to the
+  control points through the curve's basis weights (``dq(u)/dX_k = basis_k(u)``).
+
+The margin the rows aim for is raised by :data:`EXTRA` so that the certificate
+(:mod:`diffkin.traj._certify`), which subtracts the motion between its samples, holds. Steps solve
+the ``n dof`` normal equations with error-proportional damping (:mod:`diffkin.ik._lm`'s rule); a
+step is taken only if it lowers the cost; joints stay within their limits (clipped control points:
+the curve lies in their convex hull) and locked joints at their values.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffkin.traj import _rows, _spline
+
+W_LENGTH = 0.05  # per rad of a control-polygon step
+W_BEND = 0.2  # per rad of a second difference
+SAMPLES = 4  # clearance samples per segment
+EXTRA = 0.02  # metres the clearance rows aim beyond the margin
+W_CLEAR = 10.0  # per metre of a clearance row (rows in metres against smoothness in radians)
+_MU_INIT, _MU_MIN, _MU_MAX, _MU_UP, _MU_DOWN = 1e-2, 1e-6, 1e6, 8.0, 0.25
+
+
+def _smoothing(N: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``D (R, N)`` the weighted difference rows of the control polygon and ``D[:, free]`` ``(R, n)``."""
+    D1 = np.diff(np.eye(N), axis=0)
+    D2 = np.diff(np.eye(N), n=2, axis=0)
+    D = np.concatenate([W_LENGTH * D1, W_BEND * D2])
+    return D, D[:, _spline.ENDS : _spline.ENDS + n]
+
+
+class Curves:
+    """The curves of a flat batch: ``C`` curves, ``B`` problems (``C = B k``, curves of one problem
+    consecutive), their ends, limits, locked joints and what keeps them clear."""
+
+    def __init__(self, model, q_start, q_goal, lower, upper, locked, locked_q, avoid, base, k: int):
+        self.model, self.q_start, self.q_goal = model, q_start, q_goal  # (C, dof)
+        self.lower, self.upper = lower, upper  # (dof,)
+        self.locked, self.locked_q = locked, locked_q  # static mask, (C, dof)
+        self.avoid, self.base, self.k = avoid, base, k  # avoid: flat (B, ...) world or shared
+
+    def project(self, X: jax.Array) -> jax.Array:
+        X = jnp.clip(X, self.lower, self.upper)
+        if any(self.locked):
+            X = jnp.where(jnp.asarray(self.locked), self.locked_q[:, None, :], X)
+        return X
+
+    def control(self, X: jax.Array) -> jax.Array:
+        return _spline.control_points(self.q_start, X, self.q_goal)
+
+    def _clearance_rows(self, q: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """``r (m, C, Q)`` and ``dr/dq`` ``(m, dof, C, Q)`` at configurations ``q`` ``(C, Q, dof)``, weighted."""
+        avoid = dataclasses.replace(self.avoid, margin=self.avoid.margin + EXTRA)
+        r, J = _rows.rows(self.model, avoid, self.locked, self.base, self.k, q)
+        return W_CLEAR * r, W_CLEAR * J
+
+    def normal(self, X: jax.Array, W: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+        """``(cost (C,), g (C, n dof), H (C, n dof, n dof))``: ``|r|^2``, ``J^T r`` and ``J^T J`` at
+        ``X`` ``(C, n, dof)``, ``W`` ``(Q, N)`` the basis weights of the clearance samples."""
+        C, n, dof = X.shape
+        P = self.control(X)
+        D_host, D_free_host = _smoothing(P.shape[1], n)
+        D, D_free = jnp.asarray(D_host, X.dtype), jnp.asarray(D_free_host, X.dtype)
+        rs = jnp.einsum("rk,ckj->crj", D, P)  # (C, R, dof)
+        cost = jnp.sum(rs**2, axis=(1, 2))
+        g = jnp.einsum("rk,crj->ckj", D_free, rs).reshape(C, n * dof)
+        H = jnp.broadcast_to(jnp.kron(D_free.T @ D_free, jnp.eye(dof, dtype=X.dtype)), (C, n * dof, n * dof))
+        if self.avoid is not None:
+            q = jnp.einsum("qk,ckj->cqj", W, P)  # (C, Q, dof)
+            r, J = self._clearance_rows(q)  # (m, C, Q), (m, dof, C, Q)
+            Wf = W[:, _spline.ENDS : _spline.ENDS + n]  # (Q, n)
+            cost = cost + jnp.sum(r**2, axis=(0, 2))
+            Jr = jnp.einsum("mjcq,mcq->cqj", J, r)  # (C, Q, dof)
+            g = g + jnp.einsum("qk,cqj->ckj", Wf, Jr).reshape(C, n * dof)
+            G = jnp.einsum("mjcq,mlcq->cqjl", J, J)  # (C, Q, dof, dof)
+            H = H + jnp.einsum("qk,qi,cqjl->ckjil", Wf, Wf, G).reshape(C, n * dof, n * dof)
+        return cost, g, H
+
+    def samples(self, N: int, dtype) -> jax.Array:
+        """``(Q, N)`` the basis weights of the clearance samples: :data:`SAMPLES` per segment and the end."""
+        segs = _spline.segments(N)
+        u = np.concatenate([np.arange(segs * SAMPLES) / SAMPLES, [segs]])
+        return _spline.basis(jnp.asarray(u, dtype), N).astype(dtype)
+
+    def descend(self, X: jax.Array, iters: int) -> jax.Array:
+        """``X`` ``(C, n, dof)`` after ``iters`` Levenberg-Marquardt iterations."""
+        C, n, dof = X.shape
+        X = self.project(X)
+        W = self.samples(n + 2 * _spline.ENDS, X.dtype)
+        eye = jnp.eye(n * dof, dtype=X.dtype)
+
+        def step(_, state):
+            X, cost, g, H, mu = state
+            lam = jnp.where(jnp.isfinite(cost), mu * cost, 0.0) + 1e-10
+            dx = jnp.linalg.solve(H + lam[:, None, None] * eye, -g[..., None])[..., 0]
+            X_try = self.project(X + dx.reshape(C, n, dof))
+            cost_try, g_try, H_try = self.normal(X_try, W)
+            take = jnp.isfinite(cost_try) & (cost_try < cost)
+            pick = lambda new, old: jnp.where(take.reshape((C,) + (1,) * (new.ndim - 1)), new, old)  # noqa: E731
+            mu = jnp.where(take, jnp.maximum(mu * _MU_DOWN, _MU_MIN), jnp.minimum(mu * _MU_UP, _MU_MAX))
+            return pick(X_try, X), pick(cost_try, cost), pick(g_try, g), pick(H_try, H), mu
+
+        # the first iteration evaluates X itself (a zero step from an infinite cost): the residual is
+        # compiled once, inside the loop
+        cost = jnp.full((C,), jnp.inf, X.dtype)
+        g, H = jnp.zeros((C, n * dof), X.dtype), jnp.broadcast_to(eye, (C, n * dof, n * dof))
+        mu = jnp.full((C,), _MU_INIT, X.dtype)
+        X, *_ = jax.lax.fori_loop(0, iters + 1, step, (X, cost, g, H, mu))
+        return X

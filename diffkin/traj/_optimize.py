@@ -1,0 +1,295 @@
+"""``dk.traj.optimize``: the front door. Arguments checked on the host, pose goals solved by
+collision-aware IK, then one compiled program: seeds, descent, certificate, timing, the best seed."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffkin._checks import positive_int, real_array
+from diffkin._static import combine, is_concrete, partition
+from diffkin._xla import solver_jit
+from diffkin.ik._args import check_batched, default_key, finite
+from diffkin.ik._prepare import cast, detach
+from diffkin.ik._terms.avoid import Avoid
+from diffkin.models.robot import Robot
+from diffkin.traj import _limits, _reach, _spline
+from diffkin.traj._certify import certified
+from diffkin.traj._descent import Curves
+from diffkin.traj._trajectory import Trajectory
+
+#: joint-space points per segment that measure the path length
+_LENGTH_SAMPLES = 16
+
+
+def optimize(
+    model,
+    q_start,
+    goal,
+    *,
+    avoid: Avoid | None = None,
+    limits: _limits.Limits | None = None,
+    knots: int = 12,
+    key=None,
+    num_seeds: int = 4,
+    max_iters: int = 30,
+    pos_tol: float = 1e-5,
+    rot_tol: float = 1e-4,
+    locked=None,
+    base=None,
+) -> Trajectory:
+    """A smooth motion from ``q_start`` to ``goal`` within limits, clear of obstacles between its knots too.
+
+    The motion is a uniform cubic B-spline in joint space with ``knots`` knots (``knots + 2`` control
+    points: the start and the goal three times each, so it starts and stops at rest). Every problem
+    runs ``num_seeds`` seeds (the straight line, then curves through random via points) through
+    ``max_iters`` Levenberg-Marquardt iterations on its free control points (smoothness rows and the
+    clearance rows of collision-aware IK at 4 samples per segment, pushed through the spline's
+    basis); each result is then timed and certified:
+
+    - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
+      stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
+      hull of the control polygon's differences);
+    - **clearance**: a certified lower bound over the whole motion (each segment halved 4 times; on a
+      piece, the distances at its middle minus how far the shapes can move within it, from the joint
+      speeds and each joint's reach to the shapes it moves: :mod:`diffkin.traj._certify`).
+
+    The best seed of each problem is kept: a successful one of the shortest duration, else the one
+    with the largest certified clearance. Failures stay honest: ``success=False`` with finite values
+    and the reason in ``goal_ok``, ``limits_ok``, ``clear``. Problems are independent (a world per
+    problem where ``avoid.world`` has problem axes). Compiled once per model, batch shape and static
+    argument; works inside ``jit`` and ``vmap`` with the model and ``avoid.geom`` closed over
+    (the certificate reads them on the host).
+
+    Args:
+        model: a :class:`~diffkin.Robot`, :class:`~diffkin.DHChain` or :class:`~diffkin.PoEChain` of
+            revolute and prismatic joints (``avoid`` needs a robot).
+        q_start: ``(..., dof)`` the start (radians / metres); its dtype is the solver's.
+        goal: a joint goal ``(..., dof)``; or pose targets as :func:`diffkin.ik.solve` takes them,
+            ``(..., 4, 4)`` for a chain (read as poses whenever the last two axes are ``(4, 4)``) or a
+            mapping ``{frame: (..., 4, 4)}`` for a robot: solved first by :func:`diffkin.ik.solve`
+            with ``avoid``, warm-started at ``q_start`` (any branch).
+        avoid: :class:`diffkin.ik.Avoid`: the geometry, obstacles (shared, or one world per problem)
+            and margin the whole motion keeps; ``None``: no clearance.
+        limits: :class:`Limits`; default :data:`diffkin.traj._limits.DEFAULT_VELOCITY` (1 rad/s) and
+            :data:`~diffkin.traj._limits.DEFAULT_ACCELERATION` (2 rad/s^2) per joint, no jerk bound
+            (diffkin's models do not carry the files' velocity limits).
+        knots: static, ``K >= 5``.
+        key: PRNG key of the random seeds (and of a pose goal's IK); default ``jax.random.key(0)``.
+        num_seeds: static, ``>= 1`` seeds per problem (the first the straight line).
+        max_iters: static, ``>= 0`` iterations per seed.
+        pos_tol, rot_tol: metres, radians: a pose goal's tolerance.
+        locked: ``{joint name: value}`` joints held at ``value`` through the motion (their start and
+            goal entries are replaced by it).
+        base: robots: ``(..., 4, 4)`` root pose ``T_world_root`` (default identity).
+
+    Returns:
+        A :class:`Trajectory` of the problems' batch shape.
+
+    Raises:
+        TypeError, ValueError: bad arguments, named (on the host, before anything is traced).
+    """
+    dof = _check_model(model)
+    q_start = real_array(q_start, "q_start", "joint values")
+    if q_start.ndim == 0 or q_start.shape[-1] != dof:
+        raise ValueError(f"q_start: expected shape (..., {dof}) joint values, got {q_start.shape}")
+    finite(q_start, "q_start", "finite joint values")
+    dtype = q_start.dtype
+    knots = positive_int(knots, "knots", "an int >= 5")
+    if knots < 5:
+        raise ValueError(f"knots: expected an int >= 5, got {knots}")
+    num_seeds = positive_int(num_seeds, "num_seeds", "an int >= 1")
+    if isinstance(max_iters, bool) or not isinstance(max_iters, (int, np.integer)) or max_iters < 0:
+        raise ValueError(f"max_iters: expected an int >= 0, got {max_iters!r}")
+    if avoid is not None and not isinstance(avoid, Avoid):
+        raise TypeError(f"avoid: expected a diffkin.ik.Avoid or None, got {type(avoid).__name__}")
+    if avoid is not None and not isinstance(model, Robot):
+        raise TypeError(f"avoid: needs a diffkin.Robot with collision geometry, got a {type(model).__name__}")
+    if limits is None:
+        limits = _limits.default(dof)
+    if not isinstance(limits, _limits.Limits):
+        raise TypeError(f"limits: expected a diffkin.traj.Limits or None, got {type(limits).__name__}")
+    velocity, acceleration, jerk = limits.per_joint(dof, dtype)
+    if base is not None and not isinstance(model, Robot):
+        raise TypeError(f"base: only a diffkin.Robot takes a root pose, got a {type(model).__name__}")
+    key = default_key() if key is None else key
+
+    pose_goal = isinstance(goal, Mapping) or (jnp.ndim(goal) >= 2 and jnp.shape(goal)[-2:] == (4, 4))
+    if pose_goal:
+        from diffkin.ik import solve
+
+        if isinstance(goal, Mapping) and not isinstance(model, Robot):
+            raise TypeError("goal: a mapping {frame: pose} needs a diffkin.Robot; a chain takes (..., 4, 4) poses")
+        res = solve(
+            model, goal, key=key, q0=q_start, avoid=avoid, locked=locked, base=base, pos_tol=pos_tol, rot_tol=rot_tol
+        )
+        q_goal, goal_ok = res.q.astype(dtype), res.success
+    else:
+        q_goal = real_array(goal, "goal", "joint values (or (..., 4, 4) poses)")
+        if q_goal.ndim == 0 or q_goal.shape[-1] != dof:
+            raise ValueError(
+                f"goal: expected shape (..., {dof}) joint values, (..., 4, 4) poses or a mapping, got {q_goal.shape}"
+            )
+        finite(q_goal, "goal", "finite joint values")
+        q_goal = q_goal.astype(dtype)
+        goal_ok = jnp.ones(q_goal.shape[:-1], bool)
+    shapes = [q_start.shape[:-1], q_goal.shape[:-1]]
+    if avoid is not None and avoid.world is not None:
+        shapes.append(avoid.world.batch)
+    try:
+        batch = tuple(np.broadcast_shapes(*shapes))
+    except ValueError:
+        raise ValueError(
+            f"q_start, goal, avoid.world: batch shapes {shapes} (q_start, goal, world) do not broadcast"
+        ) from None
+    if base is not None:
+        base = real_array(base, "base", "poses")
+        check_batched(base, "base", (4, 4), batch, "(T_world_root)")
+    mask, locked_q = _locked(model, locked, batch)
+    B = int(np.prod(batch, dtype=np.int64))
+    flat = lambda x, tail: jnp.broadcast_to(x, batch + tail).reshape((B,) + tail)  # noqa: E731
+    avoid_flat = None
+    reach = np.zeros((dof, 0))
+    if avoid is not None:
+        _check_concrete(avoid)
+        reach = _reach.reach(model, avoid.geom)
+        avoid_flat = avoid.cast(dtype).flat(batch)
+    static, traced = partition(model)
+    out = _solve(
+        static,
+        traced,
+        flat(q_start, (dof,)),
+        flat(q_goal, (dof,)),
+        flat(goal_ok, ()),
+        avoid_flat,
+        None if base is None else flat(base.astype(dtype), (4, 4)),
+        None if locked_q is None else flat(locked_q.astype(dtype), (dof,)),
+        (velocity, acceleration, jerk),
+        jnp.asarray(reach, dtype),
+        key,
+        locked=mask,
+        free=knots - 4,
+        seeds=num_seeds,
+        iters=int(max_iters),
+    )
+    return jax.tree.map(lambda x: x.reshape(batch + x.shape[1:]), out)
+
+
+def _check_model(model) -> int:
+    types = getattr(model, "actuated_types", None)
+    if types is None or not hasattr(model, "forward"):
+        raise TypeError(f"model: expected a diffkin.Robot, DHChain or PoEChain, got {type(model).__name__}")
+    bad = [t for t in types if t not in "RP"]
+    if bad:
+        raise ValueError(
+            f"model: dk.traj moves revolute and prismatic joints only; {model.joint_names[types.index(bad[0])]!r} "
+            f"is of type {bad[0]!r}"
+        )
+    return int(model.dof)
+
+
+def _check_concrete(avoid: Avoid) -> None:
+    leaves = jax.tree.leaves(avoid.geom)
+    if not all(is_concrete(x) for x in leaves):
+        raise TypeError("avoid.geom: must be concrete (close over it in jit): the certificate reads it on the host")
+
+
+def _locked(model, locked, batch) -> tuple[tuple[bool, ...], jax.Array | None]:
+    names = tuple(model.joint_names)
+    if locked is None:
+        return (False,) * len(names), None
+    if not isinstance(locked, Mapping):
+        raise TypeError(f"locked: expected a mapping joint name -> value, got {type(locked).__name__}")
+    values = []
+    for name in locked:
+        if name not in names:
+            raise ValueError(f"locked: {name!r} is not a joint; expected one of {list(names)}")
+    for name in names:
+        if name in locked:
+            v = real_array(locked[name], f"locked[{name!r}]", "a joint value")
+            check_batched(v, f"locked[{name!r}]", (), batch, "(a value per problem, or one)")
+            finite(v, f"locked[{name!r}]", "a finite joint value")
+            values.append(jnp.broadcast_to(v, batch))
+        else:
+            values.append(jnp.zeros(batch))
+    return tuple(n in locked for n in names), jnp.stack(values, axis=-1)
+
+
+def _seeds(q_start, q_goal, lower, upper, free: int, seeds: int, key) -> jax.Array:
+    """``(B, seeds, free, dof)``: the straight line, then lines through a random via point."""
+    s = jnp.asarray((np.arange(free) + 1) / (free + 1), q_start.dtype)[:, None]  # (free, 1)
+    line = q_start[:, None] + s * (q_goal - q_start)[:, None]  # (B, free, dof)
+    if seeds == 1:
+        return line[:, None]
+    B, dof = q_start.shape
+    span = jnp.where(jnp.isfinite(upper - lower), upper - lower, 2 * np.pi)
+    mid = (q_start + q_goal) / 2
+    noise = jax.random.uniform(key, (B, seeds - 1, dof), q_start.dtype, -1.0, 1.0)
+    via = jnp.clip(mid[:, None] + 0.25 * span * noise, lower, upper)  # (B, seeds - 1, dof)
+    first = s < 0.5
+    to_via = q_start[:, None, None] + (s / 0.5) * (via[:, :, None] - q_start[:, None, None])
+    from_via = via[:, :, None] + ((s - 0.5) / 0.5) * (q_goal[:, None, None] - via[:, :, None])
+    return jnp.concatenate([line[:, None], jnp.where(first, to_via, from_via)], axis=1)
+
+
+def _core(
+    static, traced, q_start, q_goal, goal_ok, avoid, base, locked_q, bounds, reach, key, *, locked, free, seeds, iters
+):
+    model = cast(detach(combine(static, traced)), q_start.dtype)
+    dtype, dof = q_start.dtype, q_start.shape[-1]
+    velocity, acceleration, jerk = bounds
+    lower, upper = jnp.asarray(model.lower, dtype), jnp.asarray(model.upper, dtype)
+    valid = goal_ok & jnp.all(jnp.isfinite(q_start) & jnp.isfinite(q_goal), axis=-1)
+    q_start, q_goal = jnp.where(jnp.isfinite(q_start), q_start, 0.0), jnp.where(jnp.isfinite(q_goal), q_goal, 0.0)
+    if locked_q is not None:
+        held = jnp.asarray(locked)
+        q_start, q_goal = jnp.where(held, locked_q, q_start), jnp.where(held, locked_q, q_goal)
+    B = q_start.shape[0]
+    X = _seeds(q_start, q_goal, lower, upper, free, seeds, jax.random.fold_in(key, 1))  # (B, k, free, dof)
+    rep = lambda x: None if x is None else jnp.repeat(x, seeds, axis=0)  # noqa: E731
+    curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), avoid, base, seeds)
+    X = curves.descend(X.reshape(B * seeds, free, dof), iters)
+    P = curves.control(X).reshape(B, seeds, free + 6, dof)
+    h = _spline.segment_time(P, velocity, acceleration, jerk)  # (B, k)
+    v, a, j = _spline.derivative_bounds(P)
+    within = jnp.all((P >= lower) & (P <= upper), axis=(-1, -2))
+    slow = jnp.all(v <= velocity * h[..., None], axis=-1) & jnp.all(a <= acceleration * h[..., None] ** 2, axis=-1)
+    if jerk is not None:
+        slow = slow & jnp.all(j <= jerk * h[..., None] ** 3, axis=-1)
+    limits_ok = within & slow & jnp.all(jnp.isfinite(P), axis=(-1, -2))
+    if avoid is not None:
+        clearance, _ = certified(model, avoid, reach, P, base, locked)
+        clearance = jnp.where(jnp.isnan(clearance), -jnp.inf, clearance)
+        clear = clearance >= avoid.margin
+    else:
+        clearance = jnp.full((B, seeds), jnp.inf, dtype)
+        clear = jnp.ones((B, seeds), bool)
+    segs = _spline.segments(free + 6)
+    duration = segs * h
+    ok = limits_ok & clear
+    score = jnp.where(ok, 1e9 - duration, jnp.clip(clearance, -1e6, 1e6))
+    best = jnp.argmax(score, axis=1)
+    pick = lambda x: jnp.take_along_axis(x, best.reshape((B, 1) + (1,) * (x.ndim - 2)), axis=1)[:, 0]  # noqa: E731
+    P, h, clearance, clear, limits_ok = pick(P), pick(h), pick(clearance), pick(clear), pick(limits_ok)
+    u = jnp.asarray(np.arange(segs * _LENGTH_SAMPLES + 1) / _LENGTH_SAMPLES, dtype)
+    dense = _spline.evaluate(P[:, None], u)  # (B, Q, dof)
+    length = jnp.sum(jnp.linalg.norm(jnp.diff(dense, axis=1), axis=-1), axis=1)
+    return Trajectory(
+        q=_spline.knots(P),
+        t=h[:, None] * jnp.arange(segs + 1, dtype=dtype),
+        duration=segs * h,
+        success=valid & limits_ok & clear,
+        goal_ok=valid,
+        limits_ok=limits_ok,
+        clear=clear,
+        clearance=clearance,
+        path_length=length,
+        control=P,
+        segment_time=h,
+    )
+
+
+_solve = solver_jit(_core, static_argnums=(0,), static_argnames=("locked", "free", "seeds", "iters"))

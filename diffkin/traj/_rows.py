@@ -1,0 +1,53 @@
+"""Collision-aware IK's clearance term, evaluated at many configurations of many curves.
+
+One :class:`diffkin.ik._problem.Problem` holding only the clearance term
+(:class:`diffkin.ik._terms.avoid.AvoidTerm`), its world tiled so that each configuration sees its own
+problem's obstacles: its rows (with their motion Jacobians) for the descent, its distances for the
+certificate. Configurations ``q`` ``(C, Q, dof)``: ``Q`` of each of ``C`` curves, ``k`` curves per
+problem (consecutive), the world shared or flat per problem ``(B, ...)`` (``C = B k``).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from diffkin import _rigid as rg
+from diffkin.ik._problem import Kinematics, Problem, Spec
+from diffkin.ik._terms.avoid import Avoid, AvoidTerm
+
+
+def problem(model, avoid: Avoid, locked: tuple[bool, ...], base, k: int, Q: int) -> tuple[Problem, AvoidTerm, Avoid]:
+    """The problem of ``C Q`` configurations, its term and its data (``avoid`` tiled)."""
+    reps = k * Q
+    avoid = avoid.tiled(lambda v: jnp.repeat(v, reps, axis=0))
+    term = AvoidTerm.of(avoid)
+    spec = Spec((), (term,), tuple(locked), (), False, True)
+    root = rg.IDENTITY if base is None else rg.from_matrix(jnp.repeat(base, reps, axis=0))
+    return spec.problem(model, spec.bind([], (avoid,)), root=root), term, avoid
+
+
+def rows(model, avoid: Avoid, locked, base, k: int, q: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """``r (m, C, Q)`` the clearance rows and ``dr/dq`` ``(m, dof, C, Q)`` at ``q`` ``(C, Q, dof)``."""
+    C, Q, dof = q.shape
+    prob, _, _ = problem(model, avoid, locked, base, k, Q)
+    ev = prob.evaluate(q.reshape(C * Q, dof).T)
+    m = ev.r.shape[0]
+    return ev.r.reshape(m, C, Q), -ev.J.reshape(m, dof, C, Q)
+
+
+def distances(model, avoid: Avoid, locked, base, k: int, q: jax.Array):
+    """The distances at ``q`` ``(C, Q, dof)``: the self pairs' ``(pairs, C, Q)`` in ``avoid.geom.pairs``
+    order (``None`` without ``self_collision``) and the shapes' to the world ``(S, W, C, Q)`` (``None``
+    without obstacles); lower bounds of the exact ones (:mod:`diffkin.collision`)."""
+    C, Q, dof = q.shape
+    prob, term, data = problem(model, avoid, locked, base, k, Q)
+    kin = Kinematics(prob, q.reshape(C * Q, dof).T)
+    blocks, d_self, d_world, _, _ = term._measure(kin, data, jnp.inf)
+    self_d = None
+    if blocks:
+        order = jnp.concatenate([jnp.asarray(rows) for rows, *_ in blocks])
+        stacked = jnp.concatenate([jnp.broadcast_to(d, (d.shape[0], C * Q)) for d in d_self])
+        self_d = jnp.zeros_like(stacked).at[order].set(stacked).reshape(-1, C, Q)
+    world_d = None if d_world is None else d_world.reshape(d_world.shape[:2] + (C, Q))
+    return self_d, world_d
