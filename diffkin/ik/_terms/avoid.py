@@ -244,6 +244,26 @@ class AvoidTerm:
         block = (rows, jnp.concatenate(J) if jacobian else jnp.zeros((rows.shape[0], 0) + kin.shape, dtype))
         return Rows([], [], err, jnp.zeros_like(err), block)
 
+    def distances(self, kin, avoid: Avoid, reach) -> tuple[jax.Array, jax.Array]:
+        """Every checked distance and its motion, one row each (a velocity-IK step's linearised
+        constraints): ``d`` ``(k, P)`` metres (the self pairs, then each robot shape against each
+        obstacle), exact below ``reach`` and a lower bound at least ``reach`` above it, and ``J``
+        ``(k, C, P)``: ``dd/dx`` per column of the state (zero above ``reach``)."""
+        blocks, d_self, d_world, w_self, w_world = self._measure(kin, avoid, reach, True)
+        twists = self._twists(kin)  # (F, C, 6, P)
+        slot = np.asarray(self.slots, dtype=np.int64)
+        starts = np.cumsum((0, *avoid.geom.counts))
+        d, J = list(d_self), []
+        for (_, ka, kb, ia, ib), (Wa, Wb) in zip(blocks, w_self, strict=True):
+            Ja = jnp.einsum("npk,nckp->ncp", Wa, twists[slot[starts[ka] + ia]])
+            J.append(Ja + jnp.einsum("npk,nckp->ncp", Wb, twists[slot[starts[kb] + ib]]))
+        if d_world is not None:  # (S, W, P) and per robot shape, per obstacle, its wrench
+            wrench = jnp.concatenate([jnp.concatenate(per_kind, axis=1) for per_kind in w_world])  # (S, W, P, 6)
+            J_world = jnp.einsum("swpk,sckp->swcp", wrench, twists[slot])
+            d.append(d_world.reshape(-1, kin.shape[0]))
+            J.append(J_world.reshape((-1,) + J_world.shape[2:]))
+        return jnp.concatenate(d), jnp.concatenate(J)
+
     def _twists(self, kin) -> jax.Array:
         """``(F, C, 6, P)``: per frame carrying shapes, per column of the state, its space twist ``[v; w]``."""
         per_frame = [kin.columns(f) for f in self.frames]

@@ -1,0 +1,313 @@
+"""``step``: one differential-IK step (velocity IK), a small QP per configuration.
+
+The targets' rows are those of :func:`diffkin.ik.solve` (the terms of :mod:`diffkin.ik._terms`, built
+by the same host-side plan and setup): at ``q``, each term's residual ``e`` (metres, and radians
+weighted :data:`~diffkin.ik._terms.pose.ROT_WEIGHT`) and its Jacobian ``J = de/d(-q)``. The step is
+the joint velocity ``v`` of
+
+    minimise  |J v - gain e / dt|^2 + w_rest^2 |v_free - gain (rest - q)_free / dt|^2 + damping |v|^2
+    subject to  lower <= q + v dt <= upper,   |v| <= velocity,   v_locked = 0,
+                d_k + dt (dd_k/dq) v >= margin  (each distance ``avoid`` checks, linearised)
+
+solved by :mod:`diffkin.ik._qp`. When the bounds of a joint contradict each other (``q`` further
+outside its limits than ``velocity * dt``), the joint moves back towards its range at its velocity
+limit; when the distance rows cannot all hold, the step is that of the rows relaxed by their least
+largest violation (:func:`diffkin.ik._qp.least_violation`, rows scaled to unit norm); both give
+``feasible=False``.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffkin import _rigid as rg
+from diffkin._checks import instance, real_array
+from diffkin._static import ModelKey, is_concrete, partition
+from diffkin._xla import solver_jit
+from diffkin.ik import _qp
+from diffkin.ik._prepare import prepare
+from diffkin.ik._problem import Kinematics
+from diffkin.ik._solve import plan
+from diffkin.models.dh import DHChain
+from diffkin.models.poe import PoEChain
+from diffkin.models.robot import Robot
+
+#: Weight of the rest rows (``weights={"rest": w}`` sets it): a posture pull well below the targets'.
+REST_WEIGHT = 0.1
+#: Metres above ``avoid.margin`` within which a distance is measured exactly and linearised (farther
+#: ones are lower bounds that hold: a step must move less than this towards an obstacle).
+AVOID_REACH = 0.05
+
+
+class Step(NamedTuple):
+    """One velocity-IK step (a pytree); every field has the batch shape ``...`` of ``q`` and the targets.
+
+    Attributes:
+        v: ``(..., dof)`` joint velocities (rad/s, m/s).
+        q: ``(..., dof)`` ``q + v dt``, within ``[lower, upper]`` wherever ``feasible`` (rounding
+            clipped away; locked joints held where they are).
+        feasible: ``(...,)`` bool: every hard constraint (limits over the step, velocity limits, the
+            linearised distances) could be met and is; ``False`` also for non-finite inputs.
+        task_err: ``(...,)`` metres: the weighted task error left after the step to first order,
+            ``|e - dt J v|`` (radians counting as ``ROT_WEIGHT`` m); ``finfo.max`` for non-finite inputs.
+    """
+
+    v: jax.Array
+    q: jax.Array
+    feasible: jax.Array
+    task_err: jax.Array
+
+
+def step(
+    model,
+    q,
+    targets,
+    *,
+    dt,
+    gain=1.0,
+    weights=None,
+    rest=None,
+    relative=None,
+    com=None,
+    locked=None,
+    velocity=None,
+    avoid=None,
+    damping=1e-6,
+    base=None,
+) -> Step:
+    """One differential-IK step: the joint velocity that best moves the targets' errors to zero in
+    ``dt / gain``, subject exactly to the joint limits over the step, the velocity limits and, with
+    ``avoid``, linearised distance constraints (the module :mod:`diffkin.ik._step`).
+
+    Pure and traceable (``jit``, ``vmap``); batched over the leading axes of ``q`` and the targets
+    (broadcast together); float32 or float64 (the targets' dtype). Nothing raises inside ``jit``
+    and nothing turns NaN: the damping keeps singular configurations finite.
+
+    Args:
+        model: a :class:`~diffkin.DHChain`, :class:`~diffkin.PoEChain` or :class:`~diffkin.Robot`.
+        q: ``(..., dof)`` the current joint values (radians, metres).
+        targets: as :func:`diffkin.ik.solve`'s ``target``: a chain's ``(..., 4, 4)`` end-effector pose
+            or ``(..., 3)`` position; a robot's mapping ``{frame_name: target}`` (world frame).
+        dt: seconds, ``> 0``: the step's duration.
+        gain: in ``[0, 1]`` usually: the fraction of the error to remove in one step.
+        weights: robots: as :func:`diffkin.ik.solve`'s, and ``"rest"``: the rest rows' weight
+            (default :data:`REST_WEIGHT`).
+        rest: robots: ``(..., dof)`` a rest configuration the free joints are pulled towards.
+        relative, com: robots: targets between two frames, the centre of mass (as :func:`diffkin.ik.solve`).
+        locked: robots: a sequence of joint names that do not move (``v = 0``).
+        velocity: ``()``, ``(dof,)`` or ``(..., dof)`` velocity limits ``|v| <= velocity`` (rad/s,
+            m/s; ``inf``: none); default none (model files' velocity limits are not read yet).
+        avoid: robots: a :class:`~diffkin.ik.Avoid`: each distance it checks (within
+            :data:`AVOID_REACH` of the margin) keeps ``d + dt (dd/dq) v >= margin``.
+        damping: ``> 0``, ``(m/s)^2`` per ``(rad/s)^2``: the cost of ``|v|^2``.
+        base: robots: ``(..., 4, 4)`` the root pose ``T_world_root`` (default identity).
+
+    Returns:
+        :class:`Step`.
+
+    Raises:
+        ValueError: a bad ``q``, ``dt``, ``gain``, ``damping`` or ``velocity`` (named), and every
+            error of :func:`diffkin.ik.solve`'s arguments.
+        TypeError: a model that is not one, a mapping for ``locked``, non-real arrays.
+    """
+    instance(model, (DHChain, PoEChain, Robot), "model", "a DHChain, PoEChain or Robot")
+    q = real_array(q, "q", "joint values")
+    if q.ndim < 1 or q.shape[-1] != model.dof:
+        raise ValueError(f"q: expected shape (..., {model.dof}) for a {model.dof}-joint model, got {q.shape}")
+    for name, value, strict in (("dt", dt, True), ("gain", gain, False), ("damping", damping, True)):
+        _scalar(value, name, 0.0, strict)
+    if isinstance(locked, Mapping):
+        raise TypeError("locked: dk.ik.step takes a sequence of joint names (they keep their values: v = 0)")
+    if velocity is not None:
+        velocity = real_array(velocity, "velocity", "velocity limits")
+        if velocity.ndim and velocity.shape[-1] != model.dof:
+            raise ValueError(f"velocity: expected shape (), (dof,) or (..., {model.dof}), got {velocity.shape}")
+        if is_concrete(velocity) and not np.all(np.asarray(velocity) >= 0):
+            raise ValueError("velocity: expected limits >= 0 (inf: none)")
+    weights = dict(weights) if isinstance(weights, Mapping) else weights
+    rest_weight = REST_WEIGHT
+    if isinstance(weights, dict) and "rest" in weights:
+        rest_weight = weights.pop("rest")
+        _scalar(rest_weight, "weights['rest']", 0.0, False)
+    batch = _batch(q.shape[:-1], targets, relative, com)
+    targets, relative, com = (_broadcast(x, batch) for x in (targets, relative, com))
+    p = plan(
+        model,
+        targets,
+        {"relative": relative, "com": com, "avoid": avoid},
+        q0=jnp.broadcast_to(q, batch + (model.dof,)),
+        num_seeds=1,
+        method="lm",
+        max_iters=None,
+        pos_tol=0.0,
+        rot_tol=0.0,
+        optimizer=None,
+        weights=weights,
+        locked=locked,
+        rest=rest,
+        secondary=(),
+        solve_base=False,
+        base=base,
+    )
+    dtype = p.dtype
+    as_dtype = lambda x: None if x is None else jnp.asarray(x, dtype)  # noqa: E731
+    static, traced = partition(model)
+    return _step(
+        traced,
+        tuple(p.data),
+        as_dtype(q),
+        as_dtype(rest),
+        as_dtype(base),
+        as_dtype(velocity),
+        *(jnp.asarray(x, dtype) for x in (dt, gain, damping, rest_weight)),
+        static=static,
+        spec=p.spec,
+        batch=p.batch,
+    )
+
+
+def _scalar(value, name: str, low: float, strict: bool) -> None:
+    """A real scalar, finite and ``> low`` (``strict``) or ``>= low`` when concrete."""
+    if isinstance(value, bool) or np.ndim(value) != 0:
+        raise ValueError(f"{name}: expected a number, got {value!r}")
+    if not is_concrete(value):
+        return
+    try:
+        x = float(value)
+    except TypeError:
+        raise TypeError(f"{name}: expected a real number, got {value!r}") from None
+    if not np.isfinite(x) or (x <= low if strict else x < low):
+        raise ValueError(f"{name}: expected a finite number {'>' if strict else '>='} {low:g}, got {value!r}")
+
+
+def _shape_of(x) -> tuple[tuple[int, ...], int]:
+    """The batch shape of a target (pose ``(..., 4, 4)``, else ``(..., k)``) and its tail's length."""
+    shape = np.shape(x)
+    tail = 2 if len(shape) >= 2 and shape[-2:] == (4, 4) else 1
+    return tuple(shape[: max(len(shape) - tail, 0)]), tail
+
+
+def _values(x) -> list:
+    return [] if x is None else list(x.values()) if isinstance(x, Mapping) else [x]
+
+
+def _batch(q_batch: tuple[int, ...], *given) -> tuple[int, ...]:
+    """The joint batch shape of ``q`` and every target (``targets``, ``relative``, ``com``)."""
+    shapes = [q_batch] + [_shape_of(v)[0] for x in given for v in _values(x)]
+    try:
+        return tuple(np.broadcast_shapes(*shapes))
+    except ValueError:
+        raise ValueError(f"q: its batch shape {q_batch} and the targets' {shapes[1:]} do not broadcast") from None
+
+
+def _broadcast(x, batch: tuple[int, ...]):
+    """A target (or a mapping of them) broadcast to ``batch`` (left alone if it is not an array: the plan names it)."""
+    if x is None:
+        return None
+    if isinstance(x, Mapping):
+        return {k: _broadcast(v, batch) for k, v in x.items()}
+    if not hasattr(x, "shape") and not isinstance(x, (list, tuple)):
+        return x
+    b, tail = _shape_of(x)
+    if b == batch:
+        return x
+    x = jnp.asarray(x)
+    return jnp.broadcast_to(x, batch + x.shape[x.ndim - tail :])
+
+
+@functools.partial(solver_jit, static_argnames=("static", "spec", "batch"))
+def _step(
+    traced, data, q, rest, base, velocity, dt, gain, damping, rest_weight, *, static: ModelKey, spec, batch
+) -> Step:
+    """The step, compiled once per model (by value), terms and shapes."""
+    s = prepare(static, traced, data, spec, batch, batch, rest=rest, base=base)
+    model, dtype, dof = s.model, data[0].dtype, s.model.dof
+    n = int(np.prod(batch, dtype=np.int64))
+    given = jnp.broadcast_to(q, batch + (dof,)).reshape(n, dof).T  # (dof, P)
+    finite_q = jnp.all(jnp.isfinite(given), axis=0)
+    x = jnp.where(jnp.isfinite(given), given, 0.0)
+    locked = np.asarray(spec.locked)
+    targets_only = spec._replace(constraints=())
+    root = s.base
+    problem = targets_only.problem(
+        model,
+        targets_only.bind(s.targets, ()),
+        rg.IDENTITY if root is None else rg.from_matrix(root),
+        None,
+        None,
+    )
+    ev = problem.evaluate(x)  # r (m, P), J = de/d(-q) (m, dof, P)
+    u = gain * ev.r / dt
+    H = jnp.einsum("mip,mjp->ijp", ev.J, ev.J) + damping * jnp.eye(dof, dtype=dtype)[:, :, None]
+    g = -jnp.einsum("mip,mp->ip", ev.J, u)
+    free = jnp.asarray(~locked)[:, None]
+    if s.rest is not None:
+        w2 = rest_weight**2
+        H = H + w2 * jnp.diag(jnp.where(free[:, 0], 1.0, 0.0).astype(dtype))[:, :, None]
+        g = g - w2 * jnp.where(free, gain * (s.rest.T - x) / dt, 0.0)
+
+    # The box: position limits over the step and velocity limits; contradictory bounds fix the joint.
+    vel = jnp.inf if velocity is None else jnp.broadcast_to(velocity, batch + (dof,)).reshape(n, dof).T
+    vel = jnp.where(jnp.isnan(vel), 0.0, vel)
+    p_lo, p_hi = (s.lower[:, None] - x) / dt, (s.upper[:, None] - x) / dt
+    lo, hi = jnp.maximum(p_lo, -vel), jnp.minimum(p_hi, vel)
+    conflict = (lo > hi) & free
+    fixed = conflict | ~free
+    value = jnp.where(conflict, jnp.clip(jnp.clip(0.0, p_lo, p_hi), -vel, vel), 0.0)  # (dof, P)
+    value = jnp.broadcast_to(value, (dof, n))
+    lo, hi = jnp.where(fixed, -jnp.inf, lo), jnp.where(fixed, jnp.inf, hi)
+    # Fixed joints eliminated: their rows of H the identity, v_i = value_i exactly.
+    both = fixed[:, None, :] | fixed[None, :, :]
+    g = g + jnp.einsum("ijp,jp->ip", jnp.where(fixed[None, :, :], H, 0.0), value)
+    eye = jnp.eye(dof, dtype=dtype)[:, :, None]
+    H = jnp.where(both, eye, H)
+    g = jnp.where(fixed, -value, g)
+
+    G = jnp.zeros((0, dof, n), dtype)
+    h = jnp.zeros((0, n), dtype)
+    on = jnp.zeros((0, n), bool)
+    if spec.constraints:
+        term = spec.constraints[0]
+        avoid = s.data[0]
+        d, Jd = term.distances(Kinematics(problem, x), avoid, avoid.margin + AVOID_REACH)
+        Jd = jnp.where(fixed[None], 0.0, Jd)
+        h = avoid.margin - d - jnp.einsum("kip,ip->kp", Jd, value) * dt
+        G = Jd * dt
+        on = (d < avoid.margin + AVOID_REACH) & jnp.isfinite(d)
+        norm = jnp.sqrt(jnp.sum(G**2, axis=1))
+        unit = jnp.where(norm > 0, norm, 1.0)
+        G, h = G / unit[:, None], jnp.where(on, h / unit, 0.0)
+    qp = _qp.QP(H, g, lo, hi, G, h, on)
+    rows_ok = jnp.ones((n,), bool)
+    if spec.constraints:
+        t = _qp.least_violation(qp)
+        tol = jnp.sqrt(jnp.finfo(dtype).eps) * (1.0 + jnp.max(jnp.abs(h), axis=0, initial=0.0))
+        rows_ok = t <= tol
+        slack = jnp.where(rows_ok, 0.0, t + tol)
+        qp = qp._replace(h=h - slack)
+    v = _qp.solve(qp).v
+    v = jnp.where(fixed, value, v)
+    ok = s.valid & finite_q & jnp.all(jnp.isfinite(v), axis=0)
+    v = jnp.where(ok, v, 0.0)
+    in_box = ~jnp.any(conflict, axis=0)
+    q_new = x + v * dt
+    q_new = jnp.where(free & in_box, jnp.clip(q_new, s.lower[:, None], s.upper[:, None]), q_new)
+    q_new = jnp.where(fixed & ~conflict, x, q_new)  # locked joints exactly where they were
+    if spec.constraints:
+        violation = jnp.max(jnp.where(on, h - jnp.einsum("knp,np->kp", G, v), 0.0), axis=0, initial=0.0)
+        rows_ok = rows_ok & (violation <= tol)
+    err = jnp.sqrt(jnp.sum((ev.r - dt * jnp.einsum("mip,ip->mp", ev.J, v)) ** 2, axis=0))
+    big = jnp.finfo(dtype).max
+    shaped = lambda a, *tail: a.reshape(batch + tail)  # noqa: E731
+    return Step(
+        v=shaped(v.T, dof),
+        q=shaped(jnp.where(finite_q, q_new, given).T, dof),
+        feasible=shaped(ok & in_box & rows_ok),
+        task_err=shaped(jnp.where(ok, jnp.minimum(err, big), big)),
+    )
