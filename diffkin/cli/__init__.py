@@ -5,7 +5,9 @@
     diffkin fk ROBOT_OR_FILE q1 ... qn | --q-file configs.npy [--format text|json|npy] [--output FILE]
     diffkin ik ROBOT_OR_FILE --pose x y z qw qx qy qz | --position x y z [--seeds N] [--q0 ...] [--all ...]
         [--avoid scene.json [--margin M] [--srdf FILE.srdf ...]]
-    diffkin workspace ROBOT_OR_FILE --samples N --voxel V --out map.npz [--plot slice.png]
+    diffkin workspace ROBOT_OR_FILE --samples N --voxel V --out map.npz [--plot slice.png] [--capability]
+    diffkin place ROBOT_OR_FILE --tasks tasks.npy --region XMIN YMIN XMAX YMAX [--map cap.npz] [--plot place.png]
+        [--verify K] [--out place.npz]
     diffkin view ROBOT_OR_FILE [--map map.npz] [--ik-results res.npz] [--end FRAME ...]
         [--avoid scene.json [--margin M] [--srdf FILE.srdf ...]]
 

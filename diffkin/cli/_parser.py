@@ -12,6 +12,7 @@ from diffkin.cli._errors import CLIError
 from diffkin.cli._fk import cmd_fk
 from diffkin.cli._ik import cmd_ik
 from diffkin.cli._info import cmd_info
+from diffkin.cli._place import cmd_place
 from diffkin.cli._robots import ROBOTS
 from diffkin.cli._view import cmd_view
 from diffkin.cli._workspace import cmd_workspace
@@ -307,7 +308,60 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=_seed, default=0, help="PRNG seed (default 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--capability",
+        action="store_true",
+        help="a capability map instead (dk.workspace.capability: samples per voxel and orientation bin), "
+        "for 'diffkin place --map'",
+    )
+    p.add_argument(
+        "--orientation-bins",
+        type=_positive_int,
+        metavar="B",
+        help="with --capability: orientation bins, 24 d^3 for 90/d degree cells (default 5184: 15 degrees)",
+    )
     p.set_defaults(func=cmd_workspace)
+
+    p = add_parser(
+        "place",
+        help="where to put the robot: base poses scored by the tasks a capability map reaches",
+        description="Base placement (dk.workspace.base_placement): a grid of planar base poses (x, y, yaw) "
+        "over --region, each scored by the fraction of the task poses that a capability map says it reaches "
+        "(built here, or read with --map); the best bases printed, optionally verified by IK and plotted.",
+    )
+    _add_robot(p)
+    p.add_argument(
+        "--tasks",
+        required=True,
+        metavar="TASKS",
+        help="task poses T_world_task, (N, 4, 4): a .npy array, a .npz with 'tasks', or a JSON list of 4x4 matrices",
+    )
+    p.add_argument(
+        "--region",
+        nargs=4,
+        type=_finite,
+        required=True,
+        metavar=("XMIN", "YMIN", "XMAX", "YMAX"),
+        help="where the base may stand, m (world)",
+    )
+    p.add_argument("--map", metavar="CAP.npz", help="capability map from 'diffkin workspace --capability'")
+    p.add_argument(
+        "--samples", type=_samples, default=1_000_000, metavar="N", help="without --map: samples (default 1,000,000)"
+    )
+    p.add_argument("--voxel", type=_positive_float, default=0.05, metavar="V", help="without --map: voxel, m")
+    p.add_argument(
+        "--orientation-bins", type=_positive_int, default=5184, metavar="B", help="without --map: bins (default 5184)"
+    )
+    p.add_argument("--yaw-bins", type=_positive_int, default=36, metavar="K", help="base yaws (default 36)")
+    p.add_argument("--base-height", type=_finite, default=0.0, metavar="H", help="base z in the world, m (default 0)")
+    p.add_argument("--cell", type=_positive_float, metavar="C", help="base grid cell, m (default: the map's voxel)")
+    p.add_argument("--best", type=_positive_int, default=5, metavar="K", help="bases to print (default 5)")
+    p.add_argument("--verify", type=int, default=0, metavar="K", help="re-solve the K best bases by IK (default 0)")
+    p.add_argument("--plot", metavar="PLACE.png", help="plot the score over (x, y) at the best yaw, tasks drawn")
+    p.add_argument("--out", metavar="PLACE.npz", help="save the scores and the best bases")
+    p.add_argument("--seed", type=_seed, default=0, help="PRNG seed (default 0)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_place)
 
     p = add_parser(
         "view",

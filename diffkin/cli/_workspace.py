@@ -1,4 +1,4 @@
-"""``diffkin workspace``: a reachability map saved as ``.npz``, and a slice plot."""
+"""``diffkin workspace``: a reachability (or, ``--capability``, capability) map saved as ``.npz``, and a slice plot."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ from diffkin.cli._text import fmt
 
 
 def cmd_workspace(args) -> int:
-    """A reachability map of ``--samples`` configurations on a ``--voxel`` grid, saved as ``.npz``."""
+    """A reachability map of ``--samples`` configurations on a ``--voxel`` grid, saved as ``.npz``; with
+    ``--capability`` a capability map (``--orientation-bins`` per voxel), which ``diffkin place`` reads."""
     jax = jax_x64()
     import diffkin as dk
 
@@ -38,12 +39,21 @@ def cmd_workspace(args) -> int:
                 f"--value: the slice {args.axis} = {args.value:g} m is outside the grid: expected "
                 f"{args.axis} in [{lo:.4g}, {hi:.4g}) m"
             )
+    if args.orientation_bins is not None and not args.capability:
+        raise CLIError("--orientation-bins goes with --capability")
     start = time.perf_counter()
-    wmap = dk.workspace.reachability(
-        chain, args.samples, key=jax.random.key(args.seed), voxel_size=args.voxel, progress=not args.no_progress
-    )
+    key, progress = jax.random.key(args.seed), not args.no_progress
+    if args.capability:
+        bins = 5184 if args.orientation_bins is None else args.orientation_bins
+        cap = dk.workspace.capability(
+            chain, args.samples, key=key, voxel_size=args.voxel, orientation_bins=bins, progress=progress
+        )
+        cap.save(saved)
+        wmap = cap.as_reachability()
+    else:
+        wmap = dk.workspace.reachability(chain, args.samples, key=key, voxel_size=args.voxel, progress=progress)
+        wmap.save(saved)
     seconds = time.perf_counter() - start
-    wmap.save(saved)
     reached = int((wmap.counts > 0).sum())
     print(
         f"{chain.name or args.robot}: {args.samples:,} samples in {seconds:.2f} s "
@@ -55,6 +65,11 @@ def cmd_workspace(args) -> int:
         f"the workspace volume that grows with --samples), {wmap.n_outside:,} samples outside; "
         f"max manipulability {wmap.manipulability.max():.4g}; saved {saved}"
     )
+    if args.capability:
+        print(
+            f"capability: {cap.cells.size:,} cells of {cap.orientation_bins} orientation bins per voxel reached "
+            f"(dk.workspace.CapabilityMap; 'diffkin place' reads it with --map)"
+        )
     if args.plot:
         dk.workspace.plot_slice(wmap, args.axis, args.value, args.quantity, path=args.plot)
         print(f"plot: {args.quantity} on the slice {args.axis} = {args.value:g} m -> {args.plot}")
