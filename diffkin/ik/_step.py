@@ -151,7 +151,7 @@ def step(
         weights=weights,
         locked=locked,
         rest=rest,
-        secondary=(),
+        secondary=None,
         solve_base=False,
         base=base,
     )

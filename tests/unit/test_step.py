@@ -1,0 +1,282 @@
+"""dk.ik.step (velocity IK): its QP against an exact active-set enumeration (float64, 1e-8) and the
+least violation of contradictory rows; the step against damped least squares from an autodiff
+Jacobian; joint, velocity and distance limits that always hold (or ``feasible=False``); locked joints;
+singular configurations without NaN; batching, ``jit`` and ``vmap``; bad input.
+
+A two-link arm in the x-z plane (the collision example of docs/collision.md) and a planar DH chain;
+one compiled program per shape of call, shared by the tests (module level).
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import diffkin as dk
+from diffkin.collision import Sphere, World
+from diffkin.ik import _qp
+
+URDF = """<robot name="arm">
+  <link name="base"><collision><geometry><box size="0.4 0.4 0.1"/></geometry></collision></link>
+  <link name="upper"><collision><origin xyz="0 0 0.25"/>
+    <geometry><capsule radius="0.05" length="0.5"/></geometry></collision></link>
+  <link name="lower"><collision><origin xyz="0 0 0.2"/>
+    <geometry><capsule radius="0.04" length="0.4"/></geometry></collision></link>
+  <link name="tip"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="upper"/><origin xyz="0 0 0.05"/>
+    <axis xyz="0 1 0"/><limit lower="-3" upper="3"/></joint>
+  <joint name="j2" type="revolute"><parent link="upper"/><child link="lower"/><origin xyz="0 0 0.5"/>
+    <axis xyz="0 1 0"/><limit lower="-2" upper="2"/></joint>
+  <joint name="tip" type="fixed"><parent link="lower"/><child link="tip"/><origin xyz="0 0 0.4"/></joint>
+</robot>"""
+ROBOT = dk.load_robot(URDF)
+GEOM = dk.collision.load(URDF, ROBOT)
+LOWER, UPPER = np.array([-3.0, -2.0]), np.array([3.0, 2.0])
+DT = 0.01
+VELOCITY = np.array([1.0, 1.5])
+CHAIN = dk.robots.planar([0.4, 0.3, 0.2])
+
+
+@jax.jit
+def _arm_step(q, target, velocity):
+    return dk.ik.step(ROBOT, q, {"tip": target}, dt=DT, velocity=velocity)
+
+
+@jax.jit
+def _chain_step(q, target):
+    return dk.ik.step(CHAIN, q, target, dt=DT)
+
+
+def _avoid(world, margin):
+    return dk.ik.Avoid(GEOM, world, margin, self_collision=False)
+
+
+def _world(centre):
+    return World(Sphere(centre[None], jnp.asarray([0.05], centre.dtype)))
+
+
+@jax.jit
+def _avoid_step(q, target, centre, velocity, margin):
+    return dk.ik.step(ROBOT, q, {"tip": target}, dt=DT, velocity=velocity, avoid=_avoid(_world(centre), margin))
+
+
+_solve_qp = jax.jit(_qp.solve)
+
+
+def _enumerated(H, g, lo, hi, G, h):
+    """The exact minimiser of a small QP: every active set tried, the one meeting the KKT conditions."""
+    n, m = len(g), len(h)
+    for box in itertools.product((0, -1, 1), repeat=n):
+        for rows in itertools.product((0, 1), repeat=m):
+            fixed = [i for i in range(n) if box[i]]
+            free = [i for i in range(n) if not box[i]]
+            act = [k for k in range(m) if rows[k]]
+            v = np.zeros(n)
+            v[fixed] = [lo[i] if box[i] < 0 else hi[i] for i in fixed]
+            if not np.all(np.isfinite(v)):
+                continue
+            nf, na = len(free), len(act)
+            K = np.zeros((nf + na, nf + na))
+            K[:nf, :nf] = H[np.ix_(free, free)]
+            A = G[np.ix_(act, free)]
+            K[:nf, nf:], K[nf:, :nf] = -A.T, A
+            rhs = np.r_[-g[free] - H[np.ix_(free, fixed)] @ v[fixed], h[act] - G[np.ix_(act, fixed)] @ v[fixed]]
+            if np.linalg.matrix_rank(K) < nf + na:
+                continue
+            sol = np.linalg.solve(K, rhs)
+            v[free], lam = sol[:nf], sol[nf:]
+            grad = H @ v + g - G[act].T @ lam
+            kkt = (
+                np.all(v >= lo - 1e-12)
+                and np.all(v <= hi + 1e-12)
+                and np.all(G @ v >= h - 1e-12)
+                and np.all(lam >= -1e-12)
+                and all(b == 0 or b * grad[i] <= 1e-10 for i, b in enumerate(box))
+            )
+            if kkt:
+                return v
+    raise AssertionError("no active set meets the KKT conditions")
+
+
+def _random_qps(P, n, m, seed):
+    """``P`` feasible problems (a point of the box meets every row), some bounds infinite; problem axis last."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for p in range(P):
+        J = rng.normal(size=(n + 1, n))
+        H = J.T @ J + 1e-3 * np.eye(n)
+        g = 3 * rng.normal(size=n)
+        lo, hi = -rng.uniform(0.1, 1, n), rng.uniform(0.1, 1, n)
+        if p % 4 == 0:
+            lo[0] = -np.inf
+        if p % 5 == 0:
+            hi[-1] = np.inf
+        G = rng.normal(size=(m, n))
+        inside = rng.uniform(np.maximum(lo, -1), np.minimum(hi, 1))
+        h = G @ inside - rng.uniform(0, 0.3, m)
+        out.append((H, g, lo, hi, G, h))
+    return out
+
+
+def _stacked(problems, dtype=np.float64) -> _qp.QP:
+    H, g, lo, hi, G, h = (jnp.asarray(np.moveaxis(np.array(a), 0, -1), dtype) for a in zip(*problems, strict=True))
+    return _qp.QP(H, g, lo, hi, G, h, jnp.ones(h.shape, bool))
+
+
+PROBLEMS = _random_qps(40, 4, 2, seed=0)
+SOLVED = _solve_qp(_stacked(PROBLEMS))
+
+
+@pytest.mark.parametrize("p", range(0, 40, 3))
+def test_qp_matches_the_exact_active_set(p):
+    H, g, lo, hi, G, h = PROBLEMS[p]
+    v = np.asarray(SOLVED.v[:, p])
+    np.testing.assert_allclose(v, _enumerated(H, g, lo, hi, G, h), atol=1e-8)
+    assert np.all(v >= lo) and np.all(v <= hi)  # the box exactly
+    assert np.all(G @ v >= h - 1e-10)
+
+
+def test_qp_float32():
+    # H's condition numbers reach ~1e4 (its damping 1e-3): float32 rounding of the problem alone moves
+    # the minimiser by up to ~1e4 * 1.2e-7.
+    v = _solve_qp(_stacked(PROBLEMS[:8], np.float32)).v
+    assert v.dtype == jnp.float32
+    for p, (H, g, lo, hi, G, h) in enumerate(PROBLEMS[:8]):
+        np.testing.assert_allclose(np.asarray(v[:, p], np.float64), _enumerated(H, g, lo, hi, G, h), atol=3e-3)
+
+
+def test_least_violation_of_contradictory_rows():
+    # v0 >= 1 and v0 <= -1 in the box [-5, 5]: the least largest violation is 1 (at v0 = 0).
+    H = jnp.eye(2)[:, :, None]
+    qp = _qp.QP(
+        H,
+        jnp.zeros((2, 1)),
+        jnp.full((2, 1), -5.0),
+        jnp.full((2, 1), 5.0),
+        jnp.asarray([[1.0, 0.0], [-1.0, 0.0]])[:, :, None],
+        jnp.asarray([[1.0], [1.0]]),
+        jnp.ones((2, 1), bool),
+    )
+    np.testing.assert_allclose(_qp.least_violation(qp), [1.0], atol=1e-6)
+    np.testing.assert_allclose(_qp.least_violation(qp._replace(h=-qp.h)), [0.0], atol=1e-9)
+
+
+def test_step_is_damped_least_squares_off_the_limits():
+    q = jnp.asarray([0.3, 0.8])
+    point = lambda q: dk.fk(ROBOT, q, "tip")[:3, 3]  # noqa: E731
+    target = point(q) + jnp.asarray([0.002, 0.0, -0.001])
+    out = _arm_step(q, target, jnp.full(2, jnp.inf))
+    J = np.asarray(jax.jacfwd(point)(q))
+    e = np.asarray(target - point(q))
+    v_ref = np.linalg.solve(J.T @ J + 1e-6 * np.eye(2), J.T @ e / DT)
+    np.testing.assert_allclose(out.v, v_ref, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(out.q, q + v_ref * DT, atol=1e-12)
+    assert bool(out.feasible)
+    np.testing.assert_allclose(out.task_err, np.linalg.norm(e - J @ v_ref * DT), atol=1e-12)
+
+
+def test_limits_always_hold():
+    rng = np.random.default_rng(1)
+    q = rng.uniform(LOWER, UPPER, (64, 2))
+    q[:8] = np.where(rng.uniform(size=(8, 2)) < 0.5, LOWER, UPPER)  # at a limit
+    q[8:16] = q[8:16] + np.sign(q[8:16]) * (UPPER - np.abs(q[8:16])) * 0.999  # just inside
+    targets = rng.uniform(-1.5, 1.5, (64, 3))  # mostly far or unreachable: the limits bind
+    out = _arm_step(jnp.asarray(q), jnp.asarray(targets), jnp.asarray(VELOCITY))
+    assert bool(jnp.all(out.feasible))
+    assert np.all(np.asarray(out.q) >= LOWER) and np.all(np.asarray(out.q) <= UPPER)
+    assert np.all(np.abs(np.asarray(out.v)) <= VELOCITY)
+    assert np.any(np.isclose(np.abs(np.asarray(out.v)), VELOCITY))  # some velocity limits bind
+
+
+def test_outside_the_limits():
+    target = jnp.asarray([0.3, 0.0, 0.5])
+    far, near = 2.0 + 0.1, 2.0 + 0.5 * VELOCITY[1] * DT  # j2 beyond its upper limit
+    out = _arm_step(jnp.asarray([[0.0, far], [0.0, near]]), target, jnp.asarray(VELOCITY))
+    assert not bool(out.feasible[0]) and bool(out.feasible[1])
+    assert float(out.v[0, 1]) == -VELOCITY[1]  # back towards the range at its velocity limit
+    assert float(out.q[1, 1]) <= 2.0  # within one step: back inside, exactly
+
+
+def test_locked_joint_does_not_move():
+    q = jnp.asarray([0.3, 0.8])
+    target = jnp.asarray([0.5, 0.0, 0.4])
+    out = dk.ik.step(ROBOT, q, {"tip": target}, dt=DT, locked=["j2"])
+    assert float(out.v[1]) == 0.0 and float(out.q[1]) == 0.8
+    assert float(out.v[0]) != 0.0
+
+
+@pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
+def test_singular_configurations_are_finite(dtype):
+    # Stretched out (singular), target beyond reach along the arm and at the base: no NaN.
+    q = jnp.zeros((3, 3), dtype)
+    targets = jnp.asarray([[2.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.9, 1e-9, 0.0]], dtype)
+    out = _chain_step(q, targets)
+    assert out.v.dtype == dtype
+    assert bool(jnp.all(jnp.isfinite(out.v))) and bool(jnp.all(jnp.isfinite(out.task_err)))
+    assert bool(jnp.all(out.feasible))
+
+
+def test_distance_rows_hold():
+    # A sphere 4 cm from the lower link, the tip pulled through it: the linearised distance holds.
+    q = jnp.asarray([[0.0, 0.6], [0.0, 0.6]])
+    centre = jnp.asarray([0.277, 0.0, 0.724])
+    target = jnp.asarray([0.8, 0.0, 0.5])
+    velocity = jnp.asarray([[5.0, 5.0], [0.0, 0.0]])  # the second cannot move
+    out = _avoid_step(q, target, centre, velocity, 0.02)
+    avoid = _avoid(_world(centre), 0.02)
+    d = lambda q: avoid.clearance(ROBOT, q)  # noqa: E731
+    d0, grad = float(d(q[0])), np.asarray(jax.grad(d)(q[0]))
+    assert 0.03 < d0 < 0.05
+    linear = d0 + DT * float(grad @ out.v[0])
+    assert linear >= 0.02 - 1e-9
+    free = _arm_step(q[0], target, jnp.asarray([5.0, 5.0]))  # without the obstacle: nearer than the margin
+    assert d0 + DT * float(grad @ free.v) < 0.02
+    assert bool(out.feasible[0]) and bool(out.feasible[1])  # the second: clear, and standing still keeps it
+    # A margin above the distance that the velocity limits cannot restore in one step: infeasible,
+    # the box still exact.
+    stuck = _avoid_step(q, target, centre, jnp.full((2, 2), 0.01), d0 + 0.01)
+    assert not bool(jnp.any(stuck.feasible))
+    assert bool(jnp.all(jnp.abs(stuck.v) <= 0.01)) and bool(jnp.all(jnp.isfinite(stuck.v)))
+
+
+def test_batches_jit_and_vmap():
+    rng = np.random.default_rng(2)
+    q = jnp.asarray(rng.uniform(-1, 1, (2, 3, 2)))
+    targets = jnp.asarray(rng.uniform(-0.6, 0.6, (2, 3, 3)))
+    vel = jnp.asarray(VELOCITY)
+    batched = _arm_step(q, targets, vel)
+    assert batched.v.shape == (2, 3, 2) and batched.feasible.shape == (2, 3) and batched.task_err.shape == (2, 3)
+    mapped = jax.vmap(jax.vmap(_arm_step, (0, 0, None)), (0, 0, None))(q, targets, vel)
+    one = _arm_step(q[1, 2], targets[1, 2], vel)
+    np.testing.assert_allclose(mapped.v, batched.v, atol=1e-12)
+    np.testing.assert_allclose(one.v, batched.v[1, 2], atol=1e-12)
+    shared = _arm_step(q, targets[0, 0], vel)  # one target for every configuration
+    assert shared.v.shape == (2, 3, 2)
+    np.testing.assert_allclose(shared.v[0, 0], batched.v[0, 0], atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "field"),
+    [
+        ({"q": jnp.zeros(3)}, ValueError, "q:"),
+        ({"dt": 0.0}, ValueError, "dt:"),
+        ({"dt": float("nan")}, ValueError, "dt:"),
+        ({"gain": -1.0}, ValueError, "gain:"),
+        ({"damping": 0.0}, ValueError, "damping:"),
+        ({"velocity": jnp.asarray([1.0, -1.0])}, ValueError, "velocity:"),
+        ({"velocity": jnp.ones(3)}, ValueError, "velocity:"),
+        ({"locked": {"j1": 0.0}}, TypeError, "locked:"),
+        ({"locked": ["nope"]}, ValueError, "locked:"),
+        ({"weights": {"rest": -1.0}}, ValueError, "weights['rest']:"),
+        ({"targets": {"tip": jnp.zeros((4, 4, 4))}}, ValueError, "target"),
+        ({"model": "arm"}, TypeError, "model:"),
+    ],
+)
+def test_bad_input(kwargs, error, field):
+    args = {"model": ROBOT, "q": jnp.zeros(2), "targets": {"tip": jnp.zeros(3)}, "dt": DT} | kwargs
+    with pytest.raises(error, match=field.replace("[", r"\[")):
+        dk.ik.step(args.pop("model"), args.pop("q"), args.pop("targets"), **args)
