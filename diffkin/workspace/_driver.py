@@ -90,14 +90,15 @@ def run(
     devices,
     orientation_bins: int,
     n_dir: int,
+    cells: bool,
     dtype,
     progress: bool | None,
     avoid,
     max_grid_bytes: int,
     desc: str,
 ) -> Maps:
-    """Sample, step and reduce one map (see :func:`diffkin.workspace.reachability`); ``n_dir > 1``: a
-    capability map, whose cells are counted on the host. ``orientation_bins`` is checked by the caller."""
+    """Sample, step and reduce one map (see :func:`diffkin.workspace.reachability`); ``cells``: a capability
+    map, whose cells are counted on the host. ``orientation_bins`` and ``n_dir`` are checked by the caller."""
     collision = None if avoid is None else _collision_check(chain, avoid)
     chain = _as_chain(chain)
     n_samples = positive_int(n_samples, "n_samples")
@@ -120,7 +121,7 @@ def run(
     # Per voxel: every device's counts, best manipulability and orientation flags; the reduction's
     # maximum of the flags and its three maps; the host's int64 counts and copies of the maps. (A
     # capability map has no flags: its cells are counted on the host, O(cells reached).)
-    item, flags = dtype.itemsize, orientation_bins if n_dir == 1 else 0
+    item, flags = dtype.itemsize, 0 if cells else orientation_bins
     grid_bytes = math.prod(shape) * (len(devices) * (4 + item + flags) + flags + 2 * (8 + item) + 8)
     if grid_bytes > max_grid_bytes:
         raise ValueError(
@@ -131,7 +132,7 @@ def run(
         )
     mesh = Mesh(np.array(devices), (_AXIS,))
     zeros, step, reduce = _compiled(
-        partition(chain)[0], shape, orientation_bins, chunk, dtype, mesh, collision, *((n_dir,) if n_dir > 1 else ())
+        partition(chain)[0], shape, orientation_bins, chunk, dtype, mesh, collision, *((n_dir, True) if cells else ())
     )
 
     n_full, n_last = divmod(n_samples, chunk)
@@ -147,7 +148,7 @@ def run(
     )
     sharded = NamedSharding(mesh, P(_AXIS))
     state, counts, bar = zeros(), np.zeros(shape, np.int64), _progress(n_samples, progress, desc)
-    counter = _CellCounter(n_slots) if n_dir > 1 else None
+    counter = _CellCounter(n_slots) if cells else None
     done: jax.Array | None = None  # the valid samples of the step in flight
     slots: jax.Array | None = None  # the cells of the step in flight (a capability map)
     for s in range(n_steps):
@@ -174,7 +175,7 @@ def run(
         bar.update(int(done))
     if bar is not None:
         bar.close()
-    cells, cell_counts = counter.merge() if counter is not None else (None, None)
+    reached, reached_counts = counter.merge() if counter is not None else (None, None)
     return Maps(
         chain,
         origin,
@@ -183,6 +184,6 @@ def run(
         counts,
         _host(best).reshape(shape),
         _host(dexterity).reshape(shape),
-        cells,
-        cell_counts,
+        reached,
+        reached_counts,
     )

@@ -139,11 +139,12 @@ def _scores(table, slices, c, d, origin_xy, inv_voxel):
         p = (c[:, None, None, :] - d[None]) - origin_xy  # (N, nx, ny, 2), the base frame
         cell = jnp.floor(p * inv_voxel)
         inside = (slices[:, None, None] >= 0) & jnp.all((cell >= 0) & (cell < jnp.asarray(shape, p.dtype)), axis=-1)
-        cell = jnp.where(inside[..., None], cell, 0).astype(jnp.int32)
-        hit = table[jnp.maximum(slices, 0)[:, None, None], cell[..., 0], cell[..., 1]] & inside
-        return jnp.mean(hit, axis=0, dtype=jnp.float32)
+        cell = cell.astype(jnp.int32)
+        flat = (jnp.maximum(slices, 0)[:, None, None] * shape[0] + cell[..., 0]) * shape[1] + cell[..., 1]
+        hit = jnp.take(table.reshape(-1), jnp.where(inside, flat, 0)) & inside  # one flat gather: XLA's fastest
+        return jnp.sum(hit, axis=0, dtype=jnp.int32)
 
-    return jnp.moveaxis(jax.lax.map(one_yaw, (c, d, slices)), 0, -1)
+    return jnp.moveaxis(jax.lax.map(one_yaw, (c, d, slices)), 0, -1) / slices.shape[1]
 
 
 def _region(region) -> np.ndarray:

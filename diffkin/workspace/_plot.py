@@ -116,8 +116,9 @@ def plot_placement(placement: Placement, yaw: int | None = None, *, path=None, a
     half_x = (p.x[1] - p.x[0]) / 2 if len(p.x) > 1 else 0.5
     half_y = (p.y[1] - p.y[0]) / 2 if len(p.y) > 1 else 0.5
     extent = [p.x[0] - half_x, p.x[-1] + half_x, p.y[0] - half_y, p.y[-1] + half_y]
-    image = ax.imshow(score.T, origin="lower", extent=extent, interpolation="nearest", vmin=0, vmax=1)
-    ax.figure.colorbar(image, ax=ax, label="fraction of the tasks reached (capability map)")
+    top = max(float(p.score.max()), 1e-9)
+    image = ax.imshow(score.T, origin="lower", extent=extent, interpolation="nearest", vmin=0, vmax=top)
+    ax.figure.colorbar(image, ax=ax, label="fraction of the tasks reached (capability map; scale to the best)")
     tasks = p.tasks[:, :3, 3]
     ax.quiver(
         tasks[:, 0], tasks[:, 1], p.tasks[:, 0, 0], p.tasks[:, 1, 0], color="white", width=0.003, scale=40, alpha=0.8

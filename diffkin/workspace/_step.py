@@ -60,6 +60,7 @@ def _compiled(
     mesh: Mesh,
     collision: _Collision | None = None,
     n_dir: int = 1,
+    cells: bool = False,
 ):
     """Jitted ``(zeros, step, reduce)`` of one map: compiled once per chain, grid shape, chunk, mesh,
     collision check (the step's last argument: the :class:`~diffkin.ik.Avoid`, or ``None``) and
@@ -68,7 +69,7 @@ def _compiled(
     The state is, per device, ``counts (nvox,)`` int32, ``best (nvox,)`` manipulability and
     ``seen (nvox * n_bins,)`` uint8 flags of the orientation bins reached, stacked on a leading
     device axis sharded over the mesh. Step ``s`` runs chunk ``s * n_devices + d`` on device ``d``.
-    With ``n_dir > 1`` (a capability map: too many cells for dense flags) ``seen`` is a placeholder
+    With ``cells`` (a capability map: too many cells for dense flags) ``seen`` is a placeholder
     ``(n_devices, 1)`` and the step also returns every sample's cell ``voxel * n_bins + bin``
     (``(n_devices * chunk,)`` int32, ``n_slots`` for a sample not counted), for the caller to count.
     """
@@ -81,7 +82,7 @@ def _compiled(
         return (
             jnp.zeros((n_dev, nvox), jnp.int32),
             jnp.zeros((n_dev, nvox), dtype),
-            jnp.zeros((n_dev, nvox * n_bins if n_dir == 1 else 1), jnp.uint8),
+            jnp.zeros((n_dev, 1 if cells else nvox * n_bins), jnp.uint8),
         )
 
     def local_step(counts, best, seen, key, chunk_index, n_full, n_last, origin, inv_voxel, n_slots, avoid):
@@ -106,7 +107,7 @@ def _compiled(
         m = _manipulability(kin, chain.dof).astype(dtype)
         counts = counts.reshape(-1).at[slot // n_bins].add(1, mode="drop").reshape(counts.shape)
         best = best.reshape(-1).at[slot // n_bins].max(m, mode="drop").reshape(best.shape)
-        if n_dir > 1:
+        if cells:
             return counts, best, seen, jnp.sum(n_valid), slot
         seen = seen.reshape(-1).at[slot].set(1, mode="drop").reshape(seen.shape)
         return counts, best, seen, jnp.sum(n_valid)
@@ -116,14 +117,14 @@ def _compiled(
             local_step,
             mesh=mesh,
             in_specs=(P(_AXIS),) * 3 + (P(), P(_AXIS)) + (P(),) * 6,
-            out_specs=(P(_AXIS),) * 3 + (P(),) + ((P(_AXIS),) if n_dir > 1 else ()),
+            out_specs=(P(_AXIS),) * 3 + (P(),) + ((P(_AXIS),) if cells else ()),
             check_vma=False,
         ),
         donate_argnums=(0, 1, 2),
     )
 
     def reduce(counts, best, seen):
-        if n_dir > 1:  # the caller counts the cells
+        if cells:  # the caller counts them
             return counts.sum(axis=0), best.max(axis=0), jnp.zeros(nvox, jnp.int32)
         dexterity = jnp.max(seen, axis=0).reshape(nvox, n_bins).sum(axis=1, dtype=jnp.int32)
         return counts.sum(axis=0), best.max(axis=0), dexterity

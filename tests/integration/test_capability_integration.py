@@ -1,0 +1,114 @@
+"""Capability maps across device counts (4 host devices, in a subprocess), the ``diffkin workspace
+--capability`` and ``diffkin place`` commands, and the placement plot (matplotlib: the plot extra)."""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import jax
+import numpy as np
+import pytest
+
+import diffkin as dk
+from diffkin import cli
+from diffkin import workspace as ws
+from diffkin.workspace._placement import planar_poses
+
+KEY = jax.random.key(7)
+
+
+def test_identical_capability_maps_on_1_3_and_4_devices(tmp_path):
+    script = f"""
+        import json, jax, numpy as np
+        import diffkin as dk
+        chain, devices = dk.robots.panda(), jax.devices()
+        maps = [dk.workspace.capability(chain, 10_123, key=jax.random.key(7), voxel_size=0.15, chunk=1000,
+                                        orientation_bins=648, devices=devices[:k], dtype="float32") for k in (1, 3, 4)]
+        maps[2].save({str(tmp_path / "four.npz")!r})
+        same = [all(np.array_equal(getattr(a, f), getattr(maps[0], f)) for f in ("cells", "cell_counts", "counts",
+                "manipulability")) for a in maps]
+        print(json.dumps(dict(n_devices=len(devices), same=same, total=[int(a.cell_counts.sum()) for a in maps])))
+    """
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(script)],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=4", "JAX_PLATFORMS": "cpu"},
+        timeout=240,
+        check=False,
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    assert result == dict(n_devices=4, same=[True, True, True], total=[10_123] * 3)
+    four = ws.CapabilityMap.load(tmp_path / "four.npz")
+    reach = ws.reachability(dk.robots.panda(), 10_123, key=KEY, voxel_size=0.15, chunk=1000, dtype="float32")
+    np.testing.assert_array_equal(four.counts, reach.counts)  # the same samples as the reachability map's
+
+
+def run(capsys, *argv):
+    code = cli.main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_cli_capability_map_then_place(capsys, tmp_path):
+    pytest.importorskip("matplotlib")
+    code, out, err = run(
+        capsys, "workspace", "panda", "--capability", "--samples", 20_000, "--voxel", 0.2, "--orientation-bins", 24,
+        "--out", tmp_path / "cap.npz", "--no-progress",
+    )  # fmt: skip
+    assert code == 0, err
+    assert "capability:" in out and "cells of 24 orientation bins per voxel reached" in out
+    cap = ws.CapabilityMap.load(tmp_path / "cap.npz")
+    assert cap.n_samples == 20_000 and cap.orientation_bins == 24 and cap.cell_counts.sum() == 20_000
+    tasks = planar_poses([0.5, 0.4, 0.6], [0.0, 0.1, -0.1], [0.0, 1.0, 2.0], 0.4)
+    (tmp_path / "tasks.json").write_text(json.dumps(tasks.tolist()))
+    code, out, err = run(
+        capsys, "place", "panda", "--tasks", tmp_path / "tasks.json", "--region", -1, -1, 1, 1, "--map",
+        tmp_path / "cap.npz", "--yaw-bins", 8, "--cell", 0.25, "--best", 3, "--plot", tmp_path / "place.png",
+        "--out", tmp_path / "place.npz",
+    )  # fmt: skip
+    assert code == 0, err
+    assert "placement: 3 tasks x 8 x 8 x 8 bases" in out and out.count("base x ") == 3
+    saved = np.load(tmp_path / "place.npz")
+    expected = ws.base_placement(cap, tasks, region=[[-1, -1], [1, 1]], yaw_bins=8, cell=0.25)
+    np.testing.assert_array_equal(saved["score"], expected.score)
+    np.testing.assert_allclose(saved["best"], expected.best(3))
+    assert (tmp_path / "place.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        (["workspace", "panda", "--orientation-bins", "24", "--out", "m.npz"], "--orientation-bins goes with"),
+        (["place", "panda", "--tasks", "nothing.npy", "--region", "-1", "-1", "1", "1"], "--tasks: no such file"),
+        (["place", "panda", "--tasks", "BAD", "--region", "-1", "-1", "1", "1"], "--tasks: expected task poses"),
+        (["place", "panda", "--tasks", "GOOD", "--region", "1", "-1", "-1", "1", "--map", "CAP"], "region"),
+    ],
+)
+def test_cli_user_errors(capsys, tmp_path, argv, match):
+    np.save(tmp_path / "bad.npy", np.eye(4))
+    np.save(tmp_path / "good.npy", np.eye(4)[None])
+    ws.CapabilityMap(
+        *(np.zeros(0, np.int64),) * 2, np.zeros((1, 1, 1), np.int64), np.zeros((1, 1, 1)), np.zeros(3), 0.1, 1, 1, 24
+    ).save(tmp_path / "cap.npz")
+    names = {"BAD": tmp_path / "bad.npy", "GOOD": tmp_path / "good.npy", "CAP": tmp_path / "cap.npz"}
+    code, out, err = run(capsys, *(names.get(a, a) for a in argv))
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("diffkin: error: "), err
+    assert match in lines[0], lines[0]
+
+
+def test_plot_placement_draws_the_best_yaw_and_the_tasks():
+    pytest.importorskip("matplotlib")
+    cap = ws.capability(dk.robots.planar([0.4, 0.3]), 5000, key=KEY, voxel_size=0.1, orientation_bins=24)
+    tasks = planar_poses([0.3, 0.2], [0.0, 0.3], [0.0, 1.0], 0.0)
+    placement = ws.base_placement(cap, tasks, region=[[-0.5, -0.5], [0.5, 0.5]], yaw_bins=4)
+    ax = ws.plot_placement(placement)
+    best = placement.best_cells(1)[0]
+    assert f"yaw {np.degrees(placement.yaw[best[2]]):.0f} deg (of 4)" in ax.get_title()
+    np.testing.assert_array_equal(ax.images[0].get_array().T, placement.score[:, :, best[2]])
+    with pytest.raises(ValueError, match="yaw"):
+        ws.plot_placement(placement, yaw=4)
