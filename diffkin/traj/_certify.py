@@ -2,8 +2,8 @@
 
 Each segment of the curve (:mod:`diffkin.traj._spline`) is cut in halves ``DEPTH`` times: pieces of
 ``1, 2, 4, ..., 2^DEPTH`` per segment. On a piece of half-width ``w`` (in the curve's parameter), joint
-``c`` stays within ``speed_c w`` of its value at the piece's middle (``speed_c``: the segment's bound on
-``|dq_c/du|``), so every point of shape ``s`` stays within ``delta_s = sum_c R[c, s] speed_c w``
+``c`` stays within ``speed_c w`` of its value at the piece's middle (``speed_c``: a bound on ``|dq_c/du|``
+over the piece, from the Bernstein coefficients of that quadratic on it), so every point of shape ``s`` stays within ``delta_s = sum_c R[c, s] speed_c w``
 (:func:`diffkin.traj._reach.reach`) of where it is at the middle. A distance measured at the middle
 (a lower bound of the true one: :mod:`diffkin.collision`) minus the motion of its shapes (``delta_s``
 against an obstacle, ``delta_a + delta_b`` between two of the robot's shapes) is then a lower bound
@@ -21,7 +21,7 @@ import numpy as np
 from diffkin.traj import _rows, _spline
 
 #: halvings of each segment (pieces of 1/2^DEPTH of a segment at the finest level)
-DEPTH = 4
+DEPTH = 5
 
 
 def pieces(depth: int = DEPTH) -> tuple[np.ndarray, np.ndarray]:
@@ -33,6 +33,14 @@ def pieces(depth: int = DEPTH) -> tuple[np.ndarray, np.ndarray]:
         mids.append((np.arange(n) + 0.5) / n)
         halves.append(np.full(n, 0.5 / n))
     return np.concatenate(mids), np.concatenate(halves)
+
+
+def _piece_speed(start: jax.Array, mid: jax.Array, end: jax.Array) -> jax.Array:
+    """A bound on ``|dq/du|`` over a piece, from ``dq/du`` at its start, middle and end: within a segment
+    ``dq/du`` is a quadratic, whose Bernstein coefficients on the piece are ``start``, ``2 mid - (start +
+    end) / 2`` and ``end``, and which lies in their convex hull."""
+    inner = 2 * mid - (start + end) / 2
+    return jnp.maximum(jnp.maximum(jnp.abs(start), jnp.abs(end)), jnp.abs(inner))
 
 
 def _tree(bound: jax.Array, depth: int) -> jax.Array:
@@ -65,8 +73,10 @@ def certified(
     segs = _spline.segments(N)
     u = jnp.asarray(np.arange(segs)[:, None] + mids[None, :], P.dtype)  # (segs, M)
     q = _spline.evaluate(P[:, :, None, None], u)  # (B, K, segs, M, dof)
-    speed = _spline.segment_speed(P)  # (B, K, segs, dof)
-    moved = speed[:, :, :, None, :] * jnp.asarray(halves, P.dtype)[:, None]  # (B, K, segs, M, dof)
+    half = jnp.asarray(halves, P.dtype)
+    ends = [_spline.evaluate(P[:, :, None, None], u + side * half, 1) for side in (-1, 1)]
+    mid = _spline.evaluate(P[:, :, None, None], u, 1)
+    moved = _piece_speed(ends[0], mid, ends[1]) * half[:, None]  # (B, K, segs, M, dof)
     delta = jnp.moveaxis(moved @ jnp.asarray(reach, P.dtype), -1, 0).reshape(-1, B * K, segs * M)  # (S, C, Q)
     d_self, d_world = _rows.distances(model, avoid, locked, base, K, q.reshape(B * K, segs * M, dof))
     parts, sampled = [], []

@@ -31,7 +31,7 @@ W_LENGTH = 0.05  # per rad of a control-polygon step
 W_BEND = 0.2  # per rad of a second difference
 SAMPLES = 4  # clearance samples per segment
 EXTRA = 0.02  # metres the clearance rows aim beyond the margin
-W_CLEAR = 10.0  # per metre of a clearance row (rows in metres against smoothness in radians)
+W_CLEAR = 30.0  # per metre of a clearance row (rows in metres against smoothness in radians)
 _MU_INIT, _MU_MIN, _MU_MAX, _MU_UP, _MU_DOWN = 1e-2, 1e-6, 1e6, 8.0, 0.25
 
 

@@ -53,7 +53,7 @@ def optimize(
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
       hull of the control polygon's differences);
-    - **clearance**: a certified lower bound over the whole motion (each segment halved 4 times; on a
+    - **clearance**: a certified lower bound over the whole motion (each segment halved 5 times; on a
       piece, the distances at its middle minus how far the shapes can move within it, from the joint
       speeds and each joint's reach to the shapes it moves: :mod:`diffkin.traj._certify`).
 

@@ -1,0 +1,212 @@
+"""dk.traj.optimize: certified clearance (never above what dense sampling measures, and below zero for
+a motion that passes through an obstacle between its knots), limits on the continuous motion, a
+narrow passage, joint and pose goals, a world per problem, bad input.
+
+A two-link arm in the x-z plane (the collision example of docs/collision.md) among spheres; one
+compiled program per shape of call, shared by the tests (module level).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import diffkin as dk
+from diffkin.collision import Sphere, World
+from diffkin.traj import _certify, _reach, _spline
+
+URDF = """<robot name="arm">
+  <link name="base"><collision><geometry><box size="0.4 0.4 0.1"/></geometry></collision></link>
+  <link name="upper"><collision><origin xyz="0 0 0.25"/>
+    <geometry><capsule radius="0.05" length="0.5"/></geometry></collision></link>
+  <link name="lower"><collision><origin xyz="0 0 0.2"/>
+    <geometry><capsule radius="0.04" length="0.4"/></geometry></collision></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="upper"/><origin xyz="0 0 0.05"/>
+    <axis xyz="0 1 0"/><limit lower="-3" upper="3"/></joint>
+  <joint name="j2" type="revolute"><parent link="upper"/><child link="lower"/><origin xyz="0 0 0.5"/>
+    <axis xyz="0 1 0"/><limit lower="-3" upper="3"/></joint>
+</robot>"""
+ROBOT = dk.load_robot(URDF)
+GEOM = dk.collision.load(URDF, ROBOT)
+MARGIN = 0.01
+LIMITS = dk.traj.Limits(velocity=jnp.array([1.0, 1.5]), acceleration=jnp.array([2.0, 3.0]), jerk=20.0)
+FAR = (5.0, 0.0, 5.0)  # a sphere no motion reaches (padding)
+
+
+def _world(centres, radii) -> World:
+    """A world per problem: ``centres`` ``(B, n, 3)``, ``radii`` ``(B, n)``."""
+    return World(Sphere(jnp.asarray(centres, jnp.float32), jnp.asarray(radii, jnp.float32)))
+
+
+@jax.jit
+def _plan(q_start, goal, world):
+    return dk.traj.optimize(
+        ROBOT, q_start, goal, avoid=dk.ik.Avoid(GEOM, world, MARGIN), limits=LIMITS, knots=10, num_seeds=3
+    )
+
+
+# three problems, each among its own obstacles: a sphere over the arm held upright (the straight
+# motion sweeps through it), a narrow passage (the elbow must bend, but not far), nothing near
+START = jnp.array([[-1.2, 0.0], [-1.2, 0.0], [-1.0, 0.3]])
+GOAL = jnp.array([[1.2, 0.0], [1.2, 0.0], [1.0, -0.3]])
+WORLDS = _world(
+    [[(0.0, 0.0, 1.0), FAR, FAR], [(0.0, 0.0, 1.0), (0.45, 0.0, 0.75), (-0.45, 0.0, 0.75)], [FAR, FAR, FAR]],
+    [[0.1, 0.1, 0.1], [0.1, 0.12, 0.12], [0.1, 0.1, 0.1]],
+)
+
+
+@pytest.fixture(scope="module")
+def planned():
+    return _plan(START, GOAL, WORLDS)
+
+
+def _dense(traj, n: int = 1501):
+    """``(n, B)`` times over each motion and ``(n, B, dof)`` its configurations."""
+    s = jnp.linspace(0.0, 1.0, n)[:, None]
+    t = s * traj.duration
+    return t, traj.at(t)
+
+
+@jax.jit
+def _clearance(q, world):
+    return dk.collision.clearance(ROBOT, GEOM, q, world)
+
+
+def _sampled_clearance(q, world) -> np.ndarray:
+    """``(n, B)`` the exact clearance of configurations ``q`` ``(n, B, dof)``, each among its problem's world."""
+    return np.asarray(_clearance(q, world))
+
+
+def test_certified_clearance_never_above_sampled(planned):
+    _, q = _dense(planned)
+    sampled = _sampled_clearance(q, WORLDS).min(axis=0)
+    assert np.all(np.asarray(planned.clearance) <= sampled + 1e-6)
+    assert np.all(np.asarray(planned.clear) == (np.asarray(planned.clearance) >= MARGIN))
+
+
+def test_obstacles_avoided_and_narrow_passage_solved(planned):
+    assert np.asarray(planned.success).tolist() == [True, True, True]
+    _, q = _dense(planned)
+    assert np.all(_sampled_clearance(q, WORLDS).min(axis=0) >= MARGIN)
+    # the straight motion of the first two collides: they bend the elbow; the third stays straight
+    straight = jnp.linspace(0.0, 1.0, 1501)[:, None, None] * (GOAL - START) + START
+    assert np.all(_sampled_clearance(straight, WORLDS).min(axis=0)[:2] < 0)
+    assert np.max(np.abs(np.asarray(q[:, :2, 1]))) > 0.2
+    length = np.linalg.norm(np.asarray(GOAL - START), axis=-1)
+    np.testing.assert_allclose(np.asarray(planned.path_length)[2], length[2], rtol=1e-3)
+
+
+def test_a_world_per_problem(planned):
+    # problem 2 alone in problem 0's world would sweep through its sphere: the worlds were not mixed
+    _, q = _dense(planned)
+    own = _sampled_clearance(q, WORLDS).min(axis=0)
+    swapped = _world([[(0.0, 0.0, 1.0), FAR, FAR]] * 3, [[0.1, 0.1, 0.1]] * 3)
+    assert own[2] >= MARGIN
+    assert _sampled_clearance(q, swapped).min(axis=0)[2] < own[2]
+
+
+def test_limits_hold_on_the_continuous_motion(planned):
+    t, q = _dense(planned, 4001)
+    lower, upper = np.asarray(ROBOT.lower), np.asarray(ROBOT.upper)
+    assert np.all((np.asarray(q) >= lower) & (np.asarray(q) <= upper))
+    tol = 1 + 1e-5
+    for k, bound in ((1, LIMITS.velocity), (2, LIMITS.acceleration), (3, LIMITS.jerk)):
+        d = np.abs(np.asarray(planned.at(t, k)))
+        assert np.all(d <= np.asarray(bound) * tol + 1e-6), k
+    # the derivatives are those of the motion: central differences of at(t)
+    dt = 1e-3
+    tm = t[1:-1]
+    fd = (planned.at(tm + dt) - planned.at(tm - dt)) / (2 * dt)
+    np.testing.assert_allclose(np.asarray(planned.at(tm, 1)), np.asarray(fd), atol=2e-3)
+    # starts and ends at rest, on the knots' times
+    np.testing.assert_allclose(np.asarray(planned.at(jnp.zeros(3))), np.asarray(START), atol=1e-6)
+    np.testing.assert_allclose(np.asarray(planned.at(planned.duration)), np.asarray(GOAL), atol=1e-5)
+    np.testing.assert_allclose(np.asarray(planned.at(planned.duration, 1)), 0.0, atol=1e-5)
+    np.testing.assert_allclose(np.asarray(planned.t[:, -1]), np.asarray(planned.duration), rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(planned.at(planned.t.T)), np.asarray(planned.q.swapaxes(0, 1)), atol=1e-5)
+
+
+@jax.jit
+def _certify_line(q_start, q_goal, world):
+    """The certificate of the straight motion from ``q_start`` to ``q_goal`` (5 knots), and its knots."""
+    free = (q_start + q_goal)[None] / 2  # one free control point, in the middle
+    P = _spline.control_points(q_start, free, q_goal)[None, None]  # (1, 1, 7, dof)
+    avoid = dk.ik.Avoid(GEOM, world, 0.0).flat(())
+    lower, sampled = _certify.certified(ROBOT, avoid, _reach.reach(ROBOT, GEOM), P, None, (False, False))
+    return lower[0, 0], sampled[0, 0], P[0, 0], _spline.knots(P[0, 0])
+
+
+def test_sampling_at_the_knots_misses_what_the_bound_rejects():
+    # a straight motion whose knots all clear the sphere, which it passes through between two knots:
+    # the certificate is below zero
+    world = World(Sphere(jnp.array([[0.0, 0.0, 1.02]]), jnp.array([0.05])))
+    lower, sampled, P, knots = _certify_line(jnp.array([-1.0, 0.0]), jnp.array([0.6, 0.0]), world)
+    assert float(_clearance(jnp.resize(knots, (2001, 2)), world).min()) > 0.05
+    q = _spline.evaluate(P, jnp.linspace(0.0, 4.0, 2001))
+    truth = float(_clearance(q, world).min())
+    assert truth < 0
+    assert float(lower) <= truth <= float(sampled) + 1e-9
+    # and the reverse: where the certificate says clear, dense sampling agrees (far from the sphere)
+    lower, _, P, _ = _certify_line(jnp.array([-1.0, 0.0]), jnp.array([-0.4, 0.5]), world)
+    q = _spline.evaluate(P, jnp.linspace(0.0, 4.0, 2001))
+    assert 0 < float(lower) <= float(_clearance(q, world).min())
+
+
+def test_reach_of_each_joint_to_each_shape():
+    # joint 1's axis point (0, 0, 0.05) to the elbow (0.5), then to the lower capsule's centre (0.2) and its
+    # half length plus radius (0.24); joint 2 from the elbow; the base does not move
+    R = _reach.reach(ROBOT, GEOM)
+    upper, lower, base = (GEOM.shape_links.index(n) for n in ("upper", "lower", "base"))
+    np.testing.assert_allclose(R[:, lower], [0.5 + 0.2 + 0.24, 0.2 + 0.24], rtol=1e-6)
+    np.testing.assert_allclose(R[:, upper], [0.25 + 0.3, 0.0], rtol=1e-6)
+    np.testing.assert_allclose(R[:, base], [0.0, 0.0])
+
+
+def test_chain_joint_and_pose_goals_in_float64():
+    model = dk.robots.planar([0.5, 0.4, 0.3])
+    with jax.enable_x64(True):
+        q0 = jnp.zeros(3, jnp.float64)
+        q1 = jnp.array([0.3, 0.6, 0.9])
+        joint = dk.traj.optimize(model, q0, q1, knots=6, num_seeds=1, max_iters=5)
+        assert joint.q.dtype == jnp.float64 and bool(joint.success) and float(joint.clearance) == np.inf
+        np.testing.assert_allclose(np.asarray(joint.q[-1]), np.asarray(q1), atol=1e-12)
+        # no obstacles: the straight line (its length) at the default limits (1 rad/s, 2 rad/s^2)
+        np.testing.assert_allclose(float(joint.path_length), float(jnp.linalg.norm(q1 - q0)), rtol=1e-6)
+        assert np.all(np.abs(np.asarray(joint.at(jnp.linspace(0, joint.duration, 999), 1))) <= 1.0 + 1e-9)
+        # a pose goal: solved by IK, the motion ends on the pose
+        T = dk.fk(model, q1)
+        pose = dk.traj.optimize(model, q0, T, knots=6, num_seeds=1, max_iters=5)
+        assert bool(pose.goal_ok) and bool(pose.success)
+        np.testing.assert_allclose(np.asarray(dk.fk(model, pose.at(pose.duration))), np.asarray(T), atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"q_start": jnp.zeros(3)}, ValueError, "q_start"),
+        ({"goal": jnp.zeros(3)}, ValueError, "goal"),
+        ({"q_start": "a"}, TypeError, "q_start"),
+        ({"knots": 4}, ValueError, "knots"),
+        ({"num_seeds": 0}, ValueError, "num_seeds"),
+        ({"max_iters": -1}, ValueError, "max_iters"),
+        ({"limits": dk.traj.Limits(jnp.ones(3), 1.0)}, ValueError, "Limits.velocity"),
+        ({"limits": (1.0, 1.0)}, TypeError, "limits"),
+        ({"avoid": GEOM}, TypeError, "avoid"),
+        ({"locked": {"j9": 0.0}}, ValueError, "locked"),
+        ({"q_start": jnp.array([np.nan, 0.0])}, ValueError, "q_start"),
+        ({"base": jnp.eye(3)}, ValueError, "base"),
+    ],
+)
+def test_bad_input(kwargs, error, match):
+    args = {"q_start": jnp.zeros(2), "goal": jnp.ones(2)} | kwargs
+    with pytest.raises(error, match=match):
+        dk.traj.optimize(ROBOT, args.pop("q_start"), args.pop("goal"), **args)
+
+
+def test_bad_limits():
+    with pytest.raises(ValueError, match="Limits.acceleration"):
+        dk.traj.Limits(velocity=1.0, acceleration=-1.0)
+    with pytest.raises(TypeError, match="Limits.velocity"):
+        dk.traj.Limits(velocity="fast", acceleration=1.0)
