@@ -3,8 +3,9 @@
 Each segment of the curve (:mod:`diffkin.traj._spline`) is cut in halves ``DEPTH`` times: pieces of
 ``1, 2, 4, ..., 2^DEPTH`` per segment. On a piece of half-width ``w`` (in the curve's parameter), joint
 ``c`` stays within ``speed_c w`` of its value at the piece's middle (``speed_c``: a bound on ``|dq_c/du|``
-over the piece, from the Bernstein coefficients of that quadratic on it), so every point of shape ``s`` stays within ``delta_s = sum_c R[c, s] speed_c w``
-(:func:`diffkin.traj._reach.reach`) of where it is at the middle. A distance measured at the middle
+over the piece, from the Bernstein coefficients of that quadratic on it), so every point of shape
+``s`` stays within ``delta_s = sum_c R[c, s] speed_c w`` (:func:`diffkin.traj._reach.reach`) of where
+it is at the middle. A distance measured at the middle
 (a lower bound of the true one: :mod:`diffkin.collision`) minus the motion of its shapes (``delta_s``
 against an obstacle, ``delta_a + delta_b`` between two of the robot's shapes) is then a lower bound
 over the whole piece. A piece's bound is the larger of its own and the smaller of its two halves'
