@@ -137,7 +137,7 @@ def main(argv=None) -> int:
     command += f" --bins {args.bins}" if args.bins != 5184 else ""
     about = (
         f"`{command}`, {datetime.date.today()}, 1-minute load average {load:.1f} before the run. "
-        "example-robot-data's Panda, frame `{FRAME}`, float32 map, "
+        f"example-robot-data's Panda, frame `{FRAME}`, float32 map, "
         "default chunk; tasks: 0.6 m x 0.4 m table at the world origin, 0.35-0.55 m above the base's floor, tool "
         "z down within 30 deg, any yaw; region 2 m x 2 m at 5 cm cells, 36 yaws. IK: `dk.ik.solve` defaults "
         "(32 seeds, 1e-5 m / 1e-4 rad). Recall grows with the samples (most of the Panda's ~10^8 reachable "
