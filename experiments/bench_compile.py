@@ -1,6 +1,6 @@
 """What the first call costs: trace, lower and compile times, and the compile's peak memory.
 
-    python experiments/bench_compile.py [--quick] [--only fk,jacobian,ik] [--timeout 300] [--max-gb 4]
+    python experiments/bench_compile.py [--quick] [--only fk,jacobian,ik] [--timeout 300] [--max-gb 4] [--cache]
 
 ``--quick``: one case, the first of the parts asked for (FK of the 7-joint arm by default).
 
@@ -20,6 +20,11 @@ would read at least the parent's memory. Where ``/proc`` is missing (not Linux) 
 ``ru_maxrss`` and is an upper bound. A case is stopped after ``--timeout`` seconds or above
 ``--max-gb`` GB of resident memory and reported as such. The batch (1,000 configurations) does not
 change what is compiled.
+
+``--cache``: what JAX's persistent cache (on by default for diffkin's users) saves a script's second run:
+each IK case (the iiwa14, Baxter, Talos' contacts, and the Panda with ``avoid``: capsules, a few
+obstacles, 5 mm margin) runs twice, each time in a fresh subprocess, with one fresh cache folder;
+the table gives both runs' trace + lower and compile times.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -58,18 +64,24 @@ def chain(dof: int):
     return dk.DHChain.from_table(table, lower=-np.pi * np.ones(dof), upper=np.pi * np.ones(dof), name=f"dh{dof}")
 
 
-def erd_robot(relative: str, floating: bool = False):
-    """A robot of example-robot-data (a path below its ``robots`` folder); ``None`` if not installed."""
+def example_robot_data_root() -> Path | None:
+    """The ``robots`` folder of example-robot-data; ``None`` if not installed."""
     from importlib import metadata
-
-    import diffkin as dk
 
     try:
         dist = metadata.distribution("example-robot-data")
     except metadata.PackageNotFoundError:
         return None
-    path = Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))) / relative
-    return dk.load_robot(str(path), floating=floating) if path.is_file() else None
+    return Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")))
+
+
+def erd_robot(relative: str, floating: bool = False):
+    """A robot of example-robot-data (a path below its ``robots`` folder); ``None`` if not installed."""
+    import diffkin as dk
+
+    root = example_robot_data_root()
+    path = None if root is None else root / relative
+    return dk.load_robot(str(path), floating=floating) if path is not None and path.is_file() else None
 
 
 def talos():
@@ -88,6 +100,34 @@ ROBOT_IK = {
 }
 
 
+def panda_avoid():
+    """``(f, args)``: the Panda's collision-aware IK (``meshes="capsules"``, the default model; 1,000 targets,
+    a box and two spheres, 5 mm margin, fingers locked), as a user of ``avoid=`` first calls it."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    import diffkin as dk
+
+    folder = example_robot_data_root()
+    urdf, srdf = folder / "panda_description/urdf/panda.urdf", folder / "panda_description/srdf/panda.srdf"
+    m = dk.load_robot(str(urdf))
+    geom = dk.collision.load(str(urdf), m, srdf=str(srdf))
+    world = dk.collision.World(
+        boxes=dk.collision.Box(jnp.eye(4).at[:3, 3].set(jnp.array([0.6, 0.0, 0.2])), jnp.array([0.1, 0.3, 0.2])),
+        spheres=dk.collision.Sphere(jnp.array([[0.3, 0.4, 0.5], [0.3, -0.4, 0.5]]), jnp.array([0.08, 0.08])),
+    )
+    lo, hi = np.asarray(m.lower), np.asarray(m.upper)
+    q = np.random.default_rng(0).uniform(lo, hi, (BATCH, m.dof))
+    T = jnp.asarray(dk.fk(m, q, "panda_hand"), jnp.float32)
+    avoid = dk.ik.Avoid(geom, world, margin=0.005)
+    locked = {"panda_finger_joint1": 0.02}
+    return (lambda t, key: dk.ik.solve(m, {"panda_hand": t}, key=key, avoid=avoid, locked=locked)), (
+        T,
+        jax.random.key(1),
+    )
+
+
 def case_function(work: str, model: str):
     """``(f, args)`` of one case: a function of arrays and its float32 arguments."""
     import jax
@@ -96,6 +136,8 @@ def case_function(work: str, model: str):
 
     import diffkin as dk
 
+    if model == "panda-avoid":
+        return panda_avoid()
     if model in ROBOT_IK:
         path, frames, floating = ROBOT_IK[model]
         m = erd_robot(path, floating)
@@ -176,11 +218,12 @@ def run_case(work: str, model: str) -> dict:
     }
 
 
-def measure(work: str, model: str, timeout: float, max_gb: float) -> dict:
-    """One case in a fresh subprocess, stopped beyond ``timeout`` seconds or ``max_gb`` of resident memory."""
+def measure(work: str, model: str, timeout: float, max_gb: float, cache: str | None = None) -> dict:
+    """One case in a fresh subprocess, stopped beyond ``timeout`` seconds or ``max_gb`` of resident memory;
+    JAX's persistent cache in folder ``cache``, else off (cold)."""
     env = dict(
         os.environ,
-        DIFFKIN_CACHE_DIR=os.environ.get("DIFFKIN_CACHE_DIR", "off"),  # cold: JAX's persistent cache off
+        DIFFKIN_CACHE_DIR=cache or os.environ.get("DIFFKIN_CACHE_DIR", "off"),
         PYTHONPATH=os.pathsep.join([str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")]),
     )
     proc = subprocess.Popen(
@@ -209,7 +252,8 @@ def measure(work: str, model: str, timeout: float, max_gb: float) -> dict:
             return {"stopped": stopped}
     out, err = proc.communicate()
     if proc.returncode != 0:
-        return {"stopped": f"failed: {err.strip().splitlines()[-1] if err.strip() else proc.returncode}"}
+        errors = [line for line in err.splitlines() if re.match(r"^[\w.]+(Error|Exception)\b", line)]
+        return {"stopped": f"failed: {errors[-1] if errors else err.strip()[-300:] or proc.returncode}"}
     return json.loads(out.strip().splitlines()[-1])
 
 
@@ -236,17 +280,21 @@ def cases(parts, quick: bool = False) -> list[tuple[str, str]]:
     return out
 
 
+NAMES = {
+    "talos": "Talos (tree, 32 joints)",
+    "7": "iiwa14 (7 joints)",
+    "baxter": "Baxter, two grippers (2 poses)",
+    "talos-contacts": "Talos, 2 soles + 2 grippers (4 poses), root solved",
+    "panda-avoid": "Panda with avoid= (capsules, 3 obstacles, 5 mm margin)",
+}
+
+
 def rows(parts=("fk", "jacobian", "ik"), quick: bool = False, timeout: float = 300.0, max_gb: float = 4.0):
     """Markdown rows ``[work, model, trace, lower, compile, peak memory]`` of every case."""
     out = []
     for work, model in cases(parts, quick):
         r = measure(work, model, timeout, max_gb)
-        name = {
-            "talos": "Talos (tree, 32 joints)",
-            "7": "iiwa14 (7 joints)",
-            "baxter": "Baxter, two grippers (2 poses)",
-            "talos-contacts": "Talos, 2 soles + 2 grippers (4 poses), root solved",
-        }.get(model, f"DH chain, {model} joints")
+        name = NAMES.get(model, f"DH chain, {model} joints")
         if "stopped" in r:
             out.append([work, name, r["stopped"], "", "", ""])
         else:
@@ -266,6 +314,31 @@ def rows(parts=("fk", "jacobian", "ik"), quick: bool = False, timeout: float = 3
     return out
 
 
+def cache_rows(timeout: float = 300.0, max_gb: float = 4.0):
+    """Markdown rows ``[model, first run, second run, second/first]`` of the IK cases, each run twice in fresh
+    subprocesses sharing one fresh persistent-cache folder (trace + lower, then compile, of each run)."""
+    import tempfile
+
+    models = ["7", *[m for m in ROBOT_IK if erd_robot(ROBOT_IK[m][0])]]
+    if example_robot_data_root() is not None:
+        models.append("panda-avoid")
+    out = []
+    for model in models:
+        with tempfile.TemporaryDirectory(prefix="diffkin-bench-cache-") as folder:
+            runs = [measure("IK (LM defaults, 1,000 targets)", model, timeout, max_gb, folder) for _ in range(2)]
+        name = NAMES.get(model, model)
+        if any("stopped" in r for r in runs):
+            out.append([name, *(r.get("stopped", "") for r in runs), ""])
+        else:
+            first, second = (f"{r['trace'] + r['lower']:.2f} s + {r['compile']:.2f} s" for r in runs)
+            total = [r["trace"] + r["lower"] + r["compile"] for r in runs]
+            ratio = runs[1]["compile"] / runs[0]["compile"]
+            out.append([name, first, second, f"{total[1] / total[0]:.2f} (compile {ratio:.3f})"])
+        print(" | ".join(out[-1]), file=sys.stderr, flush=True)
+    return out
+
+
+CACHE_HEADER = ["IK case (1,000 targets)", "first run: trace + lower, compile", "second run", "second / first"]
 HEADER = ["work", "model", "trace", "lower", "compile", "peak resident memory of the case's own process"]
 MEMORY = (
     "Memory: each case's own subprocess, its peak resident memory while tracing, lowering and compiling "
@@ -294,11 +367,18 @@ def main() -> int:
     )
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds per case (default 300)")
     parser.add_argument("--max-gb", type=float, default=4.0, help="resident memory per case (default 4 GB)")
+    parser.add_argument("--cache", action="store_true", help="the IK cases' second runs with JAX's persistent cache")
     args = parser.parse_args()
     if args.case:
         print(json.dumps(run_case(*args.case)))
         return 0
     from _bench import busy_note, machine_line, table
+
+    if args.cache:
+        body = cache_rows(args.timeout, args.max_gb)
+        paragraphs = ["# diffkin: what the persistent cache saves a second run", machine_line(), busy_note()]
+        print("\n\n".join([p for p in paragraphs if p] + [table(CACHE_HEADER, body)]))
+        return 0
 
     body = rows(tuple(args.only.split(",")), args.quick, args.timeout, args.max_gb)
     paragraphs = ["# diffkin compile cost", machine_line(), busy_note(), MEMORY, table(HEADER, body)]
