@@ -23,7 +23,7 @@ PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 BLOCK = re.compile(r"^```python\n(.*?)^```\s*$", re.MULTILINE | re.DOTALL)
 
 #: Pages (relative to the repository root) whose examples need the validation install or compile big solvers.
-SLOW = {"docs/models.md", "docs/ik.md", "docs/srs.md", "docs/workspace.md", "docs/viewer.md"}
+SLOW = {"docs/models.md", "docs/ik.md", "docs/srs.md", "docs/workspace.md", "docs/viewer.md", "docs/traj.md"}
 
 
 #: A line that starts a new session of a page: the blocks after it run in an interpreter of their own.
