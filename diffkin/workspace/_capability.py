@@ -115,6 +115,16 @@ class CapabilityMap:
         """``(nx, ny, nz)``, the voxel grid."""
         return self.counts.shape  # type: ignore[return-value]
 
+    @functools.cached_property
+    def layers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The cells in the order of their ``(bin, z layer)``: ``(bin * nz + k (M,), i * ny + j (M,), count
+        (M,))``, sorted by the first (what :func:`base_placement` reads: a slice per task; computed once)."""
+        voxel, b = np.divmod(self.cells, self.orientation_bins)
+        ij, k = np.divmod(voxel, self.shape[2])
+        layers = b * self.shape[2] + k
+        order = np.argsort(layers, kind="stable")
+        return layers[order], ij[order], self.cell_counts[order]
+
     def dexterity(self) -> np.ndarray:
         """``(nx, ny, nz)`` int64, the number of orientation bins reached in each voxel."""
         flat = np.bincount(self.cells // self.orientation_bins, minlength=self.counts.size)

@@ -235,21 +235,22 @@ def base_placement(
     needed, slices = np.unique(keys, return_inverse=True)
     slices = slices.reshape(keys.shape) - (needed[0] < 0)  # -1: the task is outside the map's z range
     needed = needed[needed >= 0]
-    # The map's (x, y) slices of those (bin, layer) pairs.
-    table = np.zeros((max(needed.size, 1), mx, my), bool)
-    kept = cap.cells[cap.cell_counts >= min_count]
-    if needed.size and kept.size:
-        voxel, b = np.divmod(kept, n_bins)
-        ix, iy, iz = np.unravel_index(voxel, cap.shape)
-        at = np.minimum(np.searchsorted(needed, b * mz + iz), needed.size - 1)
-        hit = needed[at] == b * mz + iz
-        table[at[hit], ix[hit], iy[hit]] = True
+    # The map's (x, y) slices of those (bin, layer) pairs: the ranges of the map's cells in that order.
+    flat_table = np.zeros((max(needed.size, 1), mx * my), bool)
+    layers, xy, counts = cap.layers
+    first, last = np.searchsorted(layers, needed, "left"), np.searchsorted(layers, needed, "right")
+    sizes = last - first
+    if sizes.sum():
+        which = np.repeat(np.arange(needed.size), sizes)
+        at = np.arange(sizes.sum()) + np.repeat(first - np.cumsum(sizes) + sizes, sizes)
+        kept = counts[at] >= min_count
+        flat_table[which[kept], xy[at][kept]] = True
     # The tasks' and the bases' xy in each base frame's orientation.
     c = np.einsum("yij,nj->yni", turn[:, :2, :2], T[:, :2, 3])
     bx, by = np.meshgrid(xs, ys, indexing="ij")
     d = np.einsum("yij,abj->yabi", turn[:, :2, :2], np.stack([bx, by], axis=-1))
     score = _scores(
-        jnp.asarray(table),
+        jnp.asarray(flat_table.reshape(-1, mx, my)),
         jnp.asarray(slices, jnp.int32),
         jnp.asarray(c, dtype),
         jnp.asarray(d, dtype),
