@@ -434,7 +434,8 @@ def ik(run: Run) -> Section:
             section.rows.append(
                 [name, f"{n:,}", f"{first:.1f}", duration(warm), pct(success), pct(checked), peer, peer_ok]
             )
-            run.figures[("ik", name, n)] = (warm, f"{duration(warm)}, {pct(success)} solved", min(success, checked))
+            solved = min(success, checked)
+            run.figures[("ik", name, n)] = (warm, f"{duration(warm)}, {pct(solved)} solved", solved)
     return section
 
 
@@ -732,8 +733,12 @@ def mbm(run: Run, path: Path) -> Section:
         section.notes.append(run.skipped("MBM"))
         return section
     import bench_geometry
-    import bench_mbm
 
+    try:
+        import bench_mbm
+    except ImportError as err:  # PyYAML (cuRobo's world file), not installed on a bare GPU image
+        section.notes.append(f"skipped: bench_mbm not importable ({err})")
+        return section
     doc = json.loads(path.read_text())
     scenes = {s: bench_mbm.subset(p, k) for s, p in doc["problems"].items()}
     problems = [p for ps in scenes.values() for p in ps]
