@@ -55,8 +55,8 @@ def _progress(total: int, show: bool | None, desc: str):
 
 
 class _CellCounter:
-    """Counts of sparse int cells: batches buffered, merged into sorted unique cells when the buffer
-    outgrows the merged cells (so each sample is sorted ``O(log n)`` times); sums, order-independent."""
+    """Counts of sparse int cells: batches buffered, sorted and merged into the sorted unique cells when the
+    buffer outgrows them (each merge linear in the cells); sums, order-independent."""
 
     def __init__(self, sentinel: int):
         self.sentinel, self.cells, self.counts = sentinel, np.zeros(0, np.int64), np.zeros(0, np.int64)
@@ -72,9 +72,13 @@ class _CellCounter:
     def merge(self) -> tuple[np.ndarray, np.ndarray]:
         if self.buffer:
             new, n_new = np.unique(np.concatenate(self.buffer).astype(np.int64), return_counts=True)
-            cells, inverse = np.unique(np.concatenate([self.cells, new]), return_inverse=True)
-            counts = np.zeros(cells.size, np.int64)
-            np.add.at(counts, inverse, np.concatenate([self.counts, n_new]))
+            at = np.searchsorted(self.cells, new)  # both sorted and unique: a merge, no sort of the cells
+            found = at < self.cells.size
+            found[found] = self.cells[at[found]] == new[found]
+            counts = self.counts.copy()
+            counts[at[found]] += n_new[found]
+            cells = np.insert(self.cells, at[~found], new[~found])
+            counts = np.insert(counts, at[~found], n_new[~found])
             self.cells, self.counts, self.buffer, self.buffered = cells, counts, [], 0
         return self.cells, self.counts
 

@@ -185,3 +185,20 @@ def test_look_ups_of_bad_poses_and_outside_the_grid(cap):
     far = planar_poses([5.0, 0.5], [0.0, 0.0], [0.0, 0.0], 0.0)
     np.testing.assert_array_equal(cap.reaches(far), [False, True])
     assert cap.reaches(np.zeros((0, 4, 4))).shape == (0,)
+
+
+def test_cell_counter_merges_batches_into_sorted_counts():
+    """The host's counting of a capability map's cells: batches merged (into cells already held and new
+    ones, the sentinel of uncounted samples dropped) give ``np.unique``'s cells and counts."""
+    from diffkin.workspace._driver import _CellCounter
+
+    rng = np.random.default_rng(0)
+    counter, batches = _CellCounter(sentinel=1000), []
+    for i in range(6):
+        batch = rng.integers(0, 1001 if i % 2 else 300, 500).astype(np.int32)  # overlapping and new cells
+        batches.append(batch[batch != 1000])
+        counter.add(batch)
+        counter.merge()
+    cells, counts = np.unique(np.concatenate(batches), return_counts=True)
+    np.testing.assert_array_equal(counter.cells, cells)
+    np.testing.assert_array_equal(counter.counts, counts)
