@@ -112,3 +112,29 @@ def test_plot_placement_draws_the_best_yaw_and_the_tasks():
     np.testing.assert_array_equal(ax.images[0].get_array().T, placement.score[:, :, best[2]])
     with pytest.raises(ValueError, match="yaw"):
         ws.plot_placement(placement, yaw=4)
+
+
+def test_capability_with_avoid_counts_the_clear_samples_and_verify_solves_clear():
+    """``avoid=``: the capability map's voxels count the samples the reachability map with the same ``avoid``
+    counts (the same step), and ``verify`` with ``avoid`` solves (robot, frame) tasks clear of the obstacles."""
+    from _shapes import CAPSULE_ARM
+
+    from diffkin.collision import Sphere, World
+
+    robot = dk.load_robot(CAPSULE_ARM)
+    geom = dk.collision.load(CAPSULE_ARM, robot)
+    world = World(Sphere(np.array([[0.35, 0.25, 0.55]]), np.array([0.08])))
+    avoid = dk.ik.Avoid(geom, world, margin=0.02)
+    kw = dict(key=KEY, voxel_size=0.1, bounds=[[-1.3, -1.3, -0.9], [1.3, 1.3, 1.7]], chunk=3000)
+    cap = ws.capability((robot, "hand"), 3000, avoid=avoid, orientation_bins=192, **kw)
+    reach = ws.reachability((robot, "hand"), 3000, avoid=avoid, **kw)
+    np.testing.assert_array_equal(cap.counts, reach.counts)
+    assert cap.cell_counts.sum() == reach.counts.sum() < 3000 and cap.n_outside == reach.n_outside
+    q = np.asarray(ws.sample_configs(robot.chain("hand"), 2, jax.random.key(9)))
+    tasks = np.asarray(dk.fk(robot.chain("hand"), q))  # reachable from the identity base
+    placement = ws.base_placement(cap, tasks, region=[[-0.1, -0.1], [0.1, 0.1]], yaw_bins=1, cell=0.2)
+    check = placement.verify((robot, "hand"), k=1, avoid=avoid, key=KEY)
+    assert check.success.shape == (1, 2) and check.bases.shape == (1, 4, 4)
+    np.testing.assert_allclose(check.bases[0], np.eye(4), atol=1e-12)
+    with pytest.raises(ValueError, match="avoid: needs a"):
+        placement.verify(robot.chain("hand"), k=1, avoid=avoid)
