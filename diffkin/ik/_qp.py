@@ -135,8 +135,7 @@ def _solve_one(H, g, lo, hi, G, h, on, *, max_iters: int) -> tuple[jax.Array, ja
         return r_d, r_p, mu, (worst <= tol) & (mu <= tol)
 
     def body(state):
-        i, v, s, z, _ = state
-        r_d, r_p, mu, _ = measure(v, s, z)
+        i, v, s, z, (r_d, r_p, mu, _) = state
         c = factor(jnp.where(mask, z / s, 0.0))
         dv_a, ds_a, dz_a = direction(c, s, z, r_d, r_p, s * z)
         alpha = jnp.minimum(1.0, longest(s, ds_a, z, dz_a))
@@ -153,13 +152,14 @@ def _solve_one(H, g, lo, hi, G, h, on, *, max_iters: int) -> tuple[jax.Array, ja
         # Past the attainable accuracy the system degenerates (z / s overflows): stop where it was.
         finite = jnp.all(jnp.array([jnp.all(jnp.isfinite(x)) for x in new]))
         v, s, z = (jnp.where(finite, a, b) for a, b in zip(new, (v, s, z), strict=True))
-        return i + 1, v, s, z, measure(v, s, z)[3] | ~finite
+        r_d, r_p, mu, done = measure(v, s, z)
+        return i + 1, v, s, z, (r_d, r_p, mu, done | ~finite)
 
     def cond(state):
-        i, *_, done = state
+        i, *_, (_, _, _, done) = state
         return (i < max_iters) & ~done
 
-    start = (jnp.asarray(0, jnp.int32), v, s, z, measure(v, s, z)[3])
+    start = (jnp.asarray(0, jnp.int32), v, s, z, measure(v, s, z))
     iters, v, *_ = jax.lax.while_loop(cond, body, start)
     return jnp.clip(v, lo, hi), iters
 
