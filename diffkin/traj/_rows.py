@@ -36,14 +36,15 @@ def rows(model, avoid: Avoid, locked, base, k: int, q: jax.Array) -> tuple[jax.A
     return ev.r.reshape(m, C, Q), -ev.J.reshape(m, dof, C, Q)
 
 
-def distances(model, avoid: Avoid, locked, base, k: int, q: jax.Array):
+def distances(model, avoid: Avoid, locked, base, k: int, q: jax.Array, reach=jnp.inf):
     """The distances at ``q`` ``(C, Q, dof)``: the self pairs' ``(pairs, C, Q)`` in ``avoid.geom.pairs``
     order (``None`` without ``self_collision``) and the shapes' to the world ``(S, W, C, Q)`` (``None``
-    without obstacles); lower bounds of the exact ones (:mod:`diffkin.collision`)."""
+    without obstacles); lower bounds of the exact ones (:mod:`diffkin.collision`), exact below ``reach``
+    (metres; above it a cheap lower bound, at least ``reach``, may stand for a pair's distance)."""
     C, Q, dof = q.shape
     prob, term, data = problem(model, avoid, locked, base, k, Q)
     kin = Kinematics(prob, q.reshape(C * Q, dof).T)
-    blocks, d_self, d_world, _, _ = term._measure(kin, data, jnp.inf)
+    blocks, d_self, d_world, _, _ = term._measure(kin, data, reach)
     self_d = None
     if blocks:
         order = jnp.concatenate([jnp.asarray(rows) for rows, *_ in blocks])
