@@ -61,8 +61,9 @@ def optimize(
     with the largest certified clearance. Failures stay honest: ``success=False`` with finite values
     and the reason in ``goal_ok``, ``limits_ok``, ``clear``. Problems are independent (a world per
     problem where ``avoid.world`` has problem axes). Compiled once per model, batch shape and static
-    argument; works inside ``jit`` and ``vmap`` with the model and ``avoid.geom`` closed over
-    (the certificate reads them on the host).
+    argument; works inside ``jit`` with the model and ``avoid.geom`` closed over (the certificate
+    reads them on the host) and the starts, goals and worlds traced (batch problems by their leading
+    axes rather than by ``vmap``).
 
     Args:
         model: a :class:`~diffkin.Robot`, :class:`~diffkin.DHChain` or :class:`~diffkin.PoEChain` of
