@@ -256,7 +256,8 @@ def _core(
     P = curves.control(X).reshape(B, seeds, free + 6, dof)
     h = _spline.segment_time(P, velocity, acceleration, jerk)  # (B, k)
     v, a, j = _spline.derivative_bounds(P)
-    within = jnp.all((P >= lower) & (P <= upper), axis=(-1, -2))
+    held = jnp.asarray(locked)  # locked joints may be held beyond their limits (as in IK)
+    within = jnp.all(((P >= lower) & (P <= upper)) | held, axis=(-1, -2))
     slow = jnp.all(v <= velocity * h[..., None], axis=-1) & jnp.all(a <= acceleration * h[..., None] ** 2, axis=-1)
     if jerk is not None:
         slow = slow & jnp.all(j <= jerk * h[..., None] ** 3, axis=-1)
