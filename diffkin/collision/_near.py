@@ -11,7 +11,10 @@ traced computation serves every case, which XLA compiles once.
 The general pairs (:mod:`diffkin.collision._gjk`) of every kind are joined into one batch, each
 shape in the one form :class:`diffkin.collision._shapes.Solid`: one GJK per call rather than one per
 pair of kinds (a robot of boxes and polytopes among boxes and cylinders has five), which is what
-XLA's compile time and the batch's work grow with.
+XLA's compile time and the batch's work grow with. When there is such a batch, the box-box and
+capsule-box pairs join it too (GJK is exact for them apart, and never reports an overlap shallower
+than it is): their closed forms are the largest code of a solver's program, compiled at every place
+it measures distances.
 """
 
 from __future__ import annotations
@@ -119,8 +122,10 @@ def near_motions(pairs: list, reach) -> list[tuple[jax.Array, jax.Array, jax.Arr
     are zero (the module docstring)."""
     batches = [tuple(jnp.broadcast_shapes(batch_shape(a), batch_shape(b))) for a, b in pairs]
     out: list = [None] * len(pairs)
-    general = [k for k, (a, b) in enumerate(pairs) if (type(a), type(b)) in GENERAL and np.prod(batches[k]) > 0]
-    if general:
+    kinds = [(type(a), type(b)) for a, b in pairs]
+    general = [k for k in range(len(pairs)) if kinds[k] in GENERAL and np.prod(batches[k]) > 0]
+    if general:  # the closed forms' pairs join the batch: its one GJK serves them too, their code is not compiled
+        general += [k for k in range(len(pairs)) if kinds[k] in BOUNDED - GENERAL and np.prod(batches[k]) > 0]
         joined = _general([pairs[k] for k in general], [batches[k] for k in general], reach)
         for k, result in zip(general, joined, strict=True):
             out[k] = result

@@ -372,9 +372,9 @@ def test_near_motion_is_exact_where_the_reach_is():
     """The term's broad phase (:func:`diffkin.collision._near.near_motions`): where the exact distance is
     below the reach, the distance is :func:`motion`'s, elsewhere at least the reach; the wrenches are
     :func:`motion`'s where the cheap bound is below the reach and zero elsewhere. Box-box and
-    capsule-box (gathered per kind) and the general pairs capsule-cylinder and polytope-box (joined
-    in one batch), with no pair near (no step), few (one step) and most (several). One test: the
-    spreads share one compiled program."""
+    capsule-box alone (their closed forms, gathered per kind), and joined with the general pairs
+    capsule-cylinder and polytope-box in one GJK batch (apart: exact to GJK's tolerance; overlapping:
+    never shallower than exact), with no pair near (no step), few (one step) and most (several)."""
     from diffkin.collision import Capsule, Convex, Cylinder
     from diffkin.collision._distance import lower_bound, motion
     from diffkin.collision._near import NEAR_SHARE, near_motions
@@ -391,27 +391,26 @@ def test_near_motion_is_exact_where_the_reach_is():
         cylinders = Cylinder(cylinders.pose, cylinders.half_extents[:, 0], cylinders.half_extents[:, 1])
         hulls = _random_boxes(rng, n, spread)
         hulls = Convex(hulls.pose, rng.uniform(0.5, 1.0, (n, 8, 1)) * corners * hulls.half_extents[:, None])
-        pairs = [
+        closed = [
             (capsules, _random_boxes(rng, n, spread)),
             (_random_boxes(rng, n, spread), _random_boxes(rng, n, spread)),
-            (capsules, cylinders),
-            (hulls, _random_boxes(rng, n, spread)),
         ]
-        for k, ((a, b), (d, Wa, Wb)) in enumerate(zip(pairs, near(pairs, reach), strict=True)):
-            d_exact, Wa_exact, Wb_exact = motion(a, b)
-            close = np.asarray(d_exact) < reach
-            measured = np.asarray(lower_bound(a, b)) < reach  # exact there, zero wrenches elsewhere
-            if k < 2:  # gathered alone: the steps it took
-                assert -(-measured.sum() // budget) in steps and (close.sum() > 0) == (steps.start > 0), spread
-            # the general pairs, two GJK runs: the distance to GJK's tolerance, the normal (the
-            # wrenches) to about its square root
-            tol = 1e-14 if k < 2 else 1e-10
-            np.testing.assert_allclose(np.asarray(d)[close], np.asarray(d_exact)[close], rtol=0, atol=tol)
-            assert np.all(np.asarray(d)[~close] >= reach)
-            # (an overlapping general pair's witnesses are support points, which may tie: apart ones only)
-            same = measured if k < 2 else measured & (np.asarray(d_exact) > 0)
-            for W, exact in ((Wa, Wa_exact), (Wb, Wb_exact)):
-                np.testing.assert_allclose(
-                    np.asarray(W)[same], np.asarray(exact)[same], rtol=1e-12, atol=1e-12 if k < 2 else 1e-5
-                )
-                assert np.all(np.asarray(W)[~measured] == 0)
+        general = [(capsules, cylinders), (hulls, _random_boxes(rng, n, spread))]
+        for pairs, joined in ((closed, False), (closed + general, True)):
+            for (a, b), (d, Wa, Wb) in zip(pairs, near(pairs, reach), strict=True):
+                d, d_exact, Wa_exact, Wb_exact = (np.asarray(x) for x in (d, *motion(a, b)))
+                close, apart = d_exact < reach, d_exact > 0
+                measured = np.asarray(lower_bound(a, b)) < reach  # exact there, zero wrenches elsewhere
+                if not joined:  # gathered alone: the steps it took
+                    assert -(-measured.sum() // budget) in steps and (close.sum() > 0) == (steps.start > 0), spread
+                # GJK: the distance to its tolerance, the normal (the wrenches) to about its square root
+                tol = 1e-10 if joined else 1e-14
+                np.testing.assert_allclose(d[close & apart], d_exact[close & apart], rtol=0, atol=tol)
+                assert np.all(d[close & ~apart] <= d_exact[close & ~apart] + tol) and np.all(d[~close] >= reach)
+                # (an overlapping GJK pair's witnesses are support points, which may tie: apart ones only)
+                same = measured & apart if joined else measured
+                for W, exact in ((Wa, Wa_exact), (Wb, Wb_exact)):
+                    np.testing.assert_allclose(
+                        np.asarray(W)[same], exact[same], rtol=1e-12, atol=1e-5 if joined else 1e-12
+                    )
+                    assert np.all(np.asarray(W)[~measured] == 0)
