@@ -114,8 +114,8 @@ def panda_avoid():
     m = dk.load_robot(str(urdf))
     geom = dk.collision.load(str(urdf), m, srdf=str(srdf))
     world = dk.collision.World(
-        boxes=dk.collision.Box(jnp.eye(4).at[:3, 3].set(jnp.array([0.6, 0.0, 0.2])), jnp.array([0.1, 0.3, 0.2])),
-        spheres=dk.collision.Sphere(jnp.array([[0.3, 0.4, 0.5], [0.3, -0.4, 0.5]]), jnp.array([0.08, 0.08])),
+        dk.collision.Box(jnp.eye(4).at[:3, 3].set(jnp.array([0.6, 0.0, 0.2]))[None], jnp.array([[0.1, 0.3, 0.2]])),
+        dk.collision.Sphere(jnp.array([[0.3, 0.4, 0.5], [0.3, -0.4, 0.5]]), jnp.array([0.08, 0.08])),
     )
     lo, hi = np.asarray(m.lower), np.asarray(m.upper)
     q = np.random.default_rng(0).uniform(lo, hi, (BATCH, m.dof))
