@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import os
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffkin._npz import read_npz
+from diffkin._npz import read_dataclass_fields, save_dataclass
 from diffkin.workspace._bins import _orientation_bin
 from diffkin.workspace._map import ReachabilityMap
 
@@ -195,8 +194,7 @@ class CapabilityMap:
 
     def save(self, path) -> None:
         """Write the map to ``path`` as a ``.npz`` archive (numpy appends ``.npz`` if missing)."""
-        fields = {f.name: np.asarray(getattr(self, f.name)) for f in dataclasses.fields(self)}
-        np.savez_compressed(path, **fields)  # type: ignore[arg-type]  # numpy's stub reads **fields as allow_pickle
+        save_dataclass(self, path)
 
     @classmethod
     def load(cls, path) -> CapabilityMap:
@@ -207,15 +205,7 @@ class CapabilityMap:
                 map (the message names the file and the field).
             FileNotFoundError: no such file.
         """
-        path = os.fspath(path)
-        if not os.path.exists(path) and not path.endswith(".npz") and os.path.exists(path + ".npz"):
-            path += ".npz"  # as np.savez named it
-        fields = read_npz(path, "written by CapabilityMap.save")
-        missing = [f.name for f in dataclasses.fields(cls) if f.name not in fields]
-        if missing:
-            raise ValueError(f"{path}: not a complete capability map, missing field(s) {', '.join(missing)}")
-        if fields["counts"].ndim != 3:
-            raise ValueError(f"{path}: field counts: expected a 3-d grid, got shape {fields['counts'].shape}")
+        path, fields = read_dataclass_fields(cls, path, "capability map")
         if fields["cells"].shape != fields["cell_counts"].shape or fields["cells"].ndim != 1:
             raise ValueError(f"{path}: field cells: expected one count per cell, got {fields['cells'].shape} cells")
         return cls(

@@ -4,11 +4,10 @@ bins, and its file format (``.npz``, read without pickle)."""
 from __future__ import annotations
 
 import dataclasses
-import os
 
 import numpy as np
 
-from diffkin._npz import read_npz
+from diffkin._npz import read_dataclass_fields, save_dataclass
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -48,8 +47,7 @@ class ReachabilityMap:
 
     def save(self, path) -> None:
         """Write the map to ``path`` as a ``.npz`` archive (numpy appends ``.npz`` if missing)."""
-        fields = {f.name: np.asarray(getattr(self, f.name)) for f in dataclasses.fields(self)}
-        np.savez_compressed(path, **fields)  # type: ignore[arg-type]  # numpy's stub reads **fields as allow_pickle
+        save_dataclass(self, path)
 
     @classmethod
     def load(cls, path) -> ReachabilityMap:
@@ -60,15 +58,7 @@ class ReachabilityMap:
                 of the map (the message names the file and the field).
             FileNotFoundError: no such file.
         """
-        path = os.fspath(path)
-        if not os.path.exists(path) and not path.endswith(".npz") and os.path.exists(path + ".npz"):
-            path += ".npz"  # as np.savez named it
-        fields = read_npz(path, "written by ReachabilityMap.save")
-        missing = [f.name for f in dataclasses.fields(cls) if f.name not in fields]
-        if missing:
-            raise ValueError(f"{path}: not a complete reachability map, missing field(s) {', '.join(missing)}")
-        if fields["counts"].ndim != 3:
-            raise ValueError(f"{path}: field counts: expected a 3-d grid, got shape {fields['counts'].shape}")
+        path, fields = read_dataclass_fields(cls, path, "reachability map")
         return cls(
             counts=fields["counts"],
             manipulability=fields["manipulability"],
