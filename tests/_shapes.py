@@ -112,6 +112,28 @@ def toy_robot():
     return robot, dk.collision.load(TOY_COLLISION_URDF, robot)
 
 
+def planar_capsule_arm(j2_limit: str = "3", tip: bool = False) -> str:
+    """A URDF: a box base and two capsule links turning about y (``j1``, ``j2``: limits +-3 and +-``j2_limit``
+    rad), with a ``tip`` frame at the end of the second link if asked."""
+    tip_link = '\n  <link name="tip"/>' if tip else ""
+    tip_joint = (
+        '\n  <joint name="tip" type="fixed"><parent link="lower"/><child link="tip"/><origin xyz="0 0 0.4"/></joint>'
+        if tip
+        else ""
+    )
+    return f"""<robot name="arm">
+  <link name="base"><collision><geometry><box size="0.4 0.4 0.1"/></geometry></collision></link>
+  <link name="upper"><collision><origin xyz="0 0 0.25"/>
+    <geometry><capsule radius="0.05" length="0.5"/></geometry></collision></link>
+  <link name="lower"><collision><origin xyz="0 0 0.2"/>
+    <geometry><capsule radius="0.04" length="0.4"/></geometry></collision></link>{tip_link}
+  <joint name="j1" type="revolute"><parent link="base"/><child link="upper"/><origin xyz="0 0 0.05"/>
+    <axis xyz="0 1 0"/><limit lower="-3" upper="3"/></joint>
+  <joint name="j2" type="revolute"><parent link="upper"/><child link="lower"/><origin xyz="0 0 0.5"/>
+    <axis xyz="0 1 0"/><limit lower="-{j2_limit}" upper="{j2_limit}"/></joint>{tip_joint}
+</robot>"""
+
+
 #: an arm of capsules and a ball hand (URDF collision geometry), and a scene of a turned box and a floor
 #: (``dk.collision.load_scene``); ``SCENE_FILE`` the documented example scene
 CAPSULE_ARM = """<robot name="arm">

@@ -12,22 +12,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _shapes import planar_capsule_arm
 
 import diffkin as dk
 from diffkin.collision import Sphere, World
 from diffkin.traj import _certify, _reach, _spline
 
-URDF = """<robot name="arm">
-  <link name="base"><collision><geometry><box size="0.4 0.4 0.1"/></geometry></collision></link>
-  <link name="upper"><collision><origin xyz="0 0 0.25"/>
-    <geometry><capsule radius="0.05" length="0.5"/></geometry></collision></link>
-  <link name="lower"><collision><origin xyz="0 0 0.2"/>
-    <geometry><capsule radius="0.04" length="0.4"/></geometry></collision></link>
-  <joint name="j1" type="revolute"><parent link="base"/><child link="upper"/><origin xyz="0 0 0.05"/>
-    <axis xyz="0 1 0"/><limit lower="-3" upper="3"/></joint>
-  <joint name="j2" type="revolute"><parent link="upper"/><child link="lower"/><origin xyz="0 0 0.5"/>
-    <axis xyz="0 1 0"/><limit lower="-3" upper="3"/></joint>
-</robot>"""
+URDF = planar_capsule_arm()
 ROBOT = dk.load_robot(URDF)
 GEOM = dk.collision.load(URDF, ROBOT)
 MARGIN = 0.01
