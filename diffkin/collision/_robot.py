@@ -271,8 +271,17 @@ def world_of_placed(shapes, world: World, n: int) -> jax.Array:
     obstacles = obstacles_last(world)
     blocks = []
     for shape in shapes:
-        blocks.append([distance(expanded(shape), o) for o in obstacles])  # (n_kind, n_obstacles, N) each
+        blocks.append([_distance(expanded(shape), o) for o in obstacles])  # (n_kind, n_obstacles, N) each
     return blocks_joined(blocks, n)
+
+
+def _distance(a, b) -> jax.Array:
+    """:func:`distance`, or its empty array where ``a`` or ``b`` has no shape (the pair's code is not traced:
+    a robot of one kind among obstacles of one kind would trace all 36 pairs of kinds)."""
+    batch = tuple(jnp.broadcast_shapes(batch_shape(a), batch_shape(b)))
+    if np.prod(batch):
+        return distance(a, b)
+    return jnp.zeros(batch, jnp.result_type(*jax.tree.leaves((a, b))))
 
 
 def clearance(robot: Robot, geom: Geometry, q, world: World | None = None, base=None) -> jax.Array:
