@@ -27,8 +27,10 @@ def load_robot(source, *, floating: bool = False) -> Robot:
     ``<default>`` classes, hinge and slide joints (several per body, applied in order; ``ref``,
     ``range``, ``limited``), named sites as frames, ``<include>``; a linear
     ``<equality><joint polycoef=>`` makes ``joint1`` follow ``joint2``,
-    ``q1 - ref1 = c0 + c1 (q2 - ref2)``; a free joint on a top-level body makes it the floating
-    root. The world body is the frame ``"world"``; angles in ``q`` and limits are radians.
+    ``q1 - ref1 = c0 + c1 (q2 - ref2)``; a linear ``<equality><tendon>`` over fixed tendons makes the
+    last joint of ``tendon1`` follow the others (MuJoCo's ``L1 - L1_0 = c0 + c1 (L2 - L2_0)``,
+    ``L = sum coef_i q_i``); a free joint on a top-level body makes it the floating root. The world
+    body is the frame ``"world"``; angles in ``q`` and limits are radians.
 
     Args:
         source: path to the file, or the XML text itself.

@@ -25,10 +25,21 @@ A ball joint is three entries of ``q``, its rotation vector ``name:rx, name:ry, 
 axes (MuJoCo's ``qpos`` quaternion is ``(cos(|r|/2), sin(|r|/2) r/|r|)``), its ``range`` a cone
 ``|r| <= range[1]`` (:mod:`diffkin.models._ball`).
 
-Rejected with a ValueError naming the element: free joints below the top level or
-with other joints, several free bodies, moving top-level bodies beside a free one, equality
-constraints other than linear ``<joint>`` ones (``connect``, ``weld``, ``tendon``, ``flex``:
-they close loops or couple tendons), ``<attach>``, ``<replicate>``, ``<composite>``,
+Equalities: a linear ``<equality><joint polycoef>`` makes ``joint1`` follow ``joint2``,
+``q1 - ref1 = c0 + c1 (q2 - ref2)`` (locked at ``c0`` without ``joint2``). A ``<equality><tendon>`` over
+fixed tendons (length ``L = sum coef_i q_i``) holds MuJoCo's ``L1 - L1_0 = c0 + c1 (L2 - L2_0)``
+(``L_0``: the length at the reference ``q = ref``; ``L1 - L1_0 = c0`` without ``tendon2``): the last
+joint of ``tendon1`` follows the others, a linear function of them (a joint following several is one
+tree joint per source, ``name`` and ``name:source``: :mod:`diffkin.models._couplings`). Couplings of
+coupled joints are substituted. ``<connect>`` and ``<weld body1>`` close loops
+(:mod:`diffkin.models._loops`).
+
+Rejected with a ValueError naming the element (and the file, for joint and tendon equalities): free
+joints below the top level or with other joints, several free bodies, moving top-level bodies beside a
+free one, non-linear couplings (``c2``, ``c3`` or ``c4`` not 0; for a tendon equality, with ``tendon2``),
+couplings that cannot be resolved (the last joint of ``tendon1`` with coefficient 0, a joint coupled
+twice, couplings in a cycle), spatial tendons in equalities, ``<weld site1 site2>`` and ``<flex>``
+equalities, ``<attach>``, ``<replicate>``, ``<composite>``,
 ``<flexcomp>``, unknown default classes, missing include files, a file included more than once
 (MuJoCo's rule). Inactive equalities
 (``active="false"``) are ignored. ``<include>`` paths are relative to the main file's folder
@@ -47,7 +58,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from diffkin.models import _ball, _mjcf_mass, _xml
+from diffkin.models import _ball, _couplings, _mjcf_mass, _xml
+from diffkin.models._couplings import Coupling
 from diffkin.models._loops import Connect, close
 from diffkin.models._tree import JointSpec, build
 from diffkin.models.robot import Robot
@@ -59,7 +71,9 @@ _FROMTO_TYPES = ("capsule", "cylinder", "box", "ellipsoid")
 
 def _describe(el: ET.Element) -> str:
     """``MJCF <tag name='...'>`` (or the attributes that identify an unnamed element)."""
-    keys = [k for k in ("name", "joint1", "joint2", "tendon1", "body1", "file", "class", "type") if el.get(k)]
+    keys = [
+        k for k in ("name", "joint1", "joint2", "tendon1", "tendon2", "body1", "file", "class", "type") if el.get(k)
+    ]
     attributes = "".join(f" {k}={el.get(k)!r}" for k in keys[:3])
     return f"MJCF <{el.tag}{attributes}>"
 
@@ -416,13 +430,20 @@ def _screw_exp(screw: np.ndarray, theta: float) -> np.ndarray:
     return T
 
 
-def _equalities(reader: _Reader, root: ET.Element, joints: list[JointSpec]) -> tuple[list[JointSpec], list[Connect]]:
-    """Apply the ``<equality><joint>`` couplings: ``q1 - ref1 = c0 + c1 (q2 - ref2)`` (MuJoCo's, linear),
-    and read the ``<connect>`` ones (closed loops: :mod:`diffkin.models._loops`).
+def _equalities(
+    reader: _Reader, root: ET.Element, joints: list[JointSpec], path: str | None
+) -> tuple[list[JointSpec], list[Connect]]:
+    """Apply the linear couplings of ``<equality><joint>`` and ``<equality><tendon>``
+    (:func:`_joint_coupling`, :func:`_tendon_coupling`; :mod:`diffkin.models._couplings`), and read the
+    ``<connect>`` and ``<weld>`` ones (closed loops: :mod:`diffkin.models._loops`).
 
-    A joint with ``joint2`` omitted is locked at ``q1 - ref1 = c0`` (a fixed joint).
+    Args:
+        path: the file the model was read from (named in error messages), or ``None``.
     """
     index = {j.name: k for k, j in enumerate(joints)}
+    scalar = {j.name for j in joints if j.kind in ("R", "P")}
+    tendons = {t.get("name", ""): t for group in root.findall("tendon") for t in group if t.get("name")}
+    couplings: dict[str, Coupling] = {}
     connects = []
     for group in root.findall("equality"):
         for el in group:
@@ -443,30 +464,97 @@ def _equalities(reader: _Reader, root: ET.Element, joints: list[JointSpec]) -> t
                 zero = np.zeros(3)  # the two sites' origins coincide (frames named as sites; see robot_from_mjcf)
                 connects.append(Connect(f"\0site:{el.get('site1')}", f"\0site:{el.get('site2')}", zero, where, zero))
                 continue
-            if el.tag != "joint":
+            if el.tag not in ("joint", "tendon"):
                 raise ValueError(
-                    f"{where}: <equality><{el.tag}> constraints are not supported (they couple tendons or "
-                    "weld sites); linear <joint> equalities, <connect> and <weld body1> loops are"
+                    f"{where}: <equality><{el.tag}> constraints are not supported (they weld sites or hold "
+                    "flexes); linear <joint> and <tendon> equalities, <connect> and <weld body1> loops are"
                 )
+            where = f"{path}: {where}" if path else where
             c = _xml.numbers(None, "polycoef", 5, reader._get(el, "polycoef", cls, "0 1 0 0 0", "equality"), where)
-            if np.any(c[2:] != 0):
-                raise ValueError(f"{where}: polycoef {c.tolist()} is not linear (c2 = c3 = c4 = 0 is needed)")
-            names = [el.get("joint1"), el.get("joint2")]
-            if not names[0]:
-                raise ValueError(f"{where}: missing 'joint1' attribute")
-            for n in filter(None, names):
-                if n not in index or joints[index[n]].kind == "F":
-                    raise ValueError(f"{where}: {n!r} is not a hinge or slide joint of the robot")
-            j1 = joints[index[names[0]]]
-            if j1.mimic is not None:
-                raise ValueError(f"{where}: joint {j1.name!r} is already coupled to {j1.mimic[0]!r}")
-            if names[1] is None:
-                locked = j1.origin @ _screw_exp(j1.screw, c[0])
-                joints[index[j1.name]] = dataclasses.replace(j1, kind="F", origin=locked)
+            if el.tag == "joint":
+                joint, coupling = _joint_coupling(el, c, scalar, where)
             else:
-                ref1, ref2 = -j1.offset, -joints[index[names[1]]].offset
-                joints[index[j1.name]] = dataclasses.replace(j1, mimic=(names[1], c[1], c[0] + ref1 - c[1] * ref2))
-    return joints, connects
+                joint, coupling = _tendon_coupling(el, c, tendons, scalar, where)
+            if joint in couplings:
+                raise ValueError(f"{where}: joint {joint!r} is already coupled by {couplings[joint].where}")
+            couplings[joint] = coupling
+    resolved = _couplings.resolve(couplings)
+    for name, (terms, bias) in resolved.items():
+        if not terms:  # a locked joint: fixed at theta = bias
+            j = joints[index[name]]
+            joints[index[name]] = dataclasses.replace(j, kind="F", origin=j.origin @ _screw_exp(j.screw, bias))
+    return _couplings.as_mimics(joints, {n: r for n, r in resolved.items() if r[0]}), connects
+
+
+def _joint_coupling(el: ET.Element, c: np.ndarray, scalar: set[str], where: str) -> tuple[str, Coupling]:
+    """``<equality><joint>``: ``theta1 = c0 + c1 theta2`` (MuJoCo's ``q1 - ref1 = c0 + c1 (q2 - ref2)``), or
+    ``theta1 = c0`` (``joint1`` locked) with ``joint2`` omitted. ``scalar``: the robot's hinges and slides."""
+    if np.any(c[2:] != 0):
+        raise ValueError(f"{where}: polycoef {c.tolist()} is not linear (c2 = c3 = c4 = 0 is needed)")
+    if not el.get("joint1"):
+        raise ValueError(f"{where}: missing 'joint1' attribute")
+    _check_joints([el.get("joint1", ""), el.get("joint2", "")], scalar, where)
+    terms = ((el.get("joint2", ""), float(c[1])),) if el.get("joint2") else ()
+    return el.get("joint1", ""), Coupling(terms, float(c[0]), where)
+
+
+def _tendon_coupling(
+    el: ET.Element, c: np.ndarray, tendons: dict[str, ET.Element], scalar: set[str], where: str
+) -> tuple[str, Coupling]:
+    """``<equality><tendon>``, MuJoCo's ``L1 - L1_0 = c0 + c1 (L2 - L2_0)`` over fixed tendons
+    (``L = sum coef_i q_i``, ``L_0`` its value at the reference ``q = ref``), or ``L1 - L1_0 = c0`` with
+    ``tendon2`` omitted (``c1 ... c4`` unused, as in MuJoCo): ``sum w_i theta_i = c0`` with
+    ``w = coef1 - c1 coef2``, solved for the last joint of ``tendon1``. ``tendons``: the named ``<tendon>``
+    elements; ``scalar``: the robot's hinges and slides."""
+    if not el.get("tendon1"):
+        raise ValueError(f"{where}: missing 'tendon1' attribute")
+    if el.get("tendon2") and np.any(c[2:] != 0):
+        raise ValueError(f"{where}: polycoef {c.tolist()} is not linear (c2 = c3 = c4 = 0 is needed)")
+    if el.get("tendon2") == el.get("tendon1"):
+        raise ValueError(f"{where}: tendon1 and tendon2 are the same tendon")
+    first = _fixed_tendon(tendons, el.get("tendon1", ""), scalar, where)
+    w, scale = dict(first), max(abs(coef) for _, coef in first)
+    for joint, coef in _fixed_tendon(tendons, el.get("tendon2", ""), scalar, where) if el.get("tendon2") else ():
+        w[joint] = w.get(joint, 0.0) - c[1] * coef
+        scale = max(scale, abs(c[1] * coef))
+    joint = first[-1][0]
+    if abs(w[joint]) <= 1e-12 * scale:  # 0, or 0 but for rounding (its joint would follow at 1e12 times the rest)
+        raise ValueError(
+            f"{where}: the coefficient of joint {joint!r} is 0 (the last joint of tendon1, which the equality "
+            "makes follow the others: it must appear in the coupling)"
+        )
+    terms = tuple((k, float(-wk / w[joint])) for k, wk in w.items() if k != joint and wk != 0)
+    return joint, Coupling(terms, float(c[0] / w[joint]), where)
+
+
+def _check_joints(names: list[str], scalar: set[str], where: str) -> None:
+    """Each of ``names`` (empty ones skipped) is one of the robot's hinges and slides, ``scalar``."""
+    for n in filter(None, names):
+        if n not in scalar:
+            raise ValueError(f"{where}: {n!r} is not a hinge or slide joint of the robot")
+
+
+def _fixed_tendon(tendons: dict[str, ET.Element], name: str, scalar: set[str], where: str) -> list[tuple[str, float]]:
+    """The ``(joint, coef)`` of the ``<tendon><fixed name>`` (its length is ``sum coef_i q_i``), in file order."""
+    if name not in tendons:
+        raise ValueError(f"{where}: unknown tendon {name!r}")
+    tendon = tendons[name]
+    if tendon.tag != "fixed":
+        raise ValueError(
+            f"{where}: tendon {name!r} is a <{tendon.tag}> tendon; only <fixed> tendons (linear in the joints) are"
+        )
+    terms: list[tuple[str, float]] = []
+    for el in tendon.findall("joint"):
+        joint = el.get("joint")
+        if not joint:
+            raise ValueError(f"{where}: a <joint> of tendon {name!r} has no 'joint' attribute")
+        if joint in dict(terms):
+            raise ValueError(f"{where}: joint {joint!r} is repeated in tendon {name!r}")
+        terms.append((joint, float(_xml.numbers(el, "coef", 1, None, f"{where} tendon {name!r} joint {joint!r}")[0])))
+    if not terms:
+        raise ValueError(f"{where}: tendon {name!r} has no joints")
+    _check_joints([joint for joint, _ in terms], scalar, where)
+    return terms
 
 
 WELD_ARM = 0.1  # metres: a weld holds three points of body1, at its origin and this far along its x and y axes
@@ -584,7 +672,7 @@ def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
                     f"floating root {name!r}; one tree is supported"
                 )
         parts = [part]
-    joints, connects = _equalities(reader, root, [j for p in parts for j in p.joints])
+    joints, connects = _equalities(reader, root, [j for p in parts for j in p.joints], path)
     links = [n for p in parts for n in p.links]
     bodies = set(links)
     sites = [(f"site:{n}" if n in bodies else n, body, T) for p in parts for n, body, T in p.sites]

@@ -2,6 +2,8 @@
 bombs and chains, and every bad input named (against MuJoCo itself:
 ``tests/validation/test_mjcf_validation.py``)."""
 
+import re
+
 import numpy as np
 import pytest
 from _fuzzing import time_limit
@@ -21,6 +23,7 @@ def test_degrees_vs_radians_give_the_same_robot():
     np.testing.assert_allclose(dk.link_poses(deg, q), dk.link_poses(rad, q), atol=1e-15)
     np.testing.assert_allclose(deg.lower[0], -np.pi / 2, rtol=1e-15)  # the hinge range in degrees
     np.testing.assert_allclose(rad.lower[0], -90.0, rtol=1e-15)  # ... read as radians
+    assert np.all(np.isposinf(np.asarray(deg.velocity)))  # MJCF has no joint velocity limits: none
 
 
 def test_a_mesh_geom_without_inertial_has_an_unknown_mass():
@@ -209,5 +212,115 @@ BODY = '<body name="a"><joint name="j"/><body name="b"><joint name="k"/></body><
     ],
 )
 def test_bad_input_names_the_element(xml, message):
+    with pytest.raises(ValueError, match=message):
+        dk.load_robot(xml)
+
+
+# ------------------------------------------------------------------------------------ tendon equalities
+
+LEG = (
+    '<body name="a"><joint name="j" ref="10"/><body name="b" pos=".3 0 0"><joint name="k" axis="0 1 0"/>'
+    '<body name="c" pos=".3 0 0"><joint name="l" ref="-5" axis="1 0 0"/><joint name="s" type="slide"/>'
+    '<site name="tip" pos=".2 .1 0"/></body></body></body>'
+)
+
+
+def _tendons(fixed: dict[str, str], equality: str, extra: str = "") -> str:
+    """``LEG`` with fixed tendons ``{name: "joint coef joint coef ..."}`` and the ``<equality>`` contents."""
+    tendons = "".join(
+        f'<fixed name="{name}">'
+        + "".join(
+            f'<joint joint="{j}" coef="{c}"/>' for j, c in zip(spec.split()[::2], spec.split()[1::2], strict=True)
+        )
+        + "</fixed>"
+        for name, spec in fixed.items()
+    )
+    return mjcf(LEG, tail=f"<tendon>{tendons}{extra}</tendon><equality>{equality}</equality>")
+
+
+def test_a_tendon_equality_makes_the_last_joint_of_tendon1_follow_the_others():
+    """``.5 (j - ref_j) - (k - ref_k) + 2 (l - ref_l) = .1 + 3 * .7 (s - ref_s)`` solved for ``l``: the poses are
+    those of the model without the equality with ``l`` set by hand."""
+    coupled = dk.load_robot(
+        _tendons({"t": "j .5 k -1 l 2", "u": "s .7"}, '<tendon tendon1="t" tendon2="u" polycoef=".1 3 0 0 0"/>')
+    )
+    free = dk.load_robot(mjcf(LEG))
+    assert coupled.joint_names == ("j", "k", "s") and free.joint_names == ("j", "k", "l", "s")
+    assert set(coupled.mimic) == {"l", "l:k", "l:s"}
+    q = np.array([[0.3, -0.4, 0.05], [1.1, 0.2, -0.2]])
+    ref_j, ref_l = np.deg2rad(10), np.deg2rad(-5)
+    l = ref_l + (0.1 + 3 * 0.7 * q[:, 2] - 0.5 * (q[:, 0] - ref_j) + q[:, 1]) / 2
+    by_hand = np.stack([q[:, 0], q[:, 1], l, q[:, 2]], axis=-1)
+    np.testing.assert_allclose(dk.link_poses(coupled, q), dk.link_poses(free, by_hand), rtol=0, atol=1e-15)
+
+
+def test_a_tendon_equality_error_names_the_file(tmp_path):
+    path = tmp_path / "leg.xml"
+    path.write_text(_tendons({"t": "j 1 k 1"}, '<tendon name="hold" tendon1="t" tendon2="u"/>'))
+    message = f"{path}: MJCF <equality><tendon name='hold' tendon1='t' tendon2='u'>: unknown tendon 'u'"
+    with pytest.raises(ValueError, match=re.escape(message)):
+        dk.load_robot(str(path))
+
+
+T = "MJCF <equality><tendon tendon1='t'"
+TU = "MJCF <equality><tendon tendon1='t' tendon2='u'>"
+EQ = '<equality><tendon tendon1="t"/></equality>'
+
+
+@pytest.mark.parametrize(
+    ("xml", "message"),
+    [
+        (
+            _tendons({"t": "j 1 k 1", "u": "s 1"}, '<tendon tendon1="t" tendon2="u" polycoef="0 1 .5 0 0"/>'),
+            rf"{TU}: polycoef \[0.0, 1.0, 0.5, 0.0, 0.0\] is not linear",
+        ),
+        (
+            _tendons({"t": "j 1 k 0"}, '<tendon tendon1="t"/>'),
+            rf"{T}>: the coefficient of joint 'k' is 0 \(the last joint of tendon1",
+        ),
+        (  # k's coefficient: .3 in t, minus 3 times .1 in u (-5.6e-17 in floating point)
+            _tendons({"t": "j 1 k .3", "u": "k .1 s 1"}, '<tendon tendon1="t" tendon2="u" polycoef="0 3 0 0 0"/>'),
+            rf"{TU}: the coefficient of joint 'k' is 0",
+        ),
+        (  # k follows j (tendon), j follows k (joint equality)
+            _tendons({"t": "j 1 k 1"}, '<tendon tendon1="t"/><joint joint1="j" joint2="k"/>'),
+            r"MJCF <equality><joint joint1='j' joint2='k'>: the joint couplings form a cycle: k -> j -> k",
+        ),
+        (
+            _tendons({"t": "j 1 k 1"}, '<joint joint1="k" joint2="j"/><tendon tendon1="t"/>'),
+            rf"{T}>: joint 'k' is already coupled by MJCF <equality><joint joint1='k' joint2='j'>",
+        ),
+        (
+            _tendons({}, '<tendon tendon1="t"/>', '<spatial name="t"><site site="tip"/><site site="tip"/></spatial>'),
+            rf"{T}>: tendon 't' is a <spatial> tendon; only <fixed> tendons",
+        ),
+        (_tendons({"u": "j 1"}, '<tendon tendon1="t"/>'), rf"{T}>: unknown tendon 't'"),
+        (_tendons({"t": "j 1 nope 1"}, '<tendon tendon1="t"/>'), rf"{T}>: 'nope' is not a hinge or slide joint"),
+        (
+            mjcf(LEG, tail='<tendon><fixed name="t"><joint joint="j"/></fixed></tendon>' + EQ),
+            rf"{T}> tendon 't' joint 'j': missing attribute 'coef'",
+        ),
+        (_tendons({"t": "j 1 j 2"}, '<tendon tendon1="t"/>'), rf"{T}>: joint 'j' is repeated in tendon 't'"),
+        (_tendons({"t": "j 1"}, '<tendon tendon1="t" tendon2="t"/>'), r"tendon1 and tendon2 are the same tendon"),
+        (_tendons({"t": ""}, '<tendon tendon1="t"/>'), rf"{T}>: tendon 't' has no joints"),
+        (_tendons({}, '<tendon tendon2="t"/>'), r"MJCF <equality><tendon tendon2='t'>: missing 'tendon1' attribute"),
+    ],
+    ids=[
+        "nonlinear",
+        "zero_coefficient",
+        "zero_combined_coefficient",
+        "cycle",
+        "already_coupled",
+        "spatial",
+        "unknown_tendon",
+        "unknown_joint",
+        "missing_coef",
+        "repeated_joint",
+        "same_tendon",
+        "empty_tendon",
+        "missing_tendon1",
+    ],
+)
+def test_unresolvable_tendon_equalities_are_rejected(xml, message):
     with pytest.raises(ValueError, match=message):
         dk.load_robot(xml)

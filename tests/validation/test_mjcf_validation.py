@@ -3,6 +3,7 @@ limits of MJCF snippets (one per feature) and of published dm_control models, in
 MuJoCo, deep nesting, include bombs and bad input: ``tests/unit/test_mjcf.py``)."""
 
 import os
+import xml.etree.ElementTree as ET
 
 import mujoco
 import numpy as np
@@ -25,19 +26,51 @@ def _name(model, kind: str, i: int) -> str:
 
 
 def _apply_equalities(model, qpos: np.ndarray, dq: np.ndarray) -> None:
-    """Set the joints that MuJoCo's active linear joint equalities drive (positions and their derivatives
-    ``dq`` with respect to diffkin's ``q``), from MuJoCo's compiled ``eq_data``."""
-    eqs = [e for e in range(model.neq) if model.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT and model.eq_active0[e]]
+    """Set the joints that MuJoCo's active linear joint and tendon equalities drive (positions and their
+    derivatives ``dq`` with respect to diffkin's ``q``), from MuJoCo's compiled ``eq_data``. A tendon
+    equality drives the last joint of ``tendon1`` (diffkin's choice), solved by hand so that MuJoCo's residual
+    ``L1 - tendon_length0[1] - c0 - c1 (L2 - tendon_length0[2])`` is zero (``L = wrap_prm @ qpos``)."""
+    kinds = (int(mujoco.mjtEq.mjEQ_JOINT), int(mujoco.mjtEq.mjEQ_TENDON))
+    eqs = [e for e in range(model.neq) if model.eq_type[e] in kinds and model.eq_active0[e]]
     for _ in range(len(eqs)):  # chains of equalities settle in as many sweeps
         for e in eqs:
-            a1, j2 = model.jnt_qposadr[model.eq_obj1id[e]], model.eq_obj2id[e]
             c0, c1 = model.eq_data[e, :2]
+            if model.eq_type[e] == mujoco.mjtEq.mjEQ_TENDON:
+                t1, t2 = model.eq_obj1id[e], model.eq_obj2id[e]
+                g, r = _tendon_row(model, t1), -model.tendon_length0[t1] - c0  # residual r + g @ qpos
+                if t2 >= 0:
+                    g, r = g - c1 * _tendon_row(model, t2), r + c1 * model.tendon_length0[t2]
+                a = model.jnt_qposadr[model.wrap_objid[model.tendon_adr[t1] + model.tendon_num[t1] - 1]]
+                qpos[a] = -(r + g @ qpos - g[a] * qpos[a]) / g[a]
+                dq[a] = -(g @ dq - g[a] * dq[a]) / g[a]
+                continue
+            a1, j2 = model.jnt_qposadr[model.eq_obj1id[e]], model.eq_obj2id[e]
             if j2 < 0:
                 qpos[a1], dq[a1] = model.qpos0[a1] + c0, 0.0
             else:
                 a2 = model.jnt_qposadr[j2]
                 qpos[a1] = model.qpos0[a1] + c0 + c1 * (qpos[a2] - model.qpos0[a2])
                 dq[a1] = c1 * dq[a2]
+
+
+def _tendon_row(model, t: int) -> np.ndarray:
+    """``(nq,)``: a fixed tendon's length is this row times ``qpos`` (MuJoCo's ``wrap_prm`` coefficients)."""
+    row = np.zeros(model.nq)
+    for w in range(model.tendon_adr[t], model.tendon_adr[t] + model.tendon_num[t]):
+        assert model.wrap_type[w] == mujoco.mjtWrap.mjWRAP_JOINT
+        row[model.jnt_qposadr[model.wrap_objid[w]]] += model.wrap_prm[w]
+    return row
+
+
+def _equality_residual(model, qpos: np.ndarray) -> float:
+    """The largest of MuJoCo's equality-constraint residuals (``efc_pos``) at ``qpos``; every active equality
+    gives a row."""
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_forward(model, data)
+    rows = data.efc_type[: data.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY
+    assert rows.sum() == sum(model.eq_active0)
+    return float(np.abs(data.efc_pos[: data.nefc][rows]).max())
 
 
 def mujoco_reference(robot, model, q: np.ndarray, base: np.ndarray | None, frames: list[str]):
@@ -390,14 +423,96 @@ def test_joint_equalities_are_mimic_couplings():
     check(mjcf(body, tail=tail), n=4)
     # the couplings satisfy MuJoCo's own equality constraints
     model = mujoco.MjModel.from_xml_string(mjcf(body, tail=tail))
-    data = mujoco.MjData(model)
     qpos, dq = model.qpos0.copy(), np.zeros((model.nq, 3))
     qpos[model.joint("drive").qposadr[0]] = 0.7
     _apply_equalities(model, qpos, dq)
-    data.qpos[:] = qpos
-    mujoco.mj_forward(model, data)
-    rows = data.efc_type[: data.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY
-    assert rows.sum() == 3 and np.abs(data.efc_pos[: data.nefc][rows]).max() < 1e-14
+    assert _equality_residual(model, qpos) < 1e-14
+
+
+TENDONS = mjcf(
+    """<body name="a"><joint name="h1" ref="10" axis="0 0 1"/>
+      <body name="b" pos=".3 0 0"><joint name="h2" ref="-20" axis="0 1 0" range="-60 60"/>
+        <body name="c" pos=".3 0 0"><joint name="s1" type="slide" ref=".05" axis="1 0 0" range="-.1 .1"/>
+          <body name="d" pos="0 .2 0" euler="10 20 30"><joint name="h3" ref="5" axis="1 0 0" pos=".1 0 0"/>
+            <joint name="h4" axis="0 0 1"/>
+            <body name="e" pos=".1 0 0"><joint name="h5" ref="7" axis="0 1 0"/><joint name="h6" ref="-3"/>
+              <site name="tip" pos=".1 .05 0"/>
+            </body>
+          </body>
+        </body>
+      </body>
+    </body>""",
+    tail="""<tendon>
+      <fixed name="t1"><joint joint="h1" coef=".5"/><joint joint="h2" coef="-1.5"/><joint joint="h3" coef="2"/></fixed>
+      <fixed name="t2"><joint joint="s1" coef="3"/><joint joint="h4" coef="1"/></fixed>
+      <fixed name="t3"><joint joint="h5" coef="-2"/></fixed>
+      <fixed name="unused"><joint joint="h6" coef="1"/></fixed>
+    </tendon>
+    <equality>
+      <tendon name="coupled" tendon1="t1" tendon2="t2" polycoef=".1 -.7 0 0 0"/>
+      <tendon name="held" tendon1="t3" polycoef=".2 5 1 1 1"/>
+      <joint joint1="h6" joint2="h3" polycoef=".05 2 0 0 0"/>
+    </equality>""",
+)
+
+
+def test_tendon_equalities_couple_joints_as_mujoco():
+    """Fixed-tendon equalities: ``h3`` (the last joint of t1) follows h1, h2, s1 and h4 through
+    ``L1 - L1_0 = c0 + c1 (L2 - L2_0)``; ``h5`` is held by a one-tendon equality (``L - L_0 = c0``, MuJoCo
+    ignores c1 ... c4); ``h6`` follows h3 by a joint equality, so all four. Poses and Jacobians match
+    MuJoCo's at configurations where its equality residuals vanish (hand-solved from its compiled tendons)."""
+    robot = dk.load_robot(TENDONS)
+    assert robot.joint_names == ("h1", "h2", "s1", "h4")
+    assert set(robot.mimic) == {f"{j}{s}" for j in ("h3", "h6") for s in ("", ":h2", ":s1", ":h4")}
+    assert check(TENDONS, n=4)[0] < 1e-12
+    model = mujoco.MjModel.from_xml_string(TENDONS)
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        qpos, dq = model.qpos0.copy(), np.zeros((model.nq, 4))
+        for name in robot.joint_names:
+            qpos[model.joint(name).qposadr[0]] = rng.uniform(-1, 1)
+        _apply_equalities(model, qpos, dq)
+        assert _equality_residual(model, qpos) < 1e-12
+        data = mujoco.MjData(model)
+        data.qpos[:] = qpos
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_tendon(model, data)
+        L, L0, (c0, c1) = data.ten_length, model.tendon_length0, model.eq_data[0, :2]
+        assert abs(L[0] - L0[0] - c0 - c1 * (L[1] - L0[1])) < 1e-12 and abs(L[2] - L0[2] - 0.2) < 1e-12
+        q = np.array([qpos[model.joint(n).qposadr[0]] for n in robot.joint_names])
+        T = np.asarray(dk.link_poses(robot, q))
+        for body in ("d", "e"):
+            np.testing.assert_allclose(T[robot.frame_index(body), :3, 3], data.xpos[model.body(body).id], atol=1e-12)
+            np.testing.assert_allclose(
+                T[robot.frame_index(body), :3, :3], data.xmat[model.body(body).id].reshape(3, 3), atol=1e-12
+            )
+
+
+def _without_the_ball(tmp_path) -> str:
+    """dm_control's quadruped.xml without its free ball (a second floating tree): the copy's path."""
+    suite = os.path.join(DM_CONTROL, "suite")
+    root = ET.parse(os.path.join(suite, "quadruped.xml")).getroot()
+    for include in root.iter("include"):
+        include.set("file", os.path.join(suite, include.get("file", "")))
+    world = root.find("worldbody")
+    assert world is not None
+    world.remove(next(b for b in world.findall("body") if b.get("name") == "ball"))
+    path = str(tmp_path / "quadruped.xml")
+    ET.ElementTree(root).write(path)
+    return path
+
+
+@pytest.mark.skipif(not os.path.isdir(DM_CONTROL), reason="dm_control is not installed (pip install -e '.[test]')")
+def test_quadruped_legs_coupled_by_tendons_against_mujoco(tmp_path):
+    """dm_control's quadruped (its ball removed): each ankle follows ``-(pitch + knee)``, the tendon
+    equality ``pitch + knee + ankle = const``; poses and Jacobians as MuJoCo's."""
+    path = _without_the_ball(tmp_path)
+    robot, model = dk.load_robot(path), mujoco.MjModel.from_xml_path(path)
+    legs = ("front_left", "front_right", "back_right", "back_left")
+    assert robot.joint_names == tuple(f"{j}_{leg}" for leg in legs for j in ("yaw", "pitch", "knee"))
+    assert robot.mimic[f"ankle_{legs[0]}"] == (f"pitch_{legs[0]}", -1.0, 0.0)
+    check_limits(robot, model)
+    against_mujoco(robot, model, n=2, frames=["toe_front_left"])  # every pose; one Jacobian (one compile)
 
 
 def test_limits_follow_mujoco():
@@ -444,6 +559,7 @@ PUBLISHED = {  # path, frames whose Jacobians are compared (None: all)
     "jaco_hand": ("third_party/kinova/jaco_hand.xml", None),
     "hopper": ("suite/hopper.xml", None),
     "finger": ("suite/finger.xml", None),
+    "manipulator": ("suite/manipulator.xml", ["thumbtip", "fingertip"]),  # the fingers: a tendon equality
 }
 
 
@@ -462,16 +578,11 @@ def test_published_models_against_mujoco(name):
     ("path", "message"),
     [
         (
-            "suite/manipulator.xml",  # its fingers are coupled through a tendon
-            r"MJCF <equality><tendon name='coupling' tendon1='coupling'>: <equality><tendon> constraints are not "
-            r"supported",
-        ),
-        (
             "suite/quadruped.xml",  # a free ball beside the free torso: two trees
             r"MJCF <freejoint name='ball_root'>: several bodies have free joints \(\['torso', 'ball'\]\)",
         ),
     ],
-    ids=["manipulator", "quadruped"],
+    ids=["quadruped"],
 )
 def test_published_models_with_unsupported_elements_are_rejected(path, message):
     with pytest.raises(ValueError, match=message):
