@@ -10,6 +10,9 @@ values only when ``concrete`` (no leaf is a tracer, e.g. not under ``jit``, ``gr
 JAX's own rebuilding of instances (``tree_unflatten``: after a transformation, ``tree_map``, with
 tracers, batched leaves, ``None`` or ``object()`` placeholders) bypasses ``__init__`` and so the
 check: it costs nothing there and cannot break on leaves that are not the user's arrays.
+
+Defaults that depend on other fields are a second hook, run first: ``_fill(self) -> dict`` gives
+the values of the fields the user left ``None`` (the models' ``velocity``: ``inf`` per joint).
 """
 
 from __future__ import annotations
@@ -28,6 +31,10 @@ def static(**kwargs: Any) -> Any:
 
 
 def _post_init(self) -> None:
+    fill = getattr(self, "_fill", None)
+    if fill is not None:
+        for name, value in fill().items():
+            object.__setattr__(self, name, value)
     leaves = [getattr(self, f.name) for f in dataclasses.fields(self) if not f.metadata.get("static", False)]
     self._check(concrete=not any(isinstance(x, jax.core.Tracer) for x in leaves))
 

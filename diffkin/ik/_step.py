@@ -9,7 +9,8 @@ the joint velocity ``v`` of
     subject to  lower <= q + v dt <= upper,   |v| <= velocity,   v_locked = 0,
                 d_k + dt (dd_k/dq) v >= margin  (each distance ``avoid`` checks, linearised)
 
-solved by :mod:`diffkin.ik._qp`. When the bounds of a joint contradict each other (``q`` further
+solved by :mod:`diffkin.ik._qp`, with ``velocity`` the user's or else the model's (its file's velocity
+limits: :attr:`diffkin.Robot.velocity`). When the bounds of a joint contradict each other (``q`` further
 outside its limits than ``velocity * dt``), the joint moves back towards its range at its velocity
 limit; when the distance rows cannot all hold, the step is that of the rows relaxed by their least
 largest violation (:func:`diffkin.ik._qp.least_violation`, rows scaled to unit norm); both give
@@ -102,7 +103,9 @@ def step(
         relative, com: robots: targets between two frames, the centre of mass (as :func:`diffkin.ik.solve`).
         locked: robots: a sequence of joint names that do not move (``v = 0``).
         velocity: ``()``, ``(dof,)`` or ``(..., dof)`` velocity limits ``|v| <= velocity`` (rad/s,
-            m/s; ``inf``: none); default none (model files' velocity limits are not read yet).
+            m/s; ``inf``: none), in place of the model's; default the model's ``velocity`` (a URDF's
+            ``<limit velocity=>``; none for MJCF and for chains built without them). To tighten the
+            file's limits rather than replace them, pass ``jnp.minimum(model.velocity, yours)``.
         avoid: robots: a :class:`~diffkin.ik.Avoid`: each distance it checks (within
             :data:`AVOID_REACH` of the margin) keeps ``d + dt (dd/dq) v >= margin``.
         damping: ``> 0``, ``(m/s)^2`` per ``(rad/s)^2``: the cost of ``|v|^2``.
@@ -170,6 +173,15 @@ def step(
         spec=p.spec,
         batch=p.batch,
     )
+
+
+def _model_velocity(model, dtype, n: int):
+    """The model's velocity limits, ``(dof, n)`` (a scalar ``inf`` when a concrete model has none: the
+    program of no velocity limits)."""
+    limit = model.velocity
+    if is_concrete(limit) and np.all(np.isposinf(np.asarray(limit))):
+        return jnp.inf
+    return jnp.broadcast_to(jnp.asarray(limit, dtype)[:, None], (model.dof, n))
 
 
 def _scalar(value, name: str, low: float, strict: bool) -> None:
@@ -253,7 +265,10 @@ def _step(
         g = g - w2 * jnp.where(free, gain * (s.rest.T - x) / dt, 0.0)
 
     # The box: position limits over the step and velocity limits; contradictory bounds fix the joint.
-    vel = jnp.inf if velocity is None else jnp.broadcast_to(velocity, batch + (dof,)).reshape(n, dof).T
+    if velocity is None:
+        vel = _model_velocity(model, dtype, n)
+    else:
+        vel = jnp.broadcast_to(velocity, batch + (dof,)).reshape(n, dof).T
     vel = jnp.where(jnp.isnan(vel), 0.0, vel)
     p_lo, p_hi = (s.lower[:, None] - x) / dt, (s.upper[:, None] - x) / dt
     lo, hi = jnp.maximum(p_lo, -vel), jnp.minimum(p_hi, vel)

@@ -30,6 +30,7 @@ class JointSpec:
         lower, upper: limits (``-inf``/``inf`` if unlimited).
         mimic: ``(source joint, multiplier, offset)``: ``theta = multiplier * theta_source + offset``.
         offset: constant added to ``theta`` (MJCF ``ref``: the joint angle is ``q - ref``).
+        velocity: velocity limit, rad/s or m/s (``inf`` if none: MJCF, a URDF ``<limit>`` without it).
     """
 
     name: str
@@ -42,6 +43,7 @@ class JointSpec:
     upper: float = np.inf
     mimic: tuple[str, float, float] | None = None
     offset: float = 0.0
+    velocity: float = np.inf
 
 
 def build(
@@ -176,6 +178,7 @@ def build(
         frame_poses=f(np.array([T for _, _, T in frame_specs]).reshape(-1, 4, 4)),
         lower=f(np.array([j.lower for j in actuated], np.float64)),
         upper=f(np.array([j.upper for j in actuated], np.float64)),
+        velocity=f(np.array([j.velocity for j in actuated], np.float64)),
         masses=f(masses),
         body_coms=f(body_coms),
         parents=tuple(parents),

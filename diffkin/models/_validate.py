@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 
@@ -152,3 +153,40 @@ def limit_leaves(chain, dof: int, concrete: bool) -> tuple[np.ndarray | None, np
         leaf(chain.lower, "lower", (dof,), concrete, finite=False),
         leaf(chain.upper, "upper", (dof,), concrete, finite=False),
     )
+
+
+def velocity(value, dof: int) -> np.ndarray:
+    """Velocity limits ``(dof,)`` (rad/s, m/s), each ``>= 0``; ``None`` means none (``inf``)."""
+    if value is None:
+        return np.full(dof, np.inf)
+    v = float_array(value, "velocity", (dof,), finite=False)
+    if np.any(v < 0):
+        i = int(np.argmax(v < 0))
+        raise ValueError(f"velocity[{i}]: expected a limit >= 0 (rad/s or m/s; inf: none), got {v[i]}")
+    return v
+
+
+def velocity_leaf(model, dof: int, concrete: bool) -> None:
+    """The ``velocity`` leaf of a model with ``dof`` joints: its shape, and its values when ``concrete``."""
+    v = leaf(model.velocity, "velocity", (dof,), concrete, finite=False)
+    if v is not None:
+        velocity(v, dof)
+
+
+def no_velocity_limits(model) -> dict:
+    """``{"velocity": inf per joint}`` (dtype of ``lower``) for a model built without ``velocity`` (the
+    models' ``_fill``: :mod:`diffkin._pytree`), else ``{}``.
+
+    A concrete ``velocity`` of ``inf`` only (none) but of another length than ``lower`` is refilled too:
+    "none" has no length, and a model rebuilt with fewer joints by ``dataclasses.replace`` keeps it
+    (the closed loops' dependent joints leave ``q``: :func:`diffkin.models._loops.close`)."""
+    lower, v = model.lower, model.velocity
+    if not hasattr(lower, "dtype"):  # (a bad ``lower``: the check names it)
+        return {}
+    none = v is None or (
+        hasattr(v, "shape")
+        and np.shape(v) != np.shape(lower)
+        and not isinstance(v, jax.core.Tracer)
+        and bool(np.all(np.isposinf(np.asarray(v))))
+    )
+    return {"velocity": jnp.full(np.shape(lower), np.inf, lower.dtype)} if none else {}

@@ -40,6 +40,8 @@ class DHChain:
         modified: static; ``True`` for the modified (Craig) convention.
         joint_names: static tuple of names.
         name: static name of the robot (informational).
+        velocity: ``(dof,)`` velocity limits ``|dq/dt| <= velocity`` (rad/s, m/s; ``inf``: none), the
+            default of :func:`diffkin.ik.step`. The last field; built without it: ``inf`` per joint.
     """
 
     a: jax.Array
@@ -54,6 +56,10 @@ class DHChain:
     modified: bool = static(default=False)
     joint_names: tuple[str, ...] = static(default=())
     name: str = static(default="")
+    velocity: jax.Array = None  # type: ignore[assignment]  # filled: check.no_velocity_limits
+
+    def _fill(self) -> dict:
+        return check.no_velocity_limits(self)
 
     @property
     def dof(self) -> int:
@@ -66,6 +72,7 @@ class DHChain:
         for field in ("a", "alpha", "d", "theta_offset"):
             check.leaf(getattr(self, field), field, (dof,), concrete)
         lo, hi = check.limit_leaves(self, dof, concrete)
+        check.velocity_leaf(self, dof, concrete)
         if concrete:
             check.limits(lo, hi, dof)
         for field in ("base", "tool"):
@@ -86,6 +93,7 @@ class DHChain:
         tool=None,
         joint_names=None,
         name: str = "",
+        velocity=None,
     ) -> DHChain:
         """Build a chain from a ``(dof, 4)`` table with columns ``[a, alpha, d, theta_offset]``.
 
@@ -99,10 +107,12 @@ class DHChain:
             tool: ``(4, 4)`` end-effector pose in the last frame; default identity.
             joint_names: ``dof`` names; default ``joint1 ... jointN``.
             name: robot name.
+            velocity: ``(dof,)`` velocity limits (rad/s, m/s), ``>= 0``; ``None`` means none (``inf``).
 
         Raises:
             ValueError: a table that is not ``(dof, 4)``, non-finite numbers, bad joint types,
-                ``lower > upper``, or a base/tool that is not a rigid transform.
+                ``lower > upper``, a negative or NaN velocity limit, or a base/tool that is not a
+                rigid transform.
             TypeError: a bool or complex table, a ``modified`` that is not a bool, ``joint_names``
                 that is not a sequence of strings.
         """
@@ -131,6 +141,7 @@ class DHChain:
             modified=check.flag(modified, "modified"),
             joint_names=check.joint_names(joint_names, dof),
             name=name,
+            velocity=f(check.velocity(velocity, dof)),
         )
 
     @property

@@ -17,7 +17,8 @@ def load_robot(source, *, floating: bool = False) -> Robot:
     to); ``continuous`` joints are unlimited; a revolute or prismatic joint's ``<limit lower=
     upper=>`` limits it, each attribute 0 if absent (as urdfdom and Pinocchio read it). A
     revolute or prismatic joint without ``<limit>`` is unlimited: urdfdom (so Pinocchio and ROS)
-    rejects such a file, diffkin reads it (wheels are often written so). ``<mimic joint=
+    rejects such a file, diffkin reads it (wheels are often written so). ``<limit velocity=>``
+    gives :attr:`Robot.velocity` (rad/s, m/s; 0 or absent: ``inf``, none). ``<mimic joint=
     multiplier= offset=>`` makes a joint follow its source, ``q_j = multiplier * q_source +
     offset``, outside ``q``. A ``floating`` joint from the root link makes its child the
     floating root.
@@ -30,7 +31,8 @@ def load_robot(source, *, floating: bool = False) -> Robot:
     ``q1 - ref1 = c0 + c1 (q2 - ref2)``; a linear ``<equality><tendon>`` over fixed tendons makes the
     last joint of ``tendon1`` follow the others (MuJoCo's ``L1 - L1_0 = c0 + c1 (L2 - L2_0)``,
     ``L = sum coef_i q_i``); a free joint on a top-level body makes it the floating root. The world
-    body is the frame ``"world"``; angles in ``q`` and limits are radians.
+    body is the frame ``"world"``; angles in ``q`` and limits are radians. MJCF has no joint
+    velocity limits (``velocity``: ``inf``).
 
     Args:
         source: path to the file, or the XML text itself.

@@ -33,6 +33,9 @@ class PoEChain:
         joint_types: static string of ``"R"``/``"P"``.
         joint_names: static tuple of names.
         name: static name of the robot (informational).
+        velocity: ``(dof,)`` velocity limits ``|dq/dt| <= velocity`` (rad/s, m/s; ``inf``: none), the
+            default of :func:`diffkin.ik.step` (a URDF chain: the file's, as :class:`~diffkin.Robot`
+            reads them). The last field; built without it: ``inf`` per joint.
     """
 
     screws: jax.Array
@@ -43,6 +46,10 @@ class PoEChain:
     joint_types: str = static()
     joint_names: tuple[str, ...] = static(default=())
     name: str = static(default="")
+    velocity: jax.Array = None  # type: ignore[assignment]  # filled: check.no_velocity_limits
+
+    def _fill(self) -> dict:
+        return check.no_velocity_limits(self)
 
     @property
     def dof(self) -> int:
@@ -55,6 +62,7 @@ class PoEChain:
         check.leaf(self.home, "home", (4, 4), concrete)
         L = check.leaf(self.link_homes, "link_homes", (dof, 4, 4), concrete)
         lo, hi = check.limit_leaves(self, dof, concrete)
+        check.velocity_leaf(self, dof, concrete)
         if not concrete:
             return
         assert S is not None and L is not None  # concrete: check.leaf returned the values
@@ -81,6 +89,7 @@ class PoEChain:
         link_homes=None,
         joint_names=None,
         name: str = "",
+        velocity=None,
     ) -> PoEChain:
         """Build a chain from space-frame screws.
 
@@ -94,10 +103,12 @@ class PoEChain:
                 axis (revolute) or the previous link frame (prismatic), with identity rotation.
             joint_names: ``dof`` names; default ``joint1 ... jointN``.
             name: robot name.
+            velocity: ``(dof,)`` velocity limits (rad/s, m/s), ``>= 0``; ``None`` means none (``inf``).
 
         Raises:
             ValueError: screws that are not unit screws, a joint type that contradicts its screw,
-                a home pose that is not rigid, non-finite numbers, ``lower > upper``.
+                a home pose that is not rigid, non-finite numbers, ``lower > upper``, a negative or
+                NaN velocity limit.
         """
         S = check.float_array(screws, "screws", finite=False)
         if S.ndim != 2 or S.shape[1] != 6 or S.shape[0] == 0:
@@ -139,6 +150,7 @@ class PoEChain:
             joint_types=types,
             joint_names=check.joint_names(joint_names, dof),
             name=name,
+            velocity=f(check.velocity(velocity, dof)),
         )
 
     @property
@@ -211,4 +223,5 @@ def to_poe(chain: DHChain) -> PoEChain:
         joint_types=chain.joint_types,
         joint_names=chain.joint_names,
         name=chain.name,
+        velocity=chain.velocity,
     )

@@ -65,6 +65,11 @@ class Robot:
             coincide (:mod:`diffkin.models._loops`); ``loop_bodies``: static, the two bodies.
         dependent_home: ``(nd,)`` reference values of the dependent joints (solved from ``q``, not in
             it: ``sources`` index ``dof + d``); ``dependent_names``: static, their names.
+        velocity: ``(dof,)`` velocity limits of the actuated joints, ``|dq/dt| <= velocity`` (rad/s,
+            m/s; ``inf``: none), the default of :func:`diffkin.ik.step`: a URDF's ``<limit velocity=>``
+            (0 or absent: none); MJCF has none (MuJoCo limits positions, forces and controls, not joint
+            velocities). As with ``lower``/``upper``, a mimic joint's own limit is not read (its source's
+            holds). The last field; built without it: ``inf`` per joint.
     """
 
     joint_poses: jax.Array
@@ -90,6 +95,10 @@ class Robot:
     unknown_masses: tuple[str, ...] = static(default=())
     loop_bodies: tuple[tuple[int, int], ...] = static(default=())
     dependent_names: tuple[str, ...] = static(default=())
+    velocity: jax.Array = None  # type: ignore[assignment]  # filled: check.no_velocity_limits
+
+    def _fill(self) -> dict:
+        return check.no_velocity_limits(self)
 
     @property
     def dof(self) -> int:
@@ -138,6 +147,7 @@ class Robot:
         check.leaf(self.offsets, "offsets", (nj,), concrete)
         F = check.leaf(self.frame_poses, "frame_poses", (nf, 4, 4), concrete)
         lo, hi = check.limit_leaves(self, dof, concrete)
+        check.velocity_leaf(self, dof, concrete)
         m = check.leaf(self.masses, "masses", (nj + 1,), concrete)
         check.leaf(self.body_coms, "body_coms", (nj + 1, 3), concrete)
         if not isinstance(self.unknown_masses, tuple) or not all(isinstance(n, str) for n in self.unknown_masses):
@@ -324,6 +334,7 @@ class Robot:
             link_homes=jnp.stack(link_homes),
             lower=self.lower[jnp.asarray(sources)],
             upper=self.upper[jnp.asarray(sources)],
+            velocity=self.velocity[jnp.asarray(sources)],
             joint_types="".join(self.joint_types[j] for j in path),
             joint_names=tuple(self.joint_names[i] for i in sources),
             name=self.name,

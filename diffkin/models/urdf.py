@@ -63,6 +63,9 @@ def _parse_joint(el: ET.Element) -> JointSpec:
         upper = float(_xml.numbers(limit, "upper", 1, "0", f"{where} <limit>")[0])
         if lower > upper:
             raise ValueError(f"{where} <limit>: expected lower <= upper, got lower={lower}, upper={upper}")
+    velocity = np.inf
+    if kind_letter in ("R", "P") and limit is not None:
+        velocity = _velocity(limit, where)
     mimic = None
     mimic_el = el.find("mimic")
     if mimic_el is not None and kind_letter in ("R", "P"):
@@ -74,7 +77,22 @@ def _parse_joint(el: ET.Element) -> JointSpec:
             float(_xml.numbers(mimic_el, "multiplier", 1, "1", f"{where} <mimic>")[0]),
             float(_xml.numbers(mimic_el, "offset", 1, "0", f"{where} <mimic>")[0]),
         )
-    return JointSpec(name, kind_letter, parent.get("link", ""), child.get("link", ""), T, screw, lower, upper, mimic)
+    parent_link, child_link = parent.get("link", ""), child.get("link", "")
+    return JointSpec(name, kind_letter, parent_link, child_link, T, screw, lower, upper, mimic, velocity=velocity)
+
+
+def _velocity(limit: ET.Element, where: str) -> float:
+    """A ``<limit>``'s ``velocity`` (rad/s, m/s): ``inf`` when absent or 0.
+
+    urdfdom requires the attribute and Pinocchio copies it, 0 included; but 0 is how files without
+    velocity limits fill the required attribute (44 ``<limit>``s of example-robot-data: the double
+    pendulums', Kinova's, Romeo's), and read literally it would hold the joint still, so 0 means none (as
+    gazebo_ros2_control reads it).
+    """
+    v = float(_xml.numbers(limit, "velocity", 1, "0", f"{where} <limit>")[0])
+    if not v >= 0:
+        raise ValueError(f"{where} <limit> velocity: expected a limit >= 0 (rad/s or m/s), got {v}")
+    return np.inf if v == 0 else v
 
 
 def _read(source) -> ET.Element:

@@ -235,6 +235,9 @@ _SCALED = np.diag([2.0, 2.0, 2.0, 1.0])
         ({"d": np.zeros(7, complex)}, TypeError, r"^d: expected a real floating-point array, got dtype complex"),
         ({"a": [0.0] * 7}, TypeError, r"^a: expected an array, got list"),
         ({"theta_offset": None}, TypeError, r"^theta_offset: expected an array"),
+        ({"velocity": np.r_[np.ones(6), -1.0]}, ValueError, r"^velocity\[6\]: expected a limit >= 0"),
+        ({"velocity": np.full(7, np.nan)}, ValueError, r"^velocity: expected numbers, got NaN"),
+        ({"velocity": np.ones(6)}, ValueError, r"^velocity: expected shape \(7,\), got \(6,\)"),
     ],
 )
 def test_replace_and_direct_construction_validate_like_the_builder(changes, error, match):
@@ -244,6 +247,21 @@ def test_replace_and_direct_construction_validate_like_the_builder(changes, erro
     fields = {f: getattr(chain, f) for f in ("a", "alpha", "d", "theta_offset", "lower", "upper", "base", "tool")}
     with pytest.raises(error, match=match):
         dk.DHChain(**{**fields, "joint_types": chain.joint_types, **changes})
+
+
+def test_velocity_limits_of_chains_are_given_or_none():
+    """``velocity``: none (``inf``) unless given, through the builders, direct construction and ``to_poe``."""
+    table = np.zeros((2, 4))
+    assert np.all(np.isposinf(np.asarray(dk.DHChain.from_table(table).velocity)))
+    dh = dk.DHChain.from_table(table, velocity=[1.0, np.inf])
+    assert np.asarray(dh.velocity).tolist() == [1.0, np.inf] and dh.velocity.dtype == dh.lower.dtype
+    assert np.asarray(dk.to_poe(dh).velocity).tolist() == [1.0, np.inf]
+    fields = {f: getattr(dh, f) for f in ("a", "alpha", "d", "theta_offset", "lower", "upper", "base", "tool")}
+    assert np.all(np.isposinf(np.asarray(dk.DHChain(**fields, joint_types="RR").velocity)))
+    poe = dk.PoEChain.from_screws([[0, 0, 0, 0, 0, 1.0]], np.eye(4), velocity=[0.5])
+    assert float(poe.velocity[0]) == 0.5
+    with pytest.raises(ValueError, match=r"^velocity\[0\]: expected a limit >= 0"):
+        dk.PoEChain.from_screws([[0, 0, 0, 0, 0, 1.0]], np.eye(4), velocity=[-0.5])
 
 
 def test_replace_with_traced_values_checks_shapes_not_values():
@@ -275,7 +293,7 @@ def test_jax_rebuilding_is_not_validated():
     out = jax.vmap(dk.fk, in_axes=(0, None))(stacked, np.zeros(7))
     np.testing.assert_allclose(out[0], dk.fk(chain, np.zeros(7)))
     paths = [jax.tree_util.keystr(p) for p, _ in jax.tree_util.tree_flatten_with_path(chain)[0]]
-    assert paths[0] == ".a" and paths[-1] == ".tool"
+    assert paths[0] == ".a" and paths[-1] == ".velocity"  # the last field
 
 
 @pytest.mark.parametrize(

@@ -181,6 +181,26 @@ def test_limits_always_hold():
     assert np.any(np.isclose(np.abs(np.asarray(out.v)), VELOCITY))  # some velocity limits bind
 
 
+@jax.jit
+def _model_step(robot, q, target):
+    return dk.ik.step(robot, q, {"tip": target}, dt=DT)
+
+
+def test_the_model_s_velocity_limits_are_the_default():
+    """Without ``velocity``: the model's (a file's), concrete or traced; a URDF without them: none."""
+    rng = np.random.default_rng(4)
+    q, targets = jnp.asarray(rng.uniform(LOWER, UPPER, (64, 2))), jnp.asarray(rng.uniform(-1.5, 1.5, (64, 3)))
+    limited = ROBOT.replace(velocity=jnp.asarray(VELOCITY))
+    given = _arm_step(q, targets, jnp.asarray(VELOCITY))
+    assert np.any(np.isclose(np.abs(np.asarray(given.v)), VELOCITY))  # they bind
+    for out in (dk.ik.step(limited, q, {"tip": targets}, dt=DT), _model_step(limited, q, targets)):
+        np.testing.assert_allclose(out.v, given.v, rtol=1e-12, atol=1e-12)
+    assert np.all(np.isposinf(np.asarray(ROBOT.velocity)))  # the file gives none
+    np.testing.assert_allclose(
+        _model_step(ROBOT, q, targets).v, _arm_step(q, targets, jnp.full(2, jnp.inf)).v, rtol=1e-12, atol=1e-12
+    )
+
+
 def test_outside_the_limits():
     target = jnp.asarray([0.3, 0.0, 0.5])
     far, near = 2.0 + 0.1, 2.0 + 0.5 * VELOCITY[1] * DT  # j2 beyond its upper limit

@@ -1,5 +1,6 @@
 """Whole robots against Pinocchio: every frame and Jacobian of the URDFs of example-robot-data (centre of
-mass too), URDF limits as urdfdom reads them, the files that are rejected, and IK of a long serial path."""
+mass too), URDF limits (positions and velocities) as urdfdom reads them, the files that are rejected, and
+IK of a long serial path."""
 
 import glob
 import os
@@ -87,12 +88,15 @@ def test_every_frame_and_jacobian_matches_pinocchio(path):
     assert worst_pose < 1e-10 and worst_jac < 1e-10, (worst_pose, worst_jac)
     if robot.dof and np.sum(robot.masses) > 0:  # the centre of mass (eager: no compile per robot)
         assert _com_error(robot, model, data, q) < 1e-10
-    # the limits of the revolute and prismatic joints (continuous ones: (cos, sin) in Pinocchio)
+    # the limits of the revolute and prismatic joints (continuous ones: (cos, sin) in Pinocchio), and the
+    # velocity limits of every joint (a file's 0: Pinocchio's 0, none for diffkin)
     for i, name in enumerate(robot.joint_names):
         joint = model.joints[model.getJointId(name)]
         if joint.nq == 1:
             limits = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
             assert (float(robot.lower[i]), float(robot.upper[i])) == limits, name
+        velocity = model.velocityLimit[joint.idx_v]
+        assert float(robot.velocity[i]) == (np.inf if velocity == 0 else velocity), name
 
 
 @pytest.mark.skipif(not ERD, reason="example-robot-data is not installed")
@@ -124,13 +128,59 @@ def test_urdf_limit_attributes_as_pinocchio_reads_them(kind, attributes):
     assert (float(chain.lower[0]), float(chain.upper[0])) == (model.lowerPositionLimit[0], model.upperPositionLimit[0])
 
 
+@pytest.mark.skipif(not ERD, reason="example-robot-data is not installed")
+def test_panda_velocity_limits_are_pinocchio_s():
+    """The Panda's ``<limit velocity=>`` (rad/s, m/s for the finger), exactly Pinocchio's ``velocityLimit``
+    by joint name; the finger's mimic joint follows its source (its own limit is not read, as its range)."""
+    path = os.path.join(ERD, "panda_description/urdf/panda.urdf")
+    robot, model = dk.load_robot(path), pin.buildModelFromUrdf(path)
+    assert robot.joint_names[-1] == "panda_finger_joint1" and "panda_finger_joint2" in robot.mimic
+    by_name = {name: model.velocityLimit[model.joints[model.getJointId(name)].idx_v] for name in robot.joint_names}
+    assert dict(zip(robot.joint_names, np.asarray(robot.velocity).tolist(), strict=True)) == by_name
+    assert by_name["panda_joint1"] == 2.175 and by_name["panda_finger_joint1"] == 0.2
+    chain = dk.load_urdf(path, "panda_hand")
+    assert np.asarray(chain.velocity).tolist() == [by_name[name] for name in chain.joint_names]
+
+
+_VELOCITY_CASES = [
+    ("revolute", 'velocity="2.5"', 2.5),
+    ("continuous", 'velocity="2.5"', 2.5),
+    ("prismatic", 'velocity="0.25"', 0.25),
+    ("revolute", 'velocity="0"', np.inf),  # Pinocchio: 0 (the joint could not move)
+    ("continuous", None, np.inf),  # no <limit>: Pinocchio's inf too
+]
+
+
+@pytest.mark.parametrize("kind, attribute, expected", _VELOCITY_CASES)
+def test_urdf_velocity_attribute_as_pinocchio_reads_it_but_0_means_none(kind, attribute, expected):
+    """``<limit velocity=>`` as urdfdom and Pinocchio read it, except 0: none (``inf``), not a joint held still."""
+    limit = "" if attribute is None else f'<limit lower="-1" upper="1" effort="1" {attribute}/>'
+    urdf = f"""<robot name="r"><link name="a"/><link name="b"/>
+      <joint name="j" type="{kind}"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>{limit}</joint></robot>"""
+    robot, model = dk.load_robot(urdf), pin.buildModelFromXML(urdf)
+    assert float(robot.velocity[0]) == expected
+    assert model.velocityLimit[0] == (0.0 if attribute == 'velocity="0"' else expected)
+    assert float(dk.load_urdf(urdf).velocity[0]) == expected
+
+
+def test_urdf_negative_velocity_limit_is_rejected():
+    """A negative ``velocity`` is an error (Pinocchio: "min_velocity greater than max_velocity")."""
+    urdf = """<robot name="r"><link name="a"/><link name="b"/>
+      <joint name="j" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>
+        <limit lower="-1" upper="1" effort="1" velocity="-2"/></joint></robot>"""
+    with pytest.raises(ValueError, match=r"URDF joint 'j' <limit> velocity: expected a limit >= 0"):
+        dk.load_robot(urdf)
+    with pytest.raises(ValueError, match="min_velocity are greater than max_velocity"):
+        pin.buildModelFromXML(urdf)
+
+
 @pytest.mark.parametrize("kind", ["revolute", "prismatic"])
 def test_urdf_joint_without_limit_is_unlimited_where_urdfdom_rejects_it(kind):
     """A revolute or prismatic joint without ``<limit>`` loads, unlimited (urdfdom, so Pinocchio, rejects the file)."""
     urdf = f"""<robot name="r"><link name="a"/><link name="b"/>
       <joint name="j" type="{kind}"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/></joint></robot>"""
     robot = dk.load_robot(urdf)
-    assert (float(robot.lower[0]), float(robot.upper[0])) == (-np.inf, np.inf)
+    assert (float(robot.lower[0]), float(robot.upper[0]), float(robot.velocity[0])) == (-np.inf, np.inf, np.inf)
     with pytest.raises(ValueError, match="does not contain a valid URDF model"):
         pin.buildModelFromXML(urdf)
 

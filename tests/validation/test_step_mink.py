@@ -1,6 +1,7 @@
 """dk.ik.step against mink (MuJoCo's Jacobian, the daqp active-set QP solver) on the Panda arm of
 example-robot-data: the hand's position tracked with damping (so that the step is unique), position
-limits over the step (mink's ``ConfigurationLimit`` with gain 1) and velocity limits, in float64.
+limits over the step (mink's ``ConfigurationLimit`` with gain 1) and the URDF's velocity limits (diffkin
+reads them from the file, mink is given them), in float64.
 
 mink's frame task measures its error in the frame's own axes with the SE(3) log's Jacobian; the
 position task here is mink's ``Task`` with diffkin's error (world position, ``p - p_t``) and MuJoCo's
@@ -76,8 +77,8 @@ def _mink_v(q, target) -> np.ndarray:
 
 
 @jax.jit
-def _step(q, target):
-    return dk.ik.step(ROBOT, q, {"panda_hand": target}, dt=DT, velocity=jnp.asarray(VELOCITY), damping=DAMPING)
+def _step(q, target):  # the velocity limits: the URDF's, read by dk.load_robot (test_matches_mink checks them)
+    return dk.ik.step(ROBOT, q, {"panda_hand": target}, dt=DT, damping=DAMPING)
 
 
 def _cases():
@@ -92,6 +93,7 @@ def _cases():
 
 
 def test_matches_mink():
+    assert np.asarray(ROBOT.velocity).tolist() == VELOCITY.tolist()  # mink is given the file's limits
     q, targets = _cases()
     out = _step(jnp.asarray(q), jnp.asarray(targets))
     bound = 0
