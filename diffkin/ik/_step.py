@@ -14,7 +14,8 @@ limits: :attr:`diffkin.Robot.velocity`). When the bounds of a joint contradict e
 outside its limits than ``velocity * dt``), the joint moves back towards its range at its velocity
 limit; when the distance rows cannot all hold, the step is that of the rows relaxed by their least
 largest violation (:func:`diffkin.ik._qp.least_violation`, rows scaled to unit norm); both give
-``feasible=False``.
+``feasible=False``. With ``solve_base`` (a floating robot), ``v`` has six more entries, the root's body
+twist, without bounds: the columns of the root in the state of :mod:`diffkin.ik._problem`.
 """
 
 from __future__ import annotations
@@ -50,19 +51,24 @@ class Step(NamedTuple):
     """One velocity-IK step (a pytree); every field has the batch shape ``...`` of ``q`` and the targets.
 
     Attributes:
-        v: ``(..., dof)`` joint velocities (rad/s, m/s).
+        v: ``(..., dof)`` joint velocities (rad/s, m/s); with ``solve_base``, ``(..., 6 + dof)``: first the
+            root's body twist ``[v; w]`` (m/s and rad/s in the root's axes: the columns of
+            :func:`diffkin.jacobian`'s ``include_base=True``), then the joints'.
         q: ``(..., dof)`` ``q + v dt``, within ``[lower, upper]`` wherever ``feasible`` (rounding
             clipped away; locked joints held where they are).
         feasible: ``(...,)`` bool: every hard constraint (limits over the step, velocity limits, the
             linearised distances) could be met and is; ``False`` also for non-finite inputs.
         task_err: ``(...,)`` metres: the weighted task error left after the step to first order,
             ``|e - dt J v|`` (radians counting as ``ROT_WEIGHT`` m); ``finfo.max`` for non-finite inputs.
+        base: with ``solve_base``, ``(..., 4, 4)`` the root pose after the step, ``base exp(dt [v_root])``
+            (``v_root = v[..., :6]``, the root's body twist); else ``None``.
     """
 
     v: jax.Array
     q: jax.Array
     feasible: jax.Array
     task_err: jax.Array
+    base: jax.Array | None = None
 
 
 def step(
@@ -81,6 +87,7 @@ def step(
     avoid=None,
     damping=1e-6,
     base=None,
+    solve_base=False,
 ) -> Step:
     """One differential-IK step: the joint velocity that best moves the targets' errors to zero in
     ``dt / gain``, subject exactly to the joint limits over the step, the velocity limits and, with
@@ -110,6 +117,8 @@ def step(
             :data:`AVOID_REACH` of the margin) keeps ``d + dt (dd/dq) v >= margin``.
         damping: ``> 0``, ``(m/s)^2`` per ``(rad/s)^2``: the cost of ``|v|^2``.
         base: robots: ``(..., 4, 4)`` the root pose ``T_world_root`` (default identity).
+        solve_base: floating robots: the root moves too, by a body twist without limits (damped as the
+            joints), in ``Step.v`` and ``Step.base``.
 
     Returns:
         :class:`Step`.
@@ -125,6 +134,8 @@ def step(
         raise ValueError(f"q: expected shape (..., {model.dof}) for a {model.dof}-joint model, got {q.shape}")
     for name, value, strict in (("dt", dt, True), ("gain", gain, False), ("damping", damping, True)):
         _scalar(value, name, 0.0, strict)
+    if not isinstance(solve_base, bool):
+        raise TypeError(f"solve_base: expected True or False, got {solve_base!r}")
     if isinstance(locked, Mapping):
         raise TypeError("locked: dk.ik.step takes a sequence of joint names (they keep their values: v = 0)")
     if velocity is not None:
@@ -155,7 +166,7 @@ def step(
         locked=locked,
         rest=rest,
         secondary=None,
-        solve_base=False,
+        solve_base=solve_base,
         base=base,
     )
     dtype = p.dtype
@@ -247,22 +258,28 @@ def _step(
     locked = np.asarray(spec.locked)
     targets_only = spec._replace(constraints=())
     root = s.base
+    nb = 6 if spec.solve_base else 0  # the root's body twist: unbounded columns after the joints'
+    nv = dof + nb
+    state = x
+    if spec.solve_base:  # the state's root rows: p, then R row by row (diffkin.ik._problem.BASE_ROWS)
+        assert root is not None  # (prepare gives the root pose, identity by default, when it is solved)
+        state = jnp.concatenate([x, root[:, :3, 3].T, root[:, :3, :3].reshape(n, 9).T])
     problem = targets_only.problem(
         model,
         targets_only.bind(s.targets, ()),
-        rg.IDENTITY if root is None else rg.from_matrix(root),
+        rg.IDENTITY if root is None or spec.solve_base else rg.from_matrix(root),
         None,
         None,
     )
-    ev = problem.evaluate(x)  # r (m, P), J = de/d(-q) (m, dof, P)
+    ev = problem.evaluate(state)  # r (m, P), J = de/d(-x) (m, nv, P)
     u = gain * ev.r / dt
-    H = jnp.einsum("mip,mjp->ijp", ev.J, ev.J) + damping * jnp.eye(dof, dtype=dtype)[:, :, None]
+    H = jnp.einsum("mip,mjp->ijp", ev.J, ev.J) + damping * jnp.eye(nv, dtype=dtype)[:, :, None]
     g = -jnp.einsum("mip,mp->ip", ev.J, u)
     free = jnp.asarray(~locked)[:, None]
     if s.rest is not None:
         w2 = rest_weight**2
-        H = H + w2 * jnp.diag(jnp.where(free[:, 0], 1.0, 0.0).astype(dtype))[:, :, None]
-        g = g - w2 * jnp.where(free, gain * (s.rest.T - x) / dt, 0.0)
+        H = H + w2 * jnp.diag(_pad(jnp.where(free[:, 0], 1.0, 0.0).astype(dtype), nb, 0.0))[:, :, None]
+        g = g - w2 * _pad(jnp.where(free, gain * (s.rest.T - x) / dt, 0.0), nb, 0.0)
 
     # The box: position limits over the step and velocity limits; contradictory bounds fix the joint.
     if velocity is None:
@@ -277,21 +294,24 @@ def _step(
     value = jnp.where(conflict, jnp.clip(jnp.clip(0.0, p_lo, p_hi), -vel, vel), 0.0)  # (dof, P)
     value = jnp.broadcast_to(value, (dof, n))
     lo, hi = jnp.where(fixed, -jnp.inf, lo), jnp.where(fixed, jnp.inf, hi)
+    lo, hi = jnp.broadcast_to(lo, (dof, n)), jnp.broadcast_to(hi, (dof, n))
+    lo, hi, value = _pad(lo, nb, -jnp.inf), _pad(hi, nb, jnp.inf), _pad(value, nb, 0.0)
+    fixed_v = _pad(jnp.broadcast_to(fixed, (dof, n)), nb, False)  # (nv, P): the root is never fixed
     # Fixed joints eliminated: their rows of H the identity, v_i = value_i exactly.
-    both = fixed[:, None, :] | fixed[None, :, :]
-    g = g + jnp.einsum("ijp,jp->ip", jnp.where(fixed[None, :, :], H, 0.0), value)
-    eye = jnp.eye(dof, dtype=dtype)[:, :, None]
+    both = fixed_v[:, None, :] | fixed_v[None, :, :]
+    g = g + jnp.einsum("ijp,jp->ip", jnp.where(fixed_v[None, :, :], H, 0.0), value)
+    eye = jnp.eye(nv, dtype=dtype)[:, :, None]
     H = jnp.where(both, eye, H)
-    g = jnp.where(fixed, -value, g)
+    g = jnp.where(fixed_v, -value, g)
 
-    G = jnp.zeros((0, dof, n), dtype)
+    G = jnp.zeros((0, nv, n), dtype)
     h = jnp.zeros((0, n), dtype)
     on = jnp.zeros((0, n), bool)
     if spec.constraints:
         term = spec.constraints[0]
         avoid = s.data[0]
-        d, Jd = term.distances(Kinematics(problem, x), avoid, avoid.margin + AVOID_REACH)
-        Jd = jnp.where(fixed[None], 0.0, Jd)
+        d, Jd = term.distances(Kinematics(problem, state), avoid, avoid.margin + AVOID_REACH)
+        Jd = jnp.where(fixed_v[None], 0.0, Jd)
         h = avoid.margin - d - jnp.einsum("kip,ip->kp", Jd, value) * dt
         G = Jd * dt
         on = (d < avoid.margin + AVOID_REACH) & jnp.isfinite(d)
@@ -307,11 +327,13 @@ def _step(
         slack = jnp.where(rows_ok, 0.0, t + tol)
         qp = qp._replace(h=h - slack)
     v = _qp.solve(qp).v
-    v = jnp.where(fixed, value, v)
+    v = jnp.where(fixed_v, value, v)
     ok = s.valid & finite_q & jnp.all(jnp.isfinite(v), axis=0)
+    if s.base_ok is not None:
+        ok = ok & s.base_ok
     v = jnp.where(ok, v, 0.0)
     in_box = ~jnp.any(conflict, axis=0)
-    q_new = x + v * dt
+    q_new = x + v[:dof] * dt
     q_new = jnp.where(free & in_box, jnp.clip(q_new, s.lower[:, None], s.upper[:, None]), q_new)
     q_new = jnp.where(fixed & ~conflict, x, q_new)  # locked joints exactly where they were
     if spec.constraints:
@@ -320,9 +342,23 @@ def _step(
     err = jnp.sqrt(jnp.sum((ev.r - dt * jnp.einsum("mip,ip->mp", ev.J, v)) ** 2, axis=0))
     big = jnp.finfo(dtype).max
     shaped = lambda a, *tail: a.reshape(batch + tail)  # noqa: E731
+    moved, v_out = None, v
+    if spec.solve_base:  # the root moved by its body twist over the step; v: the twist first (dk.jacobian's order)
+        twist = v[dof:] * dt
+        T = rg.compose(rg.from_matrix(root), rg.screw_exp(tuple(twist[:3]), tuple(twist[3:]), jnp.ones((), dtype)))
+        moved = shaped(rg.to_matrix(T, (n,), dtype), 4, 4)
+        v_out = jnp.concatenate([v[dof:], v[:dof]])
     return Step(
-        v=shaped(v.T, dof),
+        v=shaped(v_out.T, nv),
         q=shaped(jnp.where(finite_q, q_new, given).T, dof),
         feasible=shaped(ok & in_box & rows_ok),
         task_err=shaped(jnp.where(ok, jnp.minimum(err, big), big)),
+        base=moved,
     )
+
+
+def _pad(a: jax.Array, rows: int, fill) -> jax.Array:
+    """``a`` ``(k, ...)`` with ``rows`` more rows of ``fill`` (the root's columns of the state)."""
+    if not rows:
+        return a
+    return jnp.concatenate([a, jnp.full((rows,) + a.shape[1:], fill, a.dtype)])

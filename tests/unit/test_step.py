@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import scipy.linalg
 from _shapes import planar_capsule_arm
 
 import diffkin as dk
@@ -268,6 +269,28 @@ def test_batches_jit_and_vmap():
     np.testing.assert_allclose(shared.v[0, 0], batched.v[0, 0], atol=1e-12)
 
 
+def test_solve_base_moves_the_root_by_a_body_twist():
+    """A floating robot with ``solve_base``: ``v`` is the root's body twist then the joints' velocities,
+    the damped least-squares step of ``dk.jacobian(..., include_base=True)`` off the limits; ``base`` is
+    the root moved by ``exp`` of that twist over ``dt``."""
+    floating = dk.load_robot(URDF, floating=True)
+    q = jnp.asarray([0.3, 0.8])
+    c, s = np.cos(0.4), np.sin(0.4)
+    T = jnp.asarray([[c, -s, 0.0, 0.1], [s, c, 0.0, -0.2], [0.0, 0.0, 1.0, 0.3], [0.0, 0.0, 0.0, 1.0]])
+    target = dk.fk(floating, q, "tip", base=T)[:3, 3] + jnp.asarray([0.002, 0.001, -0.001])
+    out = dk.ik.step(floating, q, {"tip": target}, dt=DT, base=T, solve_base=True, damping=1e-3)
+    J = np.asarray(dk.jacobian(floating, q, "tip", base=T, include_base=True))[:3]  # (3, 6 + 2)
+    e = np.asarray(target - dk.fk(floating, q, "tip", base=T)[:3, 3])
+    v_ref = np.linalg.solve(J.T @ J + 1e-3 * np.eye(8), J.T @ e / DT)
+    assert out.v.shape == (8,) and out.base.shape == (4, 4) and bool(out.feasible)
+    np.testing.assert_allclose(out.v, v_ref, atol=1e-9 * (1 + np.abs(v_ref).max()))  # the QP's accuracy
+    np.testing.assert_allclose(out.q, q + out.v[6:] * DT, atol=1e-15)
+    twist = np.zeros((4, 4))
+    twist[:3, :3], twist[:3, 3] = np.asarray(dk.se3.skew(out.v[3:6] * DT)), out.v[:3] * DT
+    np.testing.assert_allclose(out.base, np.asarray(T) @ scipy.linalg.expm(twist), atol=1e-12)
+    assert dk.ik.step(ROBOT, q, {"tip": target}, dt=DT).base is None
+
+
 @pytest.mark.parametrize(
     ("kwargs", "error", "field"),
     [
@@ -283,6 +306,9 @@ def test_batches_jit_and_vmap():
         ({"weights": {"rest": -1.0}}, ValueError, "weights['rest']:"),
         ({"targets": {"tip": jnp.zeros((4, 4, 4))}}, ValueError, "target"),
         ({"model": "arm"}, TypeError, "model:"),
+        ({"solve_base": 1}, TypeError, "solve_base:"),
+        ({"solve_base": True}, ValueError, "solve_base:"),  # a fixed root
+        ({"model": CHAIN, "q": jnp.zeros(3), "targets": jnp.zeros(3), "solve_base": True}, ValueError, "solve_base:"),
     ],
 )
 def test_bad_input(kwargs, error, field):
