@@ -10,12 +10,13 @@ reference configuration, MuJoCo's ``qpos0``). The robot keeps every joint in its
   loop's rows are rank-deficient, so the step is the least-squares one, lightly damped), without
   gradients, while ``q`` moves from the reference configuration to its value in a few stages: the
   solution follows the mechanism's branch (assembly mode) of the reference configuration;
-- one last step with gradients, so that the derivatives are those of the implicit function:
+- one last step at ``q`` with gradients, so that the derivatives are those of the implicit function:
   ``dq_dep/dq = -pinv(C_dep) C_q`` (``C`` the residual's Jacobian).
 
 The pass's Jacobian columns then fold each dependent column into the columns of ``q`` through that
 ``dq_dep/dq``. Where a loop cannot close (a ``q`` out of the mechanism's range) the solve returns the
-least-squares nearest, and the pass's ``loop_gap`` (``dk.loop_closure``) says by how much it stays open.
+least-squares nearest, and the pass's ``loop_gap`` (``dk.loop_closure``, IK's success) says by how much
+it stays open: measured (:func:`gap`) on the poses the pass returns, after that last step.
 
 Which joints are dependent (:func:`close`): per robot, among the joints on the loops' paths (from
 each body up to their common ancestor) that no actuator drives (directly or through a fixed tendon)
@@ -55,14 +56,19 @@ class Connect:
     point2: np.ndarray | None = None
 
 
-def _points(robot, bodies, points, entries: list, base=rg.IDENTITY):
-    """The pass at the extended joint values ``entries`` and the world positions of each loop's two points."""
-    kin = robot.tree_pass(entries, base)
+def _world(robot, bodies: list[rg.Rigid]) -> list[tuple[rg.Vec3, rg.Vec3]]:
+    """Per loop, the world positions of its two points, given every body's world pose ``bodies``."""
     world = []
-    for (a, b), (pa, pb) in zip(bodies, points, strict=True):
-        Ta, Tb = kin.bodies[a], kin.bodies[b]
+    for (a, b), (pa, pb) in zip(robot.loop_bodies, _loop_points(robot), strict=True):
+        Ta, Tb = bodies[a], bodies[b]
         world.append((rg.vadd(rg.rotate(Ta.R, pa), Ta.p), rg.vadd(rg.rotate(Tb.R, pb), Tb.p)))
-    return kin, world
+    return world
+
+
+def _points(robot, entries: list):
+    """The pass at the extended joint values ``entries`` and the world positions of each loop's two points."""
+    kin = robot.tree_pass(entries)
+    return kin, _world(robot, kin.bodies)
 
 
 def _jacobian(robot, kin, world, columns: range) -> list[list]:
@@ -92,7 +98,7 @@ def _array(rows: list[list], shape, dtype) -> jax.Array:
 def _step(robot, q: list, dep: jax.Array, shape, dtype):
     """One Gauss-Newton step from ``dep`` ``(..., nd)``: the new values, and the pass and points at ``dep``."""
     dof, nd = robot.dof, len(robot.dependent_names)
-    kin, world = _points(robot, robot.loop_bodies, _loop_points(robot), list(q) + [dep[..., d] for d in range(nd)])
+    kin, world = _points(robot, list(q) + [dep[..., d] for d in range(nd)])
     r = _array([[e] for pa, pb in world for e in rg.vadd(pa, rg.scale(-1.0, pb))], shape, dtype)[..., 0]
     J = _array(_jacobian(robot, kin, world, range(dof, dof + nd)), shape, dtype)
     A = jnp.einsum("...ki,...kj->...ij", J, J)
@@ -113,9 +119,10 @@ def _loop_points(robot) -> list[tuple[rg.Vec3, rg.Vec3]]:
     return [(rg.vector(P[k, 0]), rg.vector(P[k, 1])) for k in range(len(robot.loop_bodies))]
 
 
-def solve(robot, q: list) -> tuple[list, tuple[list[list[rg.Entry]], jax.Array]]:
-    """The dependent joints' values at ``q`` (``dof`` entries), with the implicit function's derivatives,
-    and ``(G, residual)``: ``G[d][i] = d q_dep_d / d q_i`` (entries) and the largest anchor gap (metres)."""
+def solve(robot, q: list) -> tuple[list, list[list[rg.Entry]]]:
+    """The dependent joints' values at ``q`` (``dof`` entries), with the implicit function's derivatives
+    ``G[d][i] = d q_dep_d / d q_i`` (entries). How far the loops stay open: :func:`gap`, on the pass at
+    ``q`` and these values."""
     dof, nd = robot.dof, len(robot.dependent_names)
     arrays = [e for e in q if not isinstance(e, float)]
     shape = jnp.broadcast_shapes(*(jnp.shape(e) for e in arrays)) if arrays else ()
@@ -133,12 +140,17 @@ def solve(robot, q: list) -> tuple[list, tuple[list[list[rg.Entry]], jax.Array]]
 
     dep = jax.lax.fori_loop(0, (STAGES + 1) * STEPS_PER_STAGE, stage, home)  # (a last stage at q itself)
     dep = jax.lax.stop_gradient(dep)
-    dep, kin, world, J_dep, A = _step(robot, q, dep, shape, dtype)  # the last step: with gradients
+    dep, kin, world, J_dep, A = _step(robot, q, dep, shape, dtype)  # the last step: at q, with gradients
     C_q = _array(_jacobian(robot, kin, world, range(dof)), shape, dtype)
     G = -jnp.linalg.solve(A, jnp.einsum("...ki,...kj->...ij", J_dep, C_q))  # (..., nd, dof)
-    gaps = [rg.vadd(pa, rg.scale(-1.0, pb)) for pa, pb in world]
-    gap = jnp.max(jnp.stack([jnp.broadcast_to(_distance(g), shape).astype(dtype) for g in gaps]), axis=0)
-    return [dep[..., d] for d in range(nd)], ([[G[..., d, i] for i in range(dof)] for d in range(nd)], gap)
+    return [dep[..., d] for d in range(nd)], [[G[..., d, i] for i in range(dof)] for d in range(nd)]
+
+
+def gap(robot, kin) -> jax.Array:
+    """The largest distance between a loop's two points (metres) in the pass ``kin`` (``Robot.tree_pass`` at
+    ``q`` and the solved dependent joints: the poses the caller returns); ``inf`` where one is not finite."""
+    gaps = jnp.broadcast_arrays(*(_distance(rg.vadd(pa, rg.scale(-1.0, pb))) for pa, pb in _world(robot, kin.bodies)))
+    return jnp.max(jnp.stack(gaps), axis=0)
 
 
 def close(robot, connects: list[Connect], passive: set[str], stiff: set[str], where: str = "MJCF"):
@@ -228,7 +240,7 @@ def _generic_jacobian(robot, q_ref: np.ndarray, free: list[int]) -> np.ndarray:
     0.05 (fixed seed), then the loops closed again by least-squares steps of the ``free`` entries."""
     q = q_ref + np.random.default_rng(0).uniform(-0.05, 0.05, q_ref.shape)
     for _ in range(30):
-        kin, world = _points(robot, robot.loop_bodies, _loop_points(robot), [jnp.asarray(x) for x in q])
+        kin, world = _points(robot, [jnp.asarray(x) for x in q])
         r = np.array([float(e) for pa, pb in world for e in rg.vadd(pa, rg.scale(-1.0, pb))])
         C = np.asarray(_array(_jacobian(robot, kin, world, range(robot.dof)), (), jnp.result_type(float)), np.float64)
         if np.abs(r).max() < 1e-13:

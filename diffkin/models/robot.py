@@ -223,9 +223,9 @@ class Robot:
         """
         if not self.loop_bodies:
             return self.tree_pass(q, base)
-        dependent, (fold, gap) = _loops.solve(self, list(q))
+        dependent, fold = _loops.solve(self, list(q))
         kin = self.tree_pass(list(q) + dependent, base)
-        kin.dependent, kin.fold, kin.loop_gap = dependent, fold, gap
+        kin.dependent, kin.fold, kin.loop_gap = dependent, fold, _loops.gap(self, kin)  # on these very poses
         return kin
 
     def tree_pass(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> RobotPass:

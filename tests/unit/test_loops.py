@@ -164,6 +164,21 @@ def test_a_loop_that_cannot_close_says_so():
     # (IK counts an open loop as no success: tests/validation/test_loops_validation.py, on the 2F-85)
 
 
+def test_the_gap_is_the_one_of_the_returned_poses():
+    """Open or closed, the gap ``loop_closure`` reports is the pin's mismatch between the coupler's and the rocker's
+    poses ``link_poses`` returns at the same ``q`` (the pin in each body: at (0.1, 0.2) from the crank's tip in
+    the coupler; where the coupler puts it at the reference, (0.4, 0.2), in the rocker pivoted at (0.25, 0)).
+    The crank 0.3 long: it cannot close half a turn away (issue 56)."""
+    robot = dk.load_robot(FOUR_BAR.replace('pos=".1 0 0"', 'pos=".3 0 0"', 1))
+    theta = np.random.default_rng(4).uniform(-20.0, 20.0, (24, 1))
+    _, gap = dk.loop_closure(robot, theta)
+    T = np.asarray(dk.link_poses(robot, theta))
+    coupler, rocker = (T[:, robot.frame_names.index(name)] for name in ("coupler", "rocker"))
+    mismatch = np.linalg.norm(coupler @ [0.1, 0.2, 0, 1] - rocker @ [0.15, 0.2, 0, 1], axis=-1)
+    assert (mismatch > 1e-3).sum() >= 4 and (mismatch < 1e-12).sum() >= 4  # open and closed among them
+    np.testing.assert_allclose(np.asarray(gap), mismatch, rtol=0, atol=1e-12)
+
+
 def test_a_non_finite_crank_angle_leaves_the_loop_open(four_bar):
     """NaN and infinite ``q`` cannot close a loop: the gap is infinite, never the 0 of a closed one (issue 56)."""
     theta = jnp.asarray([[np.nan], [np.inf], [-np.inf], [0.0]])
