@@ -9,7 +9,13 @@ reference configuration, MuJoCo's ``qpos0``). The robot keeps every joint in its
 - Gauss-Newton steps on the loops' residual ``r = p_a - p_b`` (stacked, ``3 * loops`` rows; a planar
   loop's rows are rank-deficient, so the step is the least-squares one, lightly damped), without
   gradients, while ``q`` moves from the reference configuration to its value in a few stages: the
-  solution follows the mechanism's branch (assembly mode) of the reference configuration;
+  solution follows the mechanism's branch (assembly mode) of the reference configuration. An unlimited
+  hinge (no limits, every joint it drives revolute by a whole multiple of it) places the bodies by its
+  value modulo a turn only: it is first moved by whole turns to within half a turn of the reference, so
+  that a crank turned any number of times is followed over at most half a turn, the shorter way round,
+  and closes on its branch (a hinge the loops keep from turning fully whose range reaches more than half
+  a turn from the reference on one side needs its limits given: a limited joint is followed along the
+  straight path inside them);
 - one last step at ``q`` with gradients, so that the derivatives are those of the implicit function:
   ``dq_dep/dq = -pinv(C_dep) C_q`` (``C`` the residual's Jacobian).
 
@@ -35,8 +41,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin import _rigid as rg
+from diffkin._static import host
 from diffkin.models import _ball
 
+TURN = 2 * np.pi
 STAGES, STEPS_PER_STAGE = 8, 3  # q moved from the reference to its value in 8 stages, 3 Gauss-Newton steps each
 DAMPING = 1e-10  # relative to the trace of J^T J: keeps a step finite where the loops leave a joint free
 # (a ball joint's spin about a rod's axis): the least-squares step of least norm there
@@ -132,13 +140,14 @@ def solve(robot, q: list) -> tuple[list, list[list[rg.Entry]]]:
     frozen_robot = jax.lax.stop_gradient(robot)
     own = {robot.sources[j]: j for j in range(len(robot.sources)) if robot.tree_joints[j] in robot.joint_names}
     ref = [-frozen_robot.offsets[own[i]] for i in range(dof)]  # q at the reference configuration (qpos0)
+    goal = [_one_turn(e, r_i, p) for e, r_i, p in zip(frozen, ref, _periodic(robot), strict=True)]
 
-    def stage(k, x):  # Newton steps along q_ref -> q: the branch of the reference configuration, followed
+    def stage(k, x):  # Newton steps along q_ref -> goal: the branch of the reference configuration, followed
         t = jnp.minimum((k // STEPS_PER_STAGE + 1) / STAGES, 1.0)
-        q_t = [rg.add(r_i, rg.mul(t, rg.add(e, rg.mul(-1.0, r_i)))) for r_i, e in zip(ref, frozen, strict=True)]
+        q_t = [rg.add(r_i, rg.mul(t, rg.add(e, rg.mul(-1.0, r_i)))) for r_i, e in zip(ref, goal, strict=True)]
         return _step(frozen_robot, q_t, x, shape, dtype)[0]
 
-    dep = jax.lax.fori_loop(0, (STAGES + 1) * STEPS_PER_STAGE, stage, home)  # (a last stage at q itself)
+    dep = jax.lax.fori_loop(0, (STAGES + 1) * STEPS_PER_STAGE, stage, home)  # (a last stage at the goal itself)
     dep = jax.lax.stop_gradient(dep)
     dep, kin, world, J_dep, A = _step(robot, q, dep, shape, dtype)  # the last step: at q, with gradients
     C_q = _array(_jacobian(robot, kin, world, range(dof)), shape, dtype)
@@ -151,6 +160,33 @@ def gap(robot, kin) -> jax.Array:
     ``q`` and the solved dependent joints: the poses the caller returns); ``inf`` where one is not finite."""
     gaps = jnp.broadcast_arrays(*(_distance(rg.vadd(pa, rg.scale(-1.0, pb))) for pa, pb in _world(robot, kin.bodies)))
     return jnp.max(jnp.stack(gaps), axis=0)
+
+
+def _periodic(robot) -> list[bool | jax.Array]:
+    """Per entry of ``q``, whether it is an unlimited hinge: no limits, and every joint it drives revolute with a
+    whole-number multiplier, so that only its value modulo a turn places the bodies (concrete numbers: a bool)."""
+    lower, upper, m = (host(x) for x in (robot.lower, robot.upper, robot.multipliers))
+    concrete = all(isinstance(x, np.ndarray) for x in (lower, upper, m))
+    xp = np if concrete else jnp
+    periodic: list[bool | jax.Array] = []
+    for i in range(robot.dof):
+        driven = np.asarray([j for j, s in enumerate(robot.sources) if s == i], np.int64)
+        if any(robot.joint_types[j] != "R" for j in driven):
+            periodic.append(False)
+            continue
+        whole = xp.all(m[driven] == xp.round(m[driven]))
+        unlimited = (lower[i] == -xp.inf) & (upper[i] == xp.inf) & whole
+        periodic.append(bool(unlimited) if concrete else unlimited)
+    return periodic
+
+
+def _one_turn(value: rg.Entry, ref: rg.Entry, periodic: bool | jax.Array) -> rg.Entry:
+    """``value`` moved by whole turns to within half a turn of ``ref`` where ``periodic`` (see :func:`_periodic`)."""
+    if periodic is False:
+        return value
+    d = rg.add(value, rg.mul(-1.0, ref))
+    reduced = rg.add(ref, d - TURN * jnp.round(d / TURN))
+    return reduced if periodic is True else jnp.where(periodic, reduced, value)
 
 
 def close(robot, connects: list[Connect], passive: set[str], stiff: set[str], where: str = "MJCF"):

@@ -3,6 +3,7 @@ four-bar's closed-form position analysis, closure, implicit-function derivatives
 the gap reported where the loop cannot close, and loading errors (the Robotiq 2F-85 and Cassie against
 MuJoCo: ``tests/validation/test_loops_validation.py``)."""
 
+import dataclasses
 import os
 import warnings
 
@@ -10,10 +11,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _fuzzing import FUZZ, finite_floats
 from _mjcf import WELDED_ARMS, mjcf
 from _paths import DATA
+from hypothesis import example, given
+from hypothesis import strategies as st
 
 import diffkin as dk
+from diffkin.models import _loops
 
 # A crank-rocker: ground pivots at (0, 0) and (0.25, 0); crank 0.1; the coupler's point (0.1, 0.2) (in the
 # coupler, from the crank's tip) pinned to the rocker, whose length is that point's distance from its pivot at
@@ -88,6 +93,39 @@ def test_the_coupler_and_rocker_are_solved_from_the_crank(four_bar, solved):
     pin_coupler = poses[:, 0] @ np.array([0.1, 0.2, 0, 1])
     pin_rocker = poses[:, 1] @ np.array([-0.05, 0.2, 0, 1])
     np.testing.assert_allclose(pin_coupler, pin_rocker, rtol=0, atol=1e-12)
+
+
+@FUZZ
+@given(st.lists(finite_floats(-200.0, 200.0), min_size=1, max_size=N))
+@example([10.07, -8.78, 13.07, 15.07])  # (issue 56: the other assembly mode, or open by 1.2 m and 3.3 m)
+def test_the_crank_keeps_the_reference_branch_over_many_turns(solved, theta):
+    """The crank turns fully (Grashof): at any angle, however many turns from the reference, the loop closes in
+    the reference's assembly mode (the closed form's), as the linkage does when it is turned there (issue 56)."""
+    theta = np.asarray(theta)
+    dependent, gap = (np.asarray(x)[: len(theta)] for x in solved(_batch(theta))[:2])
+    assert gap.max() < 1e-12
+    coupler, rocker = _closed_form(theta)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (dependent[:, 0] - coupler))), 0.0, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (dependent[:, 1] - rocker))), 0.0, rtol=0, atol=1e-10)
+
+
+def test_a_four_bar_passed_as_an_argument_keeps_its_branch_too(four_bar):
+    """A robot traced by ``jit`` (its limits and multipliers unknown when traced) finds its hinge unlimited all
+    the same: many turns from the reference, the same branch."""
+    theta = np.array([13.07, -8.78, 100.5])
+    dependent, gap = (np.asarray(x) for x in jax.jit(dk.loop_closure)(four_bar, theta[:, None]))
+    assert gap.max() < 1e-12
+    coupler, rocker = _closed_form(theta)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (dependent - np.stack([coupler, rocker], -1)))), 0.0, atol=1e-10)
+
+
+def test_only_unlimited_hinges_are_turned_back_by_whole_turns(four_bar):
+    """The crank (no limits) is moved by whole turns before the staged solve; a limited joint, or a hinge that
+    turns a joint by half its value (a turn of it is not a turn of the joint), is followed as it is."""
+    assert _loops._periodic(four_bar) == [True]
+    limited = dataclasses.replace(four_bar, lower=jnp.asarray([-20.0]), upper=jnp.asarray([20.0]))
+    half = dataclasses.replace(four_bar, multipliers=jnp.asarray([0.5, 1.0, 1.0]))
+    assert _loops._periodic(limited) == [False] and _loops._periodic(half) == [False]
 
 
 def test_a_connect_between_sites_is_the_same_loop(solved):
