@@ -41,7 +41,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin import _rigid as rg
-from diffkin._static import host
+from diffkin._static import ModelKey, combine, host, partition, traced_only
+from diffkin._xla import _top_level
 from diffkin.models import _ball
 
 TURN = 2 * np.pi
@@ -130,14 +131,36 @@ def _loop_points(robot) -> list[tuple[rg.Vec3, rg.Vec3]]:
 def solve(robot, q: list) -> tuple[list, list[list[rg.Entry]]]:
     """The dependent joints' values at ``q`` (``dof`` entries), with the implicit function's derivatives
     ``G[d][i] = d q_dep_d / d q_i`` (entries). How far the loops stay open: :func:`gap`, on the pass at
-    ``q`` and these values."""
+    ``q`` and these values.
+
+    Called outside any trace (an eager ``dk.fk``), the solve runs compiled, once per model (its
+    :class:`~diffkin._static.ModelKey`: equal models share it) and shapes of ``q`` (``_compiled``): run op by
+    op, its Gauss-Newton loop was lowered and compiled again at every call. Inside a transformation it is
+    traced into the caller's program as it is."""
+    if not _top_level(robot, q):
+        return _solve(robot, q)
+    static, traced = partition(robot)
+    floats = tuple(e if isinstance(e, float) else None for e in q)  # Python floats fold, as in a trace
+    return _compiled(traced, [None if isinstance(e, float) else e for e in q], static=static, floats=floats)
+
+
+def _solve_keyed(traced: tuple, arrays: list, *, static: ModelKey, floats: tuple) -> tuple[list, list]:
+    """:func:`_solve` of the model ``combine(static, traced)`` at ``q``: ``arrays`` where ``floats`` is ``None``."""
+    return _solve(combine(static, traced), [a if f is None else f for a, f in zip(arrays, floats, strict=True)])
+
+
+_compiled = jax.jit(_solve_keyed, static_argnames=("static", "floats"))
+
+
+def _solve(robot, q: list) -> tuple[list, list[list[rg.Entry]]]:
+    """:func:`solve`, traced where it is called."""
     dof, nd = robot.dof, len(robot.dependent_names)
     arrays = [e for e in q if not isinstance(e, float)]
     shape = jnp.broadcast_shapes(*(jnp.shape(e) for e in arrays)) if arrays else ()
     dtype = jnp.result_type(*arrays, robot.loop_points) if arrays else jnp.result_type(robot.loop_points)
     home = jnp.broadcast_to(jnp.asarray(robot.dependent_home, dtype), shape + (nd,))
     frozen = [jax.lax.stop_gradient(e) if not isinstance(e, float) else e for e in q]
-    frozen_robot = jax.lax.stop_gradient(robot)
+    frozen_robot = traced_only(jax.lax.stop_gradient, robot)  # (concrete numbers stay foldable)
     own = {robot.sources[j]: j for j in range(len(robot.sources)) if robot.tree_joints[j] in robot.joint_names}
     ref = [-frozen_robot.offsets[own[i]] for i in range(dof)]  # q at the reference configuration (qpos0)
     goal = [_one_turn(e, r_i, p) for e, r_i, p in zip(frozen, ref, _periodic(robot), strict=True)]
