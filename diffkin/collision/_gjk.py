@@ -160,7 +160,13 @@ def _gjk(a, b, dtype) -> tuple[jax.Array, jax.Array, jax.Array]:
         xx = _dot(x, x)
         Y = Ya - Yb
         scale = jnp.maximum(jnp.max(jnp.where(mask, _dot(Y, Y), 0.0), axis=-1), _dot(w, w))
-        done = done | (xx - _dot(x, w) <= tol * xx) | (xx <= (eps * 16) ** 2 * scale)
+        # converged: the gap between the upper bound |x|^2 and x.w within the tolerance, or within its
+        # rounding (x is a difference of points of size |p|, so off by ~eps |p|: in float32 a relative
+        # 1e-6 is below that for shapes near each other, and the batch would take every step of STEPS
+        # for such a pair without moving it)
+        size = jnp.max(jnp.abs(jnp.concatenate([Ya, Yb, wa[..., None, :], wb[..., None, :]], axis=-2)), axis=(-2, -1))
+        rounding = 16 * eps * size * jnp.sqrt(_dot(w, w))
+        done = done | (xx - _dot(x, w) <= tol * xx + rounding) | (xx <= (eps * 16) ** 2 * scale)
         # the points in use first (at most 3), then the new point in front of them
         order = jnp.argsort(~mask, axis=-1, stable=True)[..., :3, None]
         Ya_new = jnp.concatenate([wa[..., None, :], jnp.take_along_axis(Ya, order, axis=-2)], axis=-2)
