@@ -257,7 +257,7 @@ class Problem(NamedTuple):
     def defers(self) -> bool:
         """Whether a term is deferred: its rows cost more than every other term's together (the
         clearance), so a search may first iterate without it (:meth:`undeferred`) and check it after
-        (:meth:`deferred_met`)."""
+        (:meth:`deferred_slack`)."""
         return any(t.deferred for t in self.terms)
 
     def undeferred(self) -> Problem:
@@ -265,11 +265,12 @@ class Problem(NamedTuple):
         keep = [i for i, t in enumerate(self.terms) if not t.deferred]
         return self._replace(terms=tuple(self.terms[i] for i in keep), bound=tuple(self.bound[i] for i in keep))
 
-    def deferred_met(self, x: jax.Array) -> jax.Array:
-        """``(P,)`` bool: every deferred term holds at ``x`` (``met(kin, bound)``, exactly)."""
+    def deferred_slack(self, x: jax.Array) -> jax.Array:
+        """``(P,)`` the least slack of the deferred terms at ``x`` (``slack(kin, bound)``): every one holds
+        where it is ``>= 0``."""
         kin = Kinematics(self, x)
-        met = [cast(Constraint, t).met(kin, b) for t, b in zip(self.terms, self.bound, strict=True) if t.deferred]
-        return jnp.all(jnp.stack(met), axis=0)
+        slack = [cast(Constraint, t).slack(kin, b) for t, b in zip(self.terms, self.bound, strict=True) if t.deferred]
+        return jnp.min(jnp.stack(slack), axis=0)
 
     def padded(self, x: jax.Array, ev: Eval, met: jax.Array) -> Eval:
         """The evaluation ``ev`` of :meth:`undeferred` at ``x`` as one of this problem, without computing

@@ -7,7 +7,7 @@ as ``(copies, targets, dof)`` and enter the flat layout in :func:`_run_from` onl
 
 A *problem* (:class:`diffkin.ik._problem.Problem`) provides ``project(x)``, ``retract(x, dx)``,
 ``evaluate(x) -> Eval``, ``residual(x) -> Entries`` (the same, not yet computed into arrays),
-``screen_cost(x)`` and, for terms it may defer (``defers``), ``undeferred()``, ``deferred_met(x)``
+``screen_cost(x)`` and, for terms it may defer (``defers``), ``undeferred()``, ``deferred_slack(x)``
 and ``padded(x, ev, met)``. The search builds one with
 ``build(idx, copies)`` for the targets ``idx``, each repeated ``copies`` times.
 """
@@ -27,6 +27,10 @@ from diffkin.ik import _uniform
 from diffkin.ik._problem import Eval, settle_choosing
 
 GROUP = 4  # seeds per target in a round
+# Seeds per target in a later round without the deferred terms: their iterations cost ~1/30 of one
+# with them, and every seed that reaches the pose is checked (a narrow clear branch is found by
+# many cheap seeds, not by a few expensive ones).
+_DEFERRED_GROUP = 4 * GROUP
 # Rounds after the first run only for the targets still unsolved, packed into chunks of
 # max(n / 32, 8) targets (one compiled loop serves every later round, and small chunks keep its
 # iterations cheap).
@@ -52,12 +56,19 @@ class Seeds(NamedTuple):
 
 
 class Best(NamedTuple):
-    """The best seed of every target (leaves end with the target axis)."""
+    """The best seed of every target (leaves end with the target axis).
+
+    ``slack``: the deferred terms' least slack (the clearance less the margin: met where ``>= 0``) at
+    ``x`` where ``x`` is on its targets and a round without those terms measured it, ``-inf``
+    elsewhere. Without a success, a larger slack is better (a later round starts from the state
+    nearest to a solution), then a smaller residual.
+    """
 
     x: jax.Array
     ev: Eval
     success: jax.Array
     iters: jax.Array
+    slack: jax.Array
 
 
 class Settings(NamedTuple):
@@ -92,11 +103,14 @@ def _seed_configs(key, targets: jax.Array, rounds: jax.Array, lower, upper, coun
     return lo + _uniform.uniform(key, targets, rounds, count, lower.shape[0], dtype) * (hi - lo)
 
 
-def _iterate(problem, x, live, method, num_targets: int, has_first: bool, settings: Settings) -> Seeds:
+def _iterate(
+    problem, x, live, method, num_targets: int, has_first: bool, settings: Settings, every_seed: bool = False
+) -> Seeds:
     """Iterate every seed from ``x`` ``(n, P)`` until its target is done or ``max_iters``; finished targets are frozen.
 
     A target is done once one of its seeds succeeded (with a warm start: once the warm seed,
-    seed 0, also succeeded or stalled), or all its seeds stalled. Seeds of done targets and
+    seed 0, also succeeded or stalled), or all its seeds stalled; with ``every_seed``, once every
+    one of its seeds succeeded or stalled (each is a candidate for a check after). Seeds of done targets and
     successful seeds no longer move, so each target's result does not depend on the others in
     the batch; the loop exits as soon as every target is done. ``live`` ``(P,)`` (or ``None``)
     marks the seeds that are not padding: padding is finished before it starts.
@@ -110,8 +124,9 @@ def _iterate(problem, x, live, method, num_targets: int, has_first: bool, settin
     def active(s: Seeds):
         success = s.success.reshape(-1, num_targets)
         finished = success | s.stalled.reshape(-1, num_targets)
-        done = jnp.any(success, axis=0) & (finished[0] if has_first else True)
-        done = done | jnp.all(finished, axis=0)
+        done = jnp.all(finished, axis=0)
+        if not every_seed:
+            done = done | (jnp.any(success, axis=0) & (finished[0] if has_first else True))
         return (~done[None] & ~finished).reshape(-1)
 
     def body(carry):
@@ -156,12 +171,13 @@ def _iterate(problem, x, live, method, num_targets: int, has_first: bool, settin
     return jax.lax.while_loop(cond, body, (jnp.asarray(0), start))[1]
 
 
-def _best(s: Seeds, num_targets: int, rank) -> Best:
+def _best(s: Seeds, num_targets: int, rank, slack=None, on_pose=None) -> Best:
     """The best seed of every target (leaves end with ``(num_targets,)``).
 
     A successful seed wins, the one of least ``rank`` (``(seeds, targets)``, e.g. the distance to
-    a warm start) when given, else of least residual; without a success, the seed of least residual.
-    Ties go to the first seed.
+    a warm start) when given, else of least residual; without a success, the seed of least residual,
+    or, given the deferred terms' ``slack`` ``(P,)`` at every seed and which seeds are ``on_pose``
+    ``(P,)``, the seed on the pose of greatest slack where there is one. Ties go to the first seed.
     """
 
     def per_target(x):  # (..., P) -> (..., seeds, targets)
@@ -170,13 +186,19 @@ def _best(s: Seeds, num_targets: int, rank) -> Best:
     success, cost = per_target(s.success), per_target(s.ev.cost)
     order_by = cost if rank is None else rank
     best_success = jnp.argmin(jnp.where(success, order_by, jnp.inf), axis=0)
-    order = jnp.where(jnp.any(success, axis=0), best_success, jnp.argmin(cost, axis=0))[None]  # (1, targets)
+    fallback = jnp.argmin(cost, axis=0)
+    if slack is None:
+        slack = jnp.full(s.success.shape, -jnp.inf, s.ev.cost.dtype)
+    else:
+        clearest = per_target(jnp.where(on_pose, slack, -jnp.inf))
+        fallback = jnp.where(jnp.any(clearest > -jnp.inf, axis=0), jnp.argmax(clearest, axis=0), fallback)
+    order = jnp.where(jnp.any(success, axis=0), best_success, fallback)[None]  # (1, targets)
 
     def take(x):
         x = per_target(x)
         return jnp.take_along_axis(x, order.reshape((1,) * (x.ndim - 2) + order.shape), axis=-2)[..., 0, :]
 
-    return jax.tree.map(take, Best(s.x, s.ev, s.success, s.iters))
+    return jax.tree.map(take, Best(s.x, s.ev, s.success, s.iters, slack))
 
 
 def search(
@@ -212,12 +234,15 @@ def search(
     """
     dtype, dof = lower.dtype, lower.shape[0]
 
-    def run_from(idx, x, live=None, x_first=None, defer: bool = False) -> Best:
+    def run_from(idx, x, live=None, x_first=None, defer: bool = False, every: bool = False) -> Best:
         """Iterate the states ``x`` ``(copies, m, n_state)`` of the targets ``idx``; the best of each.
 
         ``live`` marks the targets that are not padding of a chunk; ``x_first`` is a warm start.
         With ``defer``, the seeds iterate without the problem's deferred terms, which are then checked
-        at the best seed of each target only (:meth:`~diffkin.ik._problem.Problem.padded`).
+        at the best seed of each target (:meth:`~diffkin.ik._problem.Problem.padded`); with ``every``
+        too, every seed iterates until it reaches the pose or stalls and the deferred terms are
+        checked at every seed: one that holds them succeeds, and without a success the seed on the
+        pose that comes nearest to holding them is kept.
         """
         if x_first is not None:
             x = jnp.concatenate([x_first[None], x], axis=0)
@@ -226,14 +251,24 @@ def search(
         x = problem.project(x.reshape(copies * m, -1).T)
         live = None if live is None else jnp.tile(live, copies)
         iterated = problem.undeferred() if defer else problem
-        seeds = _iterate(iterated, x, live, method, m, x_first is not None, settings)
+        seeds = _iterate(iterated, x, live, method, m, x_first is not None, settings, every_seed=defer and every)
         per_target = seeds.x.reshape(seeds.x.shape[0], copies, m)
-        best = _best(seeds, m, rank(idx, per_target))
         if not defer:
-            return best
+            return _best(seeds, m, rank(idx, per_target))
         whole = build(idx, 1)
-        met = whole.deferred_met(best.x)
-        return best._replace(ev=whole.padded(best.x, best.ev, met), success=best.success & met)
+        if every:
+            slack = problem.deferred_slack(seeds.x)
+            on_pose = seeds.success
+            best = _best(seeds._replace(success=on_pose & (slack >= 0)), m, rank(idx, per_target), slack, on_pose)
+        else:
+            best = _best(seeds, m, rank(idx, per_target))
+            best = best._replace(slack=whole.deferred_slack(best.x))
+        on_pose, met = succeeded(best.ev, settings.pos_tol, settings.rot_tol), best.slack >= 0
+        return best._replace(
+            ev=whole.padded(best.x, best.ev, met),
+            success=on_pose & met,
+            slack=jnp.where(on_pose, best.slack, -jnp.inf),
+        )
 
     def seeds(idx, round_index, group: int, best=None, defer: bool = False):
         """``group`` random seeds per target, ``(group, len(idx), n_state)``, each the best of ``_SCREEN`` draws.
@@ -275,13 +310,13 @@ def search(
 
         def attempt(idx, round_index, live, best, defer: bool = False):
             """Round ``round_index`` (per target) for the targets ``idx``: random or polishing seeds."""
-            fresh = seeds(idx, round_index, GROUP, best, defer)
+            fresh = seeds(idx, round_index, _DEFERRED_GROUP if defer else GROUP, best, defer)
             near = best.x[:, idx].T  # (m, n_state)
             joints = near[:, :dof] + _JITTER * (fresh[1:, :, :dof] - near[:, :dof])
             nearby = jnp.concatenate([joints, jnp.broadcast_to(near[:, dof:], fresh[1:, :, dof:].shape)], axis=-1)
             nearby = jnp.concatenate([near[None], nearby])
             polishing = round_index > random_rounds
-            found = run_from(idx, jnp.where(polishing[:, None], nearby, fresh), live, defer=defer)
+            found = run_from(idx, jnp.where(polishing[:, None], nearby, fresh), live, defer=defer, every=defer)
             return found._replace(iters=found.iters + jnp.where(polishing, best.iters[idx], 0))
 
         best = _retry_unsolved(attempt, best, rounds, chunk, defer, whole_from=max(1, random_rounds))
@@ -291,7 +326,7 @@ def search(
 def follow(problem, x: jax.Array, method, settings: Settings) -> Best:
     """Iterate one state per problem from ``x`` ``(n_state, P)`` (a warm start, no random seeds)."""
     s = _iterate(problem, problem.project(x), None, method, x.shape[1], False, settings)
-    return Best(s.x, s.ev, s.success, s.iters)
+    return Best(s.x, s.ev, s.success, s.iters, jnp.full(s.success.shape, -jnp.inf, s.ev.cost.dtype))
 
 
 def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int, defer: bool = False, whole_from: int = 1) -> Best:
@@ -305,8 +340,9 @@ def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int, defer: bool = 
     With ``defer``, a target's rounds leave the deferred terms out (``attempt(..., defer=True)``: a
     result that breaks them costs ``inf``); once its best state or a round's result has broken them,
     its rounds from ``whole_from`` on include them (another random round without them often finds a
-    clear branch: docs/performance.md, "Collision-aware IK"). The passes without them go first; the
-    others take ``_WHOLE`` targets at a time (their iterations cost far more).
+    clear branch: docs/performance.md, "Collision-aware IK"). The passes without them go first, with
+    ``_DEFERRED_GROUP`` seeds per target (so ``chunk * GROUP / _DEFERRED_GROUP`` targets at a time);
+    the others take ``_WHOLE`` targets at a time (their iterations cost far more).
     """
     n = best.success.shape[0]
 
@@ -320,7 +356,9 @@ def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int, defer: bool = 
             live = idx < n
             safe_idx = jnp.where(live, idx, 0)
             new = attempt(safe_idx, done[safe_idx], live, best)
-            better = live & (new.success | (new.ev.cost < best.ev.cost[safe_idx]))
+            old_slack = best.slack[safe_idx]
+            lower = (new.slack == old_slack) & (new.ev.cost < best.ev.cost[safe_idx])
+            better = live & (new.success | (new.slack > old_slack) | lower)
             best = jax.tree.map(
                 lambda old, x: old.at[..., idx].set(jnp.where(better, x, old[..., safe_idx]), mode="drop"), best, new
             )
@@ -330,9 +368,12 @@ def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int, defer: bool = 
         return jax.lax.while_loop(lambda state: jnp.any(due(*state)), body, state)
 
     state = (best, jnp.ones(n, jnp.int32), jnp.isinf(best.ev.cost))
-    if defer:
+    if defer:  # (each of these rounds has _DEFERRED_GROUP seeds per target: a pass as many seeds as another)
         state = passes(
-            state, lambda b, d, broke: pending(b, d) & (~broke | (d < whole_from)), chunk, partial(attempt, defer=True)
+            state,
+            lambda b, d, broke: pending(b, d) & (~broke | (d < whole_from)),
+            max(1, chunk * GROUP // _DEFERRED_GROUP),
+            partial(attempt, defer=True),
         )
         chunk = min(chunk, _WHOLE)
     return passes(state, lambda b, d, _: pending(b, d), chunk, attempt)[0]

@@ -121,9 +121,10 @@ def solve(
         avoid: robots: a :class:`~diffkin.ik.Avoid` (collision geometry, obstacles, margin): the
             robot's shapes are kept apart from the obstacles and (``self_collision``) from each
             other by one-sided residuals (:mod:`diffkin.ik._terms.avoid`). Those rows are
-            deferred (they cost ~30x the pose's): seeds iterate without them and each round's best
-            state is checked for clearance; a target whose states are on target but not clear gets
-            them in its last random round and its polishing rounds (seeds screened for clearance).
+            deferred (they cost ~30x the pose's): seeds iterate without them (later rounds with 4x
+            the seeds) and every seed that reaches the pose is checked for clearance; a target whose
+            states are on target but not clear gets them in its last random round and its polishing
+            rounds, from its clearest state on the pose (seeds screened for clearance).
             Success also needs the exact clearance ``>= margin`` (``IKResult.clearance``),
             which a solution may meet without the ``0.01`` m band above it. The implicit derivative
             of ``q`` is that of the targets alone: exact where no distance is within
@@ -421,7 +422,7 @@ def constraints_at(spec: Spec, problem: Problem, x: jax.Array) -> tuple[dict[str
         return {}, None
     kin = Kinematics(problem, x)
     ((constraint, bound),) = zip(spec.constraints, problem.bound[len(spec.targets) :], strict=True)
-    return {"clearance": constraint.clearance(kin, bound)}, constraint.met(kin, bound)
+    return {"clearance": constraint.clearance(kin, bound)}, constraint.slack(kin, bound) >= 0
 
 
 def result(

@@ -15,7 +15,7 @@ Every term provides:
 
 - ``frames``: the frames whose motion it reads (which joints can move it, for the seeds).
 - ``deferred``: its rows cost more than every other term's together, so a search may first
-  iterate without it and check :meth:`Constraint.met` after (:meth:`diffkin.ik._problem.Problem.undeferred`).
+  iterate without it and check :meth:`Constraint.slack` after (:meth:`diffkin.ik._problem.Problem.undeferred`).
 - ``bind(data)``: its entries, what :meth:`rows` and :meth:`screen` read: a target's from an array
   whose leading axis is the problem (``(P, 4, 4)`` poses or ``(P, 3)`` positions), a constraint's
   from its data in the solver's dtype.
@@ -83,7 +83,8 @@ class Target(Term, Protocol):
 
 class Constraint(Term, Protocol):
     """A term that reports its own value, ``clearance(kin, bound) -> (P,)`` (``IKResult.clearance``),
-    computed exactly at the returned states, and ``met(kin, bound) -> (P,)`` bool, which success needs.
+    computed exactly at the returned states, and ``slack(kin, bound) -> (P,)``, by how much it holds
+    (in its own unit): it is met where ``slack >= 0``, which success needs.
 
     ``bind(data)`` takes its data (a pytree in the solver's dtype: :class:`~diffkin.ik.Avoid`), which
     has ``cast(dtype)``, ``flat(lead)`` (parts per problem, of problem axes broadcasting to the
@@ -99,4 +100,4 @@ class Constraint(Term, Protocol):
 
     def clearance(self, kin, bound) -> jax.Array: ...
 
-    def met(self, kin, bound) -> jax.Array: ...
+    def slack(self, kin, bound) -> jax.Array: ...

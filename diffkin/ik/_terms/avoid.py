@@ -204,10 +204,10 @@ class AvoidTerm:
         """``(P,)`` the smallest checked distance (exact)."""
         return self._smallest(kin, avoid, jnp.inf)
 
-    def met(self, kin, avoid: Avoid) -> jax.Array:
-        """``(P,)`` bool: the clearance is at least the margin (exactly: only the distances below the
-        reach need computing)."""
-        return self._smallest(kin, avoid, avoid.margin + BAND) >= avoid.margin
+    def slack(self, kin, avoid: Avoid) -> jax.Array:
+        """``(P,)`` metres: the clearance less the margin (met where ``>= 0``), exact where negative (only
+        the distances below the margin need computing)."""
+        return self._smallest(kin, avoid, avoid.margin) - avoid.margin
 
     def rows(self, kin, avoid: Avoid, jacobian: bool, off=None) -> Rows:
         """The rows of the module docstring, their band narrowed to the targets' error ``off`` ``(P,)``
