@@ -157,8 +157,9 @@ class AvoidTerm:
     self_collision: bool
     #: its rows (every pair's distance and motion) cost far more than a pose target's: a search
     #: iterates without them (:meth:`diffkin.ik._problem.Problem.undeferred`) and checks the clearance
-    #: of each round's best state; a target whose states are on its pose but not clear iterates with
-    #: them in its last rounds (:func:`diffkin.ik._search._retry_unsolved`).
+    #: (:meth:`slack`) of its first round's best states and of every seed of its later rounds; a target
+    #: whose states are on its pose but not clear iterates with them in its last rounds
+    #: (:func:`diffkin.ik._search._retry_unsolved`).
     deferred = True
 
     @classmethod
