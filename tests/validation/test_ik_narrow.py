@@ -13,30 +13,31 @@ from _reference import robot_poses
 import diffkin as dk
 from diffkin.collision import Box, World
 
-#: four revolute joints (the first about z, the others about y), a capsule per link, the hand at the end
-ARM = """<robot name="arm">
-  <link name="base"/>
-  <link name="l1"><collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.03" length="0.4"/></geometry>
-    </collision></link>
-  <link name="l2"><collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.03" length="0.4"/></geometry>
-    </collision></link>
-  <link name="l3"><collision><origin xyz="0 0 0.15"/><geometry><capsule radius="0.03" length="0.3"/></geometry>
-    </collision></link>
-  <link name="l4"><collision><origin xyz="0 0 0.1"/><geometry><capsule radius="0.025" length="0.2"/></geometry>
-    </collision></link>
-  <link name="hand"/>
-  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.05"/>
-    <axis xyz="0 0 1"/><limit lower="-3" upper="3"/></joint>
-  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.4"/>
-    <axis xyz="0 1 0"/><limit lower="-2.5" upper="2.5"/></joint>
-  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0 0 0.4"/>
-    <axis xyz="0 1 0"/><limit lower="-2.8" upper="2.8"/></joint>
-  <joint name="j4" type="revolute"><parent link="l3"/><child link="l4"/><origin xyz="0 0 0.3"/>
-    <axis xyz="0 1 0"/><limit lower="-2.8" upper="2.8"/></joint>
-  <joint name="tip" type="fixed"><parent link="l4"/><child link="hand"/><origin xyz="0 0 0.2"/></joint>
-</robot>"""
-#: (link, capsule centre along the link's z, radius, length) as in ARM
+#: (link, capsule centre along the link's z, radius, length); each link's joint is at the end of the
+#: one before (the first 5 cm up), the first about z and the others about y; the hand at the end
 CAPSULES = [("l1", 0.2, 0.03, 0.4), ("l2", 0.2, 0.03, 0.4), ("l3", 0.15, 0.03, 0.3), ("l4", 0.1, 0.025, 0.2)]
+LIMITS = (3.0, 2.5, 2.8, 2.8)
+
+
+def _arm() -> str:
+    """The URDF of :data:`CAPSULES`: four revolute joints, a capsule per link, ``hand`` at the end."""
+    links, joints, parent, offset = [], [], "base", 0.05
+    for k, ((link, z, radius, length), limit) in enumerate(zip(CAPSULES, LIMITS, strict=True)):
+        links.append(
+            f'<link name="{link}"><collision><origin xyz="0 0 {z}"/>'
+            f'<geometry><capsule radius="{radius}" length="{length}"/></geometry></collision></link>'
+        )
+        axis = "0 0 1" if k == 0 else "0 1 0"
+        joints.append(
+            f'<joint name="j{k + 1}" type="revolute"><parent link="{parent}"/><child link="{link}"/>'
+            f'<origin xyz="0 0 {offset}"/><axis xyz="{axis}"/><limit lower="-{limit}" upper="{limit}"/></joint>'
+        )
+        parent, offset = link, 2 * z
+    tip = f'<parent link="{parent}"/><child link="hand"/><origin xyz="0 0 {offset}"/>'
+    joints.append(f'<joint name="tip" type="fixed">{tip}</joint>')
+    return f'<robot name="arm"><link name="base"/>{"".join(links)}<link name="hand"/>{"".join(joints)}</robot>'
+
+
 GAP, TOP = 0.065, 0.34  # the slot's half width at x = 0.6 m and its walls' height (m)
 MARGIN = 0.01
 #: walls ``(centre, half extents)``: 20 cm thick, 60 cm deep, from the floor to TOP
@@ -68,8 +69,9 @@ def test_a_narrow_slot_is_reached_clear_of_its_walls():
     """Eight targets at the slot's bottom (1 cm apart along it): solved with ``avoid`` (margin 1 cm,
     float64), each success on its target (NumPy FK, 1e-9 m) and clear by the margin on coal's distances
     (1e-9 m); without ``avoid``, fewer than 1 % of 256 solutions of the first target clear the walls."""
-    robot = dk.load_robot(ARM)
-    geom = dk.collision.load(ARM, robot)
+    arm = _arm()
+    robot = dk.load_robot(arm)
+    geom = dk.collision.load(arm, robot)
     assert [name for name, *_ in CAPSULES] == list(geom.shape_links)
     world = _world()
     targets = np.array([0.6, 0.0, 0.12]) + np.linspace(0.0, 0.07, 8)[:, None] * [0.0, 1.0, 0.0]
