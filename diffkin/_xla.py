@@ -66,12 +66,12 @@ def solver_jit(fn: Callable, **kwargs) -> Callable:
 
     @functools.wraps(fn)
     def call(*args, **kw):
-        return (top if _top_level(args, kw) else plain)(*args, **kw)
+        return (top if top_level(args, kw) else plain)(*args, **kw)
 
     return call
 
 
-def _top_level(*args) -> bool:
+def top_level(*args) -> bool:
     """Whether no transformation traces a call with the arguments ``args``.
 
     JAX has no public query for it (checked on jax 0.10.2): JAX's own ``trace_state_clean`` where
@@ -83,7 +83,7 @@ def _top_level(*args) -> bool:
 
 
 def _top_level_public(*args) -> bool:
-    """:func:`_top_level` through public API only (30 us): no argument is a tracer (``vmap``, ``grad``
+    """:func:`top_level` through public API only (30 us): no argument is a tracer (``vmap``, ``grad``
     or ``jit`` of the call) and a fresh constant is not staged out as one (a ``jit`` around it)."""
     if any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(args)):
         return False

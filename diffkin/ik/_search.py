@@ -171,6 +171,11 @@ def _iterate(
     return jax.lax.while_loop(cond, body, (jnp.asarray(0), start))[1]
 
 
+def _unmeasured(s: Seeds) -> jax.Array:
+    """``(P,)`` ``-inf``: the slack of states no round without the deferred terms measured (:class:`Best`)."""
+    return jnp.full(s.success.shape, -jnp.inf, s.ev.cost.dtype)
+
+
 def _best(s: Seeds, num_targets: int, rank, slack=None, on_pose=None) -> Best:
     """The best seed of every target (leaves end with ``(num_targets,)``).
 
@@ -188,7 +193,7 @@ def _best(s: Seeds, num_targets: int, rank, slack=None, on_pose=None) -> Best:
     best_success = jnp.argmin(jnp.where(success, order_by, jnp.inf), axis=0)
     fallback = jnp.argmin(cost, axis=0)
     if slack is None:
-        slack = jnp.full(s.success.shape, -jnp.inf, s.ev.cost.dtype)
+        slack = _unmeasured(s)
     else:
         clearest = per_target(jnp.where(on_pose, slack, -jnp.inf))
         fallback = jnp.where(jnp.any(clearest > -jnp.inf, axis=0), jnp.argmax(clearest, axis=0), fallback)
@@ -326,7 +331,7 @@ def search(
 def follow(problem, x: jax.Array, method, settings: Settings) -> Best:
     """Iterate one state per problem from ``x`` ``(n_state, P)`` (a warm start, no random seeds)."""
     s = _iterate(problem, problem.project(x), None, method, x.shape[1], False, settings)
-    return Best(s.x, s.ev, s.success, s.iters, jnp.full(s.success.shape, -jnp.inf, s.ev.cost.dtype))
+    return Best(s.x, s.ev, s.success, s.iters, _unmeasured(s))
 
 
 def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int, defer: bool = False, whole_from: int = 1) -> Best:

@@ -42,7 +42,7 @@ import numpy as np
 
 from diffkin import _rigid as rg
 from diffkin._static import ModelKey, combine, host, partition, traced_only
-from diffkin._xla import _top_level
+from diffkin._xla import top_level
 from diffkin.models import _ball
 
 TURN = 2 * np.pi
@@ -137,7 +137,7 @@ def solve(robot, q: list) -> tuple[list, list[list[rg.Entry]]]:
     :class:`~diffkin._static.ModelKey`: equal models share it) and shapes of ``q`` (``_compiled``): run op by
     op, its Gauss-Newton loop was lowered and compiled again at every call. Inside a transformation it is
     traced into the caller's program as it is."""
-    if not _top_level(robot, q):
+    if not top_level(robot, q):
         return _solve(robot, q)
     static, traced = partition(robot)
     floats = tuple(e if isinstance(e, float) else None for e in q)  # Python floats fold, as in a trace

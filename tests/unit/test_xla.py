@@ -171,12 +171,12 @@ def test_solver_jit_gives_its_options_to_top_level_calls_only(public, monkeypatc
     from diffkin._xla import SOLVER_COMPILE, solver_jit
 
     if public:
-        monkeypatch.setattr(_xla, "_top_level", _xla._top_level_public)
+        monkeypatch.setattr(_xla, "top_level", _xla._top_level_public)
     inside = []
-    jax.jit(lambda x: inside.append(_xla._top_level(x)) or x)(0.0)
-    jax.vmap(lambda x: inside.append(_xla._top_level(x)) or x)(np.zeros(2))
-    jax.grad(lambda x: inside.append(_xla._top_level(x)) or x)(0.0)
-    assert _xla._top_level(np.zeros(2)) and inside == [False, False, False]
+    jax.jit(lambda x: inside.append(_xla.top_level(x)) or x)(0.0)
+    jax.vmap(lambda x: inside.append(_xla.top_level(x)) or x)(np.zeros(2))
+    jax.grad(lambda x: inside.append(_xla.top_level(x)) or x)(0.0)
+    assert _xla.top_level(np.zeros(2)) and inside == [False, False, False]
     g = solver_jit(lambda x: x + 1.0)
     np.testing.assert_array_equal(np.asarray(jax.grad(lambda x: g(x).sum())(np.zeros(3))), np.ones(3))
     np.testing.assert_array_equal(np.asarray(g(np.zeros(3))), np.ones(3))
