@@ -1,5 +1,6 @@
 """The viewer's panels, one folder of the page each (the iiwa's arm angle: ``_arm_panel.py``): what is
-drawn, the joint sliders, the IK targets, the obstacles, the workspace map and the batch results.
+drawn, the joint sliders, the IK targets, the obstacles, the workspace map, the batch results and a base
+placement's best bases.
 
 A panel builds its controls on a :class:`~diffkin.viewer._gui.Page` and holds them; what its controls do
 to the robot goes through the callables it is given: no panel knows the viewer.
@@ -11,6 +12,7 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
+import viser.transforms as vtf
 
 from diffkin.viewer import _overlays
 from diffkin.viewer._gui import Page, node, plain, shown
@@ -186,3 +188,56 @@ class ResultsPanel:
                 show(int(self.result_slider.value))
 
         self.play_button.on_click(lambda _event: play_or_pause())
+
+
+class PlacementPanel:
+    """The best bases of a base placement (``dk.workspace.base_placement``) and its task poses: the task
+    poses as axes (``/placement/tasks``), a slider through the ``k`` best bases (the robot's root is drawn
+    at the one chosen) and its map score.
+
+    Attributes:
+        bases: ``(k, 4, 4)`` ``T_world_base`` of the best bases, best first; scores: ``(k,)`` their map scores.
+        base_slider: the rank shown (0: the best); base_status: its pose and score; show_tasks: checkbox;
+        task_axes: the task poses' axes.
+    """
+
+    def __init__(self, page: Page, scene, placement, k: int, place: Callable[[int], None], scale: float):
+        """``place(rank)``: the slider was moved to the base of that rank; ``scale``: the axes' length, metres."""
+        gui = page.gui
+        cells = placement.best_cells(k)
+        self.placement = placement
+        self.bases = placement.base(cells[:, 0], cells[:, 1], cells[:, 2])
+        self.scores = placement.score[tuple(cells.T)]
+        tasks = np.asarray(placement.tasks, np.float64)
+        self.task_axes = scene.add_batched_axes(
+            "/placement/tasks",
+            batched_wxyzs=vtf.SO3.from_matrix(tasks[:, :3, :3]).wxyz,
+            batched_positions=tasks[:, :3, 3],
+            axes_length=scale,
+            axes_radius=scale / 12,
+        )
+        with gui.add_folder("Base placement"):
+            self.base_slider = gui.add_slider(
+                "base rank", min=0, max=max(len(self.bases) - 1, 1), step=1, initial_value=0
+            )
+            self.show_tasks = gui.add_checkbox("Show task poses", initial_value=True)
+            self.base_status = gui.add_markdown("")
+            gui.add_markdown(
+                f"{len(tasks)} task poses; score: the fraction of them the capability map reaches from the base "
+                "(a prior: `Placement.verify` re-solves by IK)"
+            )
+        _toggle(self.show_tasks, lambda: [self.task_axes])
+
+        @self.base_slider.on_update
+        def _(_event) -> None:
+            if not page.quiet:
+                place(int(self.base_slider.value))
+
+    def describe(self, rank: int) -> str:
+        """``base 1 of 10: x +0.250 m, y -0.300 m, yaw 90 deg, map score 97.5%``."""
+        T = self.bases[rank]
+        yaw = np.degrees(np.arctan2(T[1, 0], T[0, 0])) % 360
+        return (
+            f"base {rank + 1} of {len(self.bases)}: x {T[0, 3]:+.3f} m, y {T[1, 3]:+.3f} m, yaw {yaw:.0f} deg, "
+            f"map score {self.scores[rank]:.1%}"
+        )

@@ -13,6 +13,7 @@ import viser
 import viser.transforms as vtf
 
 import diffkin as dk
+from diffkin._checks import positive_int
 from diffkin._npz import read_npz
 from diffkin.collision._robot import check_geometry
 from diffkin.viewer import _overlays, _visuals
@@ -25,6 +26,7 @@ from diffkin.viewer._panels import (
     JointPanel,
     MapPanel,
     ObstaclePanel,
+    PlacementPanel,
     ResultsPanel,
     TargetPanel,
 )
@@ -63,9 +65,10 @@ class Viewer:
     toggled by "Show frames"), its visual meshes below it at their fixed pose in the frame;
     ``/skeleton/<frame>`` cylinders join each frame to its parent frame; ``/targets/<frame>``
     are the IK gizmos; ``/map`` the reachability point cloud; ``/obstacles/<kind><i>`` the obstacles
-    of ``avoid`` (a capsule as ``axis``, ``a`` and ``b`` below its node). The model is drawn with its root at
-    :attr:`T_world_root` (the identity, or the ``base`` of the batch result shown); IK targets are
-    world poses, solved for the chain from the root at that pose.
+    of ``avoid`` (a capsule as ``axis``, ``a`` and ``b`` below its node); ``/placement/tasks`` the task
+    poses of a base placement. The model is drawn with its root at :attr:`T_world_root` (the identity,
+    the ``base`` of the batch result shown, or the placement's base shown); IK targets are world poses,
+    solved for the chain from the root at that pose.
 
     Attributes:
         server: the ``viser.ViserServer``.
@@ -73,7 +76,7 @@ class Viewer:
         q: ``(dof,)`` float64, the configuration shown (actuated joints; mimic joints follow).
         T_world_root: ``(4, 4)`` float64, the pose of the model's root frame (a chain's ``base``
             frame, a robot's root) in the world as drawn: the identity unless a batch result with
-            ``base`` was shown.
+            ``base`` or a placement's base (:meth:`show_base`) was shown.
         frames: ``{frame name: FrameHandle}``.
         skeleton: ``{frame name: cylinder}`` from each frame (but the root) to its parent frame.
         joint_spheres: ``{frame name: sphere}`` at each frame (shown with the skeleton).
@@ -90,6 +93,8 @@ class Viewer:
         obstacle_panel, map_panel, results_panel, arm_panel: the folders of the obstacles (with ``avoid``),
             the workspace map, the batch results (``results_panel.play_fps``, ``play_loop``,
             ``play_button``: the playback) and the arm angle, each ``None`` without what it shows.
+        placement_panel: the "Base placement" folder (``placement_panel.bases``, ``scores``, ``base_slider``,
+            ``task_axes``; ``diffkin.viewer._panels.PlacementPanel``), ``None`` without a placement.
         avoid: the ``dk.ik.Avoid`` every drag is solved with (the whole robot, clear of its obstacles
             by its margin), or ``None`` (the chain of the dragged frame, no collision check).
         obstacles: ``{scene path: handle}`` of the obstacles drawn (empty without ``avoid``).
@@ -108,6 +113,8 @@ class Viewer:
         workspace_map=None,
         results=None,
         avoid=None,
+        placement=None,
+        best_bases: int = 10,
         host: str = "127.0.0.1",
         port: int = 8080,
         num_seeds: int = 8,
@@ -117,6 +124,11 @@ class Viewer:
         self.model = model
         self.arm = arm
         self.avoid = _checked_avoid(avoid, model)
+        if placement is not None and not isinstance(placement, dk.workspace.Placement):
+            raise TypeError(
+                f"placement: expected a dk.workspace.Placement (base_placement), got {type(placement).__name__}"
+            )
+        best_bases = positive_int(best_bases, "best_bases")
         self.clearance = float("inf")
         self._key = jax.random.key(0)
         self._ik: dict[str, tuple] = {}
@@ -142,6 +154,8 @@ class Viewer:
         origins = poses[:, :3, 3]
         if self.results is not None and "base" in self.results:  # the scene spans the root poses too
             origins = np.concatenate([origins, self.results["base"][:, :3, 3]])
+        if placement is not None:  # and the tasks and the best bases
+            origins = np.concatenate([origins, placement.tasks[:, :3, 3], placement.best(best_bases)[:, :3, 3]])
         lo, hi = origins.min(0), origins.max(0)
         self.size = size = max(float(np.max(hi - lo)), 0.3)
         center = (lo + hi) / 2
@@ -159,7 +173,14 @@ class Viewer:
         if self.avoid is not None:
             self._build_collision()
         self._build_gui(workspace_map)
+        self.placement_panel = None
+        if placement is not None:
+            self.placement_panel = PlacementPanel(
+                self._page, self.server.scene, placement, best_bases, self.show_base, 0.06 * size
+            )
         self._apply(self.q, source=None)
+        if self.placement_panel is not None:
+            self.show_base(0)
         if warmup:
             threading.Thread(target=self._warmup, daemon=True).start()
 
@@ -527,6 +548,23 @@ class Viewer:
                     return
                 self.show_result(i % n)
 
+    # ------------------------------------------------------------------------------------- base placement
+
+    def show_base(self, rank: int = 0) -> None:
+        """Draw the robot's root at the base of ``rank`` (0: the best; clipped to the bases of the "Base
+        placement" folder) of the placement shown: :attr:`T_world_root` becomes its ``T_world_base``, the
+        configuration stays, and the slider and the base's description follow."""
+        panel = self.placement_panel
+        if panel is None:
+            raise ValueError("show_base: the viewer has no base placement (show(..., placement=...))")
+        rank = int(np.clip(rank, 0, len(panel.bases) - 1))
+        with self._page.lock:
+            with self._page.quietly():
+                panel.base_slider.value = rank  # type: ignore[misc]  # viser's stub: read-only; its API sets it
+            panel.base_status.content = panel.describe(rank)
+            self.T_world_root = panel.bases[rank].copy()
+            self._apply(self.q, source=None)
+
     # ------------------------------------------------------------------------------------- lifecycle
 
     def _warmup(self) -> None:
@@ -569,6 +607,8 @@ def show(
     workspace_map=None,
     results=None,
     avoid=None,
+    placement=None,
+    best_bases: int = 10,
     host: str = "127.0.0.1",
     port: int = 8080,
     num_seeds: int = 8,
@@ -605,6 +645,11 @@ def show(
             with :func:`diffkin.collision.load_scene`): the obstacles are drawn (an "Obstacles"
             folder shows them, the clearance of the configuration shown and whether it is
             collision-free), and every drag solves the whole robot clear of them by the margin.
+        placement: a ``dk.workspace.Placement`` of this model's capability map
+            (:func:`diffkin.workspace.base_placement`): its task poses are drawn as axes, the root is
+            drawn at its best base, and a "Base placement" folder's slider (``viewer.show_base(rank)``
+            from Python) goes through its ``best_bases`` best bases, each with its map score.
+        best_bases: the number of best bases of ``placement`` to go through.
         host, port: where to serve (the next free port is taken if ``port`` is in use).
         num_seeds: seeds of each interactive IK solve (the warm start is one of them).
         warmup: compile the IK functions in a background thread right away.
@@ -638,6 +683,8 @@ def show(
         workspace_map=workspace_map,
         results=results,
         avoid=avoid,
+        placement=placement,
+        best_bases=best_bases,
         host=host,
         port=port,
         num_seeds=num_seeds,

@@ -284,6 +284,54 @@ def test_map_overlay_and_batch_results(viewer_of, tmp_path):
         show("iiwa14", results={"q": np.zeros((3, 6))}, port=_free_port(), verbose=False)
 
 
+@pytest.mark.skipif(bool(IK_BROKEN), reason=IK_BROKEN or "ik runs")
+def test_base_placement_shows_the_best_bases_and_the_tasks(viewer_of):
+    """A placement of a planar 3R arm: the root is drawn at the best base, the task poses as axes, the
+    slider (and ``show_base``) goes through the best bases; from the best base, whose map score is 1,
+    a drag solves the task poses the arm reaches there (its closed form), the viewer's IK from the root drawn."""
+    from diffkin.workspace._placement import planar_poses
+
+    chain = dk.robots.planar([0.4, 0.3, 0.2])
+    cap = dk.workspace.capability(
+        chain,
+        40_000,
+        key=jax.random.key(0),
+        voxel_size=0.05,
+        orientation_bins=192,
+        bounds=[[-1, -1, -0.025], [1, 1, 0.025]],
+    )
+    tasks = planar_poses([1.2, 1.3, 1.25], [0.5, 0.6, 0.4], [0.0, 0.5, -0.4], 0.0)
+    placement = dk.workspace.base_placement(cap, tasks, region=[[0.5, 0.0], [1.5, 1.0]], yaw_bins=8, cell=0.1)
+    viewer = viewer_of(chain, placement=placement, best_bases=3)
+    panel = viewer.placement_panel
+    np.testing.assert_allclose(panel.bases, placement.best(3))
+    assert panel.scores[0] == placement.score.max() == 1.0
+    np.testing.assert_allclose(viewer.T_world_root, placement.best(1)[0])
+    _assert_scene_matches(viewer, placement.best(1)[0] @ _chain_poses(chain, viewer.q))
+    np.testing.assert_allclose(np.asarray(panel.task_axes.batched_positions), tasks[:, :3, 3], atol=1e-6)
+    assert "base 1 of 3" in panel.base_status.content and "map score 100.0%" in panel.base_status.content
+    in_base = np.linalg.inv(viewer.T_world_root) @ tasks
+    wrist = in_base[:, :2, 3] - 0.2 * in_base[:, :2, 0]  # the closed form: the wrist 0.1 to 0.7 m from the base
+    exact = np.abs(np.linalg.norm(wrist, axis=1) - 0.4) <= 0.3
+    assert exact.sum() >= 2  # the map is a prior: a task at the workspace's boundary may share a cell
+    for T, reached in zip(tasks, exact, strict=True):  # a drag from the best base reaches what the arm reaches
+        assert bool(viewer.move_target("ee", T).success) == reached
+        if reached:
+            np.testing.assert_allclose(viewer.frame_pose("ee"), T, atol=1e-4)
+    panel.base_slider.value = 2  # as the browser moves it
+    np.testing.assert_allclose(viewer.T_world_root, placement.best(3)[2])
+    assert "base 3 of 3" in panel.base_status.content
+    _assert_scene_matches(viewer, placement.best(3)[2] @ _chain_poses(chain, viewer.q))
+    viewer.show_base(99)  # clipped to the last
+    assert panel.base_slider.value == 2
+    panel.show_tasks.value = False
+    assert not panel.task_axes.visible
+    with pytest.raises(ValueError, match=r"show_base: the viewer has no base placement"):
+        viewer_of(chain).show_base(0)
+    with pytest.raises(TypeError, match=r"placement: expected a dk.workspace.Placement"):
+        show(chain, placement=cap, port=_free_port(), verbose=False)
+
+
 def _results(**fields):
     """Batch results of the iiwa14 (5 rows), with ``fields`` replaced (``None``: left out)."""
     q = np.random.default_rng(1).uniform(-1, 1, (5, 7))
