@@ -4,7 +4,7 @@ names the argument), and traceable validity checks (no raising: they give a bool
 Host side: :func:`instance` (the type of a model or an arm), :func:`positive_int` (counts),
 :func:`real_array` (numbers: ``q``, ``psi``, targets), :func:`pose_array` (``(..., 4, 4)`` poses),
 :func:`sign_array` (``+-1`` entries, checked when known), :func:`broadcast_batch` (batch shapes).
-The model constructors' field checks are in :mod:`diffkin.models._validate`.
+The model constructors' field checks are in :mod:`diffkin._validate`.
 """
 
 from __future__ import annotations

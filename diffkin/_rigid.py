@@ -272,7 +272,7 @@ def _safe_norm(n2):
     return jnp.sqrt(jnp.where(n2 < 1e-8, 1.0, n2))
 
 
-def _norm(v: Vec3) -> jax.Array:
+def norm(v: Vec3) -> jax.Array:
     """``|v|`` with a zero (not NaN) derivative at ``v = 0``."""
     sq = dot(v, v)
     nonzero = sq > 0
@@ -282,7 +282,7 @@ def _norm(v: Vec3) -> jax.Array:
 def _angle_terms(M: Mat3) -> tuple[Vec3, jax.Array, jax.Array]:
     """``vee(M) = sin(theta) axis``, ``|vee(M)| = sin(theta)`` and ``cos(theta) = (tr M - 1) / 2`` of a rotation."""
     v = tuple(mul(0.5, add(M[i][j], -M[j][i])) for i, j in ((2, 1), (0, 2), (1, 0)))
-    return v, _norm(v), jnp.asarray(mul(0.5, add(M[0][0], M[1][1], M[2][2], -1.0)))
+    return v, norm(v), jnp.asarray(mul(0.5, add(M[0][0], M[1][1], M[2][2], -1.0)))
 
 
 def rotation_angle(M: Mat3) -> jax.Array:

@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffkin import _xml
 from diffkin._pytree import pytree_dataclass, static
 from diffkin.collision import _sources
 from diffkin.collision._shapes import SOLIDS, Box, Capsule, Convex, Cylinder, Sphere
@@ -204,8 +205,6 @@ def load(source, robot: Robot, *, meshes: str = "capsules", srdf=None, dtype=Non
             robot lacks, unsupported geometry (named), or an unknown ``meshes``.
         ImportError: the file has meshes and trimesh is missing (the ``diffkin[collision]`` extra).
     """
-    from diffkin.models import _xml
-
     if meshes not in ("hulls", "capsules"):
         raise ValueError(f"meshes: expected 'hulls' or 'capsules', got {meshes!r}")
     if not isinstance(robot, Robot):

@@ -19,7 +19,7 @@ import numpy as np
 from diffkin._checks import positive_int
 from diffkin.collision._geometry import Geometry
 from diffkin.collision._robot import check_geometry, self_distances
-from diffkin.models._ranges import ball_starts, sampling_ranges, uniform
+from diffkin.models.ranges import ball_starts, sampling_ranges, uniform
 from diffkin.models.robot import Robot
 
 

@@ -281,8 +281,8 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
     """
     from diffkin.models import mjcf  # the model reader's default classes, orientations and includes
 
-    mjcf._expand_includes(root, os.path.dirname(path) if path else os.getcwd())
-    reader = mjcf._Reader(root)
+    mjcf.expand_includes(root, os.path.dirname(path) if path else os.getcwd())
+    reader = mjcf.Attributes(root)
     compiler = root.find("compiler")
     base_dir = os.path.dirname(path) if path else None
     meshdir = compiler.get("meshdir", compiler.get("assetdir", "")) if compiler is not None else ""
@@ -290,10 +290,10 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
     assets: dict[str, tuple[str | None, str, np.ndarray, np.ndarray | None]] = {}
     for asset in root.findall("asset"):
         for mesh in asset.findall("mesh"):
-            cls = reader._class(mesh, "main")
+            cls = reader.class_of(mesh, "main")
             file = mesh.get("file")
             name = mesh.get("name") or (os.path.splitext(os.path.basename(file))[0] if file else "")
-            scale = _numbers(None, "scale", 3, reader._get(mesh, "scale", cls, "1 1 1") or "1 1 1", "MJCF mesh")
+            scale = _numbers(None, "scale", 3, reader.attribute(mesh, "scale", cls, "1 1 1") or "1 1 1", "MJCF mesh")
             vertex = mesh.get("vertex")
             inline = (
                 _inline_vertices(vertex, f"MJCF <mesh name={name!r}>{f' of {path!r}' if path else ''}")
@@ -309,8 +309,8 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
         while todo:
             child, T, c = todo.pop()
             if child.tag == "frame":
-                inner = reader._class(child, c, "childclass")
-                T_frame = T @ reader._pose(child)
+                inner = reader.class_of(child, c, "childclass")
+                T_frame = T @ reader.pose(child)
                 todo.extend((g, T_frame, inner) for g in reversed(child))
             elif child.tag in ("geom", "body"):
                 out.append((child, T, c))
@@ -319,24 +319,24 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
     def geom(el: ET.Element, T_body_container: np.ndarray, cls: str, body: str) -> None:
         gid = counter["geom"]
         counter["geom"] += 1
-        cls = reader._class(el, cls)
+        cls = reader.class_of(el, cls)
         name = el.get("name") or f"geom{gid}"
         where = f"MJCF <geom name={name!r}> on body {body!r}"
-        contype = int(reader._get(el, "contype", cls, "1") or 1)
-        conaffinity = int(reader._get(el, "conaffinity", cls, "1") or 1)
+        contype = int(reader.attribute(el, "contype", cls, "1") or 1)
+        conaffinity = int(reader.attribute(el, "conaffinity", cls, "1") or 1)
         if contype == 0 and conaffinity == 0:
             return  # visual only: MuJoCo never collides it
-        kind = reader._get(el, "type", cls, "sphere") or "sphere"
+        kind = reader.attribute(el, "type", cls, "sphere") or "sphere"
         if kind not in _MJCF_KINDS:
             raise ValueError(f"{where}: type {kind!r} is not supported on a moving body (supported: {_MJCF_KINDS})")
-        size_text = reader._get(el, "size", cls, "0 0 0") or "0 0 0"
+        size_text = reader.attribute(el, "size", cls, "0 0 0") or "0 0 0"
         size = np.array([float(x) for x in size_text.split()] + [0.0, 0.0, 0.0])[:3]
-        fromto = reader._get(el, "fromto", cls)
+        fromto = reader.attribute(el, "fromto", cls)
         T = np.eye(4)
         if fromto is not None and kind != "mesh":
             ends = _numbers(None, "fromto", 6, fromto, where)
             T[:3, :3] = (
-                mjcf._zaxis(ends[:3] - ends[3:], f"{where} fromto") if np.any(ends[:3] != ends[3:]) else np.eye(3)
+                mjcf.zaxis(ends[:3] - ends[3:], f"{where} fromto") if np.any(ends[:3] != ends[3:]) else np.eye(3)
             )
             T[:3, 3] = 0.5 * (ends[:3] + ends[3:])
             half = 0.5 * float(np.linalg.norm(ends[3:] - ends[:3]))
@@ -346,12 +346,12 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
                 else np.array([size[0], size[1], half])
             )
         else:
-            T[:3, :3] = reader._rotation(el, cls)
-            T[:3, 3] = _numbers(None, "pos", 3, reader._get(el, "pos", cls, "0 0 0") or "0 0 0", where)
+            T[:3, :3] = reader.rotation(el, cls)
+            T[:3, 3] = _numbers(None, "pos", 3, reader.attribute(el, "pos", cls, "0 0 0") or "0 0 0", where)
         T = T_body_container @ T
         kw: dict = {"contype": contype, "conaffinity": conaffinity, "body": body}
         if kind == "mesh":
-            mesh_name = reader._get(el, "mesh", cls) or ""
+            mesh_name = reader.attribute(el, "mesh", cls) or ""
             if mesh_name not in assets:
                 raise ValueError(f"{where}: unknown mesh {mesh_name!r}")
             mesh_path, reference, scale, inline = assets[mesh_name]
@@ -376,7 +376,7 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
         bid = counter["body"]
         counter["body"] += 1
         body = el.get("name") or f"body{bid}"
-        inner = reader._class(el, cls, "childclass")
+        inner = reader.class_of(el, cls, "childclass")
         later = []
         for child, T, c in contents(el, inner):
             if child.tag == "geom":

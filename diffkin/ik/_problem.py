@@ -18,7 +18,7 @@ import numpy as np
 from diffkin import _rigid as rg
 from diffkin._xla import materialize
 from diffkin.ik._terms import Constraint, Term
-from diffkin.models._ranges import into_cones
+from diffkin.models.ranges import into_cones
 
 BASE_ROWS = 12  # state rows of a solved root pose: p (3), then R row by row (9)
 
@@ -194,7 +194,7 @@ class Problem(NamedTuple):
 
     def project(self, x: jax.Array) -> jax.Array:
         """Unlimited revolute joints wrapped to ``[-pi, pi)``, joints clipped (``respect_limits``), ball
-        joints scaled into their cones (:func:`diffkin.models._ranges.into_cones`), locked joints at their
+        joints scaled into their cones (:func:`diffkin.models.ranges.into_cones`), locked joints at their
         values; the root pose unchanged."""
         q = into_cones(self.joints(x), self.model, self.respect_limits)  # (then within the box around the cone)
         q = project(q, self.lower, self.upper, self.wrap, self.respect_limits)

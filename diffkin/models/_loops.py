@@ -120,7 +120,7 @@ def _step(robot, q: list, dep: jax.Array, shape, dtype):
 def _distance(g: rg.Vec3) -> jax.Array:
     """``|g|``, NaN-free derivative at 0, and ``inf`` where ``g`` is not finite (a non-finite ``q``: never closed)."""
     sq = jnp.asarray(rg.dot(g, g))
-    return jnp.where(jnp.isnan(sq), jnp.inf, rg._norm(g))
+    return jnp.where(jnp.isnan(sq), jnp.inf, rg.norm(g))
 
 
 def _loop_points(robot) -> list[tuple[rg.Vec3, rg.Vec3]]:

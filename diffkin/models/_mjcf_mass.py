@@ -15,7 +15,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from diffkin.models import _xml
+from diffkin import _xml
 
 _VOLUMES = {  # volume of a primitive from its size (r, half-length, ...), as MuJoCo computes it
     "sphere": lambda s: 4.0 / 3.0 * np.pi * s[0] ** 3,
@@ -36,7 +36,7 @@ class Compiler:
             where = "MJCF <compiler>"
             text = el.get("inertiafromgeom")
             if text is not None:
-                self.from_geom = reader._bool(el, "inertiafromgeom", text, ("true", "false", "auto"))
+                self.from_geom = reader.flag(el, "inertiafromgeom", text, ("true", "false", "auto"))
             if el.get("inertiagrouprange") is not None:
                 lo, hi = _xml.numbers(el, "inertiagrouprange", 2, None, where)
                 self.groups = (int(lo), int(hi))
@@ -51,7 +51,7 @@ def body(reader, compiler: Compiler, el: ET.Element, name: str, contents) -> tup
     """``(mass, centre of mass in the body frame)`` of the body ``el``, or why it is unknown.
 
     Args:
-        reader: the model's :class:`diffkin.models.mjcf._Reader` (classes, poses).
+        reader: the model's :class:`diffkin.models.mjcf.Attributes` (classes, poses).
         compiler: the model's :class:`Compiler`.
         el: the ``<body>`` element; ``name``: its frame name.
         contents: its ``(element, pose of its container in the body frame, class)`` (frames resolved).
@@ -72,8 +72,8 @@ def body(reader, compiler: Compiler, el: ET.Element, name: str, contents) -> tup
     for child, T, cls in contents:
         if child.tag != "geom":
             continue
-        cls = reader._class(child, cls)
-        get = lambda attribute, default=None, child=child, cls=cls: reader._get(child, attribute, cls, default)  # noqa: E731
+        cls = reader.class_of(child, cls)
+        get = lambda attribute, default=None, child=child, cls=cls: reader.attribute(child, attribute, cls, default)  # noqa: E731
         where = f"MJCF <geom name={child.get('name', '')!r}> of body {name!r}"
         group = int(_xml.numbers(None, "group", 1, get("group", "0"), where)[0])
         if not compiler.groups[0] <= group <= compiler.groups[1]:
@@ -86,7 +86,7 @@ def body(reader, compiler: Compiler, el: ET.Element, name: str, contents) -> tup
             centre = 0.5 * (ends[:3] + ends[3:])
             size[1 if kind in ("capsule", "cylinder") else 2] = 0.5 * np.linalg.norm(ends[3:] - ends[:3])
         else:
-            centre = reader._pose(child, cls)[:3, 3]
+            centre = reader.pose(child, cls)[:3, 3]
         given = get("mass")
         if kind not in _VOLUMES:  # a mesh (or height field): its centre is not computed here
             if given is not None and float(_xml.numbers(None, "mass", 1, given, where)[0]) == 0.0:

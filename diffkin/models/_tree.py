@@ -11,7 +11,7 @@ from collections.abc import Mapping, Sequence
 import jax.numpy as jnp
 import numpy as np
 
-from diffkin.models import _validate as check
+from diffkin import _validate as check
 from diffkin.models.robot import Robot
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from diffkin.models import _xml
+from diffkin import _xml
 from diffkin.models.mjcf import robot_from_mjcf
 from diffkin.models.robot import Robot
 from diffkin.models.urdf import robot_from_urdf
@@ -26,13 +26,15 @@ def load_robot(source, *, floating: bool = False) -> Robot:
     MJCF (see :mod:`diffkin.models.mjcf`): bodies (with ``pos`` and ``quat``/``axisangle``/
     ``euler``/``xyaxes``/``zaxis``, in ``<compiler angle= eulerseq=>`` units), ``<frame>``s,
     ``<default>`` classes, hinge and slide joints (several per body, applied in order; ``ref``,
-    ``range``, ``limited``), named sites as frames, ``<include>``; a linear
-    ``<equality><joint polycoef=>`` makes ``joint1`` follow ``joint2``,
+    ``range``, ``limited``), ball joints (three entries of ``q``), named sites as frames,
+    ``<include>``; a linear ``<equality><joint polycoef=>`` makes ``joint1`` follow ``joint2``,
     ``q1 - ref1 = c0 + c1 (q2 - ref2)``; a linear ``<equality><tendon>`` over fixed tendons makes the
     last joint of ``tendon1`` follow the others (MuJoCo's ``L1 - L1_0 = c0 + c1 (L2 - L2_0)``,
-    ``L = sum coef_i q_i``); a free joint on a top-level body makes it the floating root. The world
-    body is the frame ``"world"``; angles in ``q`` and limits are radians. MJCF has no joint
-    velocity limits (``velocity``: ``inf``).
+    ``L = sum coef_i q_i``); ``<equality><connect>`` and ``<weld body1>`` close loops (their dependent
+    joints, ``robot.dependent_names``, are solved from ``q`` in every pass: :func:`diffkin.loop_closure`);
+    a free joint on a top-level body makes it the floating root. The world body is the frame
+    ``"world"``; angles in ``q`` and limits are radians. MJCF has no joint velocity limits
+    (``velocity``: ``inf``).
 
     Args:
         source: path to the file, or the XML text itself.
@@ -47,7 +49,7 @@ def load_robot(source, *, floating: bool = False) -> Robot:
     Raises:
         TypeError: ``source`` is not a path or string.
         ValueError: a missing file, malformed XML, an unknown root element, or anything the
-            format's reader rejects (loops, several roots, duplicate names, unsupported joints
+            format's reader rejects (a URDF's loops, several roots, duplicate names, unsupported joints
             or elements, mimic joints of missing joints or in cycles), with the element named.
     """
     root, path = _xml.read(source)

@@ -58,7 +58,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from diffkin.models import _ball, _couplings, _mjcf_mass, _xml
+from diffkin import _xml
+from diffkin.models import _ball, _couplings, _mjcf_mass
 from diffkin.models._couplings import Coupling
 from diffkin.models._loops import Connect, close
 from diffkin.models._tree import JointSpec, build
@@ -106,7 +107,7 @@ def _quat(q: np.ndarray, where: str) -> np.ndarray:
     )
 
 
-def _zaxis(z: np.ndarray, where: str) -> np.ndarray:
+def zaxis(z: np.ndarray, where: str) -> np.ndarray:
     """The minimal rotation taking ``(0, 0, 1)`` to ``z`` (a half turn about x if ``z`` points down)."""
     z = _unit(z, where)
     axis = np.cross([0.0, 0.0, 1.0], z)
@@ -140,8 +141,11 @@ class _Part:
     free: ET.Element | None = None
 
 
-class _Reader:
-    """One pass over a ``<mujoco>`` element (includes already expanded)."""
+class Attributes:
+    """The compiler settings and ``<default>`` classes of a ``<mujoco>`` element (includes already expanded:
+    :func:`expand_includes`): an element's attributes, class, orientation and pose as MuJoCo resolves them.
+    The model reader builds on it; it is also the interface of the other readers of an MJCF (the collision
+    geoms of :func:`diffkin.collision.load`)."""
 
     def __init__(self, root: ET.Element):
         self.degrees, self.eulerseq, self.autolimits = True, "xyz", True
@@ -151,10 +155,6 @@ class _Reader:
         for el in root.findall("default"):
             name = el.get("class", "main")
             self._defaults(el, name, None if name == "main" else "main")
-        self.n_bodies, self.n_joints = 1, 0
-        self.stiff: set[str] = set()  # joints with stiffness (springs): the last chosen to close a loop
-        self.parts: dict[str, _Part] = {"world": _Part(links=["world"])}
-        self.mass_rules = _mjcf_mass.Compiler(root, self)
 
     def _compiler(self, el: ET.Element) -> None:
         angle, seq, auto = el.get("angle"), el.get("eulerseq"), el.get("autolimits")
@@ -167,7 +167,7 @@ class _Reader:
                 raise ValueError(f"{_describe(el)}: eulerseq must be 3 letters of xyzXYZ, got {seq!r}")
             self.eulerseq = seq
         if auto is not None:
-            self.autolimits = self._bool(el, "autolimits", auto) is True
+            self.autolimits = self.flag(el, "autolimits", auto) is True
 
     def _defaults(self, el: ET.Element, name: str, parent: str | None) -> None:
         """Record a ``<default>`` class and the classes nested in it: per element tag, its attributes
@@ -190,7 +190,9 @@ class _Reader:
 
     # -- attributes
 
-    def _class(self, el: ET.Element, inherited: str, attribute: str = "class") -> str:
+    def class_of(self, el: ET.Element, inherited: str, attribute: str = "class") -> str:
+        """The default class of ``el`` (its ``attribute``: ``class``, or ``childclass`` for its children's),
+        else ``inherited``; an unknown class raises."""
         name = el.get(attribute, inherited)
         if name not in self.classes:
             raise ValueError(f"{_describe(el)}: unknown default class {name!r}")
@@ -203,7 +205,7 @@ class _Reader:
             yield tags.get(tag, {})
             cls = parent
 
-    def _get(
+    def attribute(
         self, el: ET.Element, attribute: str, cls: str | None, default: str | None = None, tag: str | None = None
     ) -> str | None:
         """An attribute from the element, else its class chain, else ``default``."""
@@ -215,7 +217,8 @@ class _Reader:
         return default
 
     @staticmethod
-    def _bool(el: ET.Element, attribute: str, text: str | None, allowed=("true", "false")) -> bool | str:
+    def flag(el: ET.Element, attribute: str, text: str | None, allowed=("true", "false")) -> bool | str:
+        """The value ``text`` of ``el``'s ``attribute``: ``True``/``False``, or another word of ``allowed``."""
         if text is None or text not in allowed:
             raise ValueError(f"{_describe(el)}: {attribute} must be one of {list(allowed)}, got {text!r}")
         return {"true": True, "false": False}.get(text, text)
@@ -223,7 +226,7 @@ class _Reader:
     def _angle(self, value: float) -> float:
         return float(np.deg2rad(value)) if self.degrees else float(value)
 
-    def _rotation(self, el: ET.Element, cls: str | None = None) -> np.ndarray:
+    def rotation(self, el: ET.Element, cls: str | None = None) -> np.ndarray:
         """The element's orientation (from its class chain if it gives none), as a 3x3 rotation."""
         sources = [el.attrib, *(self._chain(cls, el.tag) if cls is not None else ())]
         attrs: dict[str, str] = next((a for a in sources if any(k in a for k in _ORIENTATIONS)), {})
@@ -244,29 +247,40 @@ class _Reader:
         if kind == "euler":
             return _euler([self._angle(a) for a in values], self.eulerseq)
         if kind == "zaxis":
-            return _zaxis(values, f"{where} zaxis")
+            return zaxis(values, f"{where} zaxis")
         x = _unit(values[:3], f"{where} xyaxes")
         y = _unit(values[3:] - x * (x @ values[3:]), f"{where} xyaxes")
         return np.column_stack([x, y, np.cross(x, y)])
 
-    def _pose(self, el: ET.Element, cls: str | None = None) -> np.ndarray:
+    def pose(self, el: ET.Element, cls: str | None = None) -> np.ndarray:
         """``(4, 4)`` pose of a body, frame or site in its container's frame (``pos`` in metres)."""
         T = np.eye(4)
         where = _describe(el)
-        fromto = self._get(el, "fromto", cls) if el.tag == "site" else None
+        fromto = self.attribute(el, "fromto", cls) if el.tag == "site" else None
         if fromto is not None:
-            kind = self._get(el, "type", cls, "sphere")
+            kind = self.attribute(el, "type", cls, "sphere")
             if kind not in _FROMTO_TYPES:
                 raise ValueError(f"{where}: fromto needs a site of type {list(_FROMTO_TYPES)}, got {kind!r}")
-            if self._get(el, "pos", cls) is not None:
+            if self.attribute(el, "pos", cls) is not None:
                 raise ValueError(f"{where}: both pos and fromto given (MuJoCo allows one)")
             ends = _xml.numbers(None, "fromto", 6, fromto, where)
-            T[:3, :3] = _zaxis(ends[:3] - ends[3:], f"{where} fromto")  # z from `to` to `from`, as MuJoCo
+            T[:3, :3] = zaxis(ends[:3] - ends[3:], f"{where} fromto")  # z from `to` to `from`, as MuJoCo
             T[:3, 3] = 0.5 * (ends[:3] + ends[3:])
             return T
-        T[:3, :3] = self._rotation(el, cls)
-        T[:3, 3] = _xml.numbers(None, "pos", 3, self._get(el, "pos", cls, "0 0 0"), where)
+        T[:3, :3] = self.rotation(el, cls)
+        T[:3, 3] = _xml.numbers(None, "pos", 3, self.attribute(el, "pos", cls, "0 0 0"), where)
         return T
+
+
+class _Reader(Attributes):
+    """One pass over a ``<mujoco>`` element (includes already expanded)."""
+
+    def __init__(self, root: ET.Element):
+        super().__init__(root)
+        self.n_bodies, self.n_joints = 1, 0
+        self.stiff: set[str] = set()  # joints with stiffness (springs): the last chosen to close a loop
+        self.parts: dict[str, _Part] = {"world": _Part(links=["world"])}
+        self.mass_rules = _mjcf_mass.Compiler(root, self)
 
     # -- the body tree
 
@@ -280,7 +294,7 @@ class _Reader:
             if child.tag in _REJECTED:
                 raise ValueError(f"{_describe(child)}: <{child.tag}> is not supported")
             if child.tag == "frame":
-                inner, T_frame = self._class(child, cls, "childclass"), T @ self._pose(child)
+                inner, T_frame = self.class_of(child, cls, "childclass"), T @ self.pose(child)
                 todo.extend((grandchild, T_frame, inner) for grandchild in reversed(child))
             elif child.tag in ("joint", "freejoint", "site", "body", "geom", "inertial"):
                 out.append((child, T, cls))
@@ -290,8 +304,8 @@ class _Reader:
         """A hinge or slide joint as a spec from the body's parent side (``origin`` set later), a ball
         joint as three (:mod:`diffkin.models._ball`), or ``([], True)`` for a free joint."""
         jid, self.n_joints = self.n_joints, self.n_joints + 1
-        cls = self._class(el, cls)
-        kind = "free" if el.tag == "freejoint" else self._get(el, "type", cls, "hinge")
+        cls = self.class_of(el, cls)
+        kind = "free" if el.tag == "freejoint" else self.attribute(el, "type", cls, "hinge")
         if kind == "free":
             return [], True
         where = _describe(el)
@@ -299,9 +313,9 @@ class _Reader:
             raise ValueError(
                 f"{where}: joint type {kind!r} is not supported (hinge, slide, ball, free on a top-level body)"
             )
-        anchor = T[:3, :3] @ _xml.numbers(None, "pos", 3, self._get(el, "pos", cls, "0 0 0"), where) + T[:3, 3]
+        anchor = T[:3, :3] @ _xml.numbers(None, "pos", 3, self.attribute(el, "pos", cls, "0 0 0"), where) + T[:3, 3]
         name = el.get("name") or f"joint{jid}"
-        if float(_xml.numbers(None, "stiffness", 1, self._get(el, "stiffness", cls, "0"), where)[0]) != 0:
+        if float(_xml.numbers(None, "stiffness", 1, self.attribute(el, "stiffness", cls, "0"), where)[0]) != 0:
             self.stiff |= {name} if kind != "ball" else {f"{name}:{k}" for k in _ball.AXES}
         if kind == "ball":  # about the anchor, in the body's axes (MuJoCo ignores a ball joint's axis and ref)
             _, upper = self._limits(el, cls, True)
@@ -312,11 +326,11 @@ class _Reader:
                 for k, e in zip(_ball.AXES, np.eye(3), strict=True)
             ], False
         axis = T[:3, :3] @ _unit(
-            _xml.numbers(None, "axis", 3, self._get(el, "axis", cls, "0 0 1"), where), f"{where} axis"
+            _xml.numbers(None, "axis", 3, self.attribute(el, "axis", cls, "0 0 1"), where), f"{where} axis"
         )
         hinge = kind == "hinge"
         screw = np.concatenate([np.cross(anchor, axis), axis] if hinge else [axis, np.zeros(3)])
-        ref = float(_xml.numbers(None, "ref", 1, self._get(el, "ref", cls, "0"), where)[0])
+        ref = float(_xml.numbers(None, "ref", 1, self.attribute(el, "ref", cls, "0"), where)[0])
         lower, upper = self._limits(el, cls, hinge)
         spec = JointSpec(
             name,
@@ -334,8 +348,8 @@ class _Reader:
     def _limits(self, el: ET.Element, cls: str, hinge: bool) -> tuple[float, float]:
         """``(lower, upper)`` in radians or metres; ``+-inf`` if unlimited (MuJoCo's ``limited`` rules)."""
         where = _describe(el)
-        text = self._get(el, "range", cls)
-        limited = self._bool(el, "limited", self._get(el, "limited", cls, "auto"), ("true", "false", "auto"))
+        text = self.attribute(el, "range", cls)
+        limited = self.flag(el, "limited", self.attribute(el, "limited", cls, "auto"), ("true", "false", "auto"))
         if limited == "auto" and text is not None and not self.autolimits:
             raise ValueError(f"{where}: 'range' without 'limited' needs <compiler autolimits=\"true\">")
         lower, upper = _xml.numbers(None, "range", 2, text or "0 0", where)
@@ -357,11 +371,11 @@ class _Reader:
                 continue
             name = self._add_body(el, parent, T, cls, part)
             later = []
-            for child, T_body_container, c in self._contents(el, self._class(el, cls, "childclass")):
+            for child, T_body_container, c in self._contents(el, self.class_of(el, cls, "childclass")):
                 if child.tag == "site" and child.get("name"):
-                    later.append((child, name, T_body_container @ self._pose(child, self._class(child, c)), c))
+                    later.append((child, name, T_body_container @ self.pose(child, self.class_of(child, c)), c))
                 elif child.tag == "body":
-                    later.append((child, name, T_body_container @ self._pose(child), c))
+                    later.append((child, name, T_body_container @ self.pose(child), c))
             todo.extend(reversed(later))
 
     def _add_body(self, el: ET.Element, parent: str, T_parent_body: np.ndarray, cls: str, part: _Part) -> str:
@@ -370,7 +384,7 @@ class _Reader:
         name = el.get("name") or f"body{bid}"
         part.links.append(name)
         moving: list[JointSpec] = []
-        contents = self._contents(el, self._class(el, cls, "childclass"))
+        contents = self._contents(el, self.class_of(el, cls, "childclass"))
         inertial = _mjcf_mass.body(self, self.mass_rules, el, name, contents)
         if isinstance(inertial, str):
             part.unknown_masses.append(inertial)
@@ -407,11 +421,11 @@ class _Reader:
             if child.tag in ("joint", "freejoint"):
                 raise ValueError(f"{_describe(child)}: the world body cannot have joints")
             if child.tag == "site" and child.get("name"):
-                T_world_site = T @ self._pose(child, self._class(child, cls))
+                T_world_site = T @ self.pose(child, self.class_of(child, cls))
                 self.parts["world"].sites.append((child.get("name", ""), "world", T_world_site))
             elif child.tag == "body":
                 part = _Part()
-                self._body(child, "world", T @ self._pose(child), cls, part)
+                self._body(child, "world", T @ self.pose(child), cls, part)
                 self.parts[part.links[0]] = part
 
 
@@ -447,12 +461,14 @@ def _equalities(
     connects = []
     for group in root.findall("equality"):
         for el in group:
-            cls = reader._class(el, "main")
-            if not reader._bool(el, "active", reader._get(el, "active", cls, "true", "equality")):
+            cls = reader.class_of(el, "main")
+            if not reader.flag(el, "active", reader.attribute(el, "active", cls, "true", "equality")):
                 continue
             where = _describe(el).replace("MJCF <", "MJCF <equality><", 1)
             if el.tag == "connect" and el.get("body1"):
-                anchor = _xml.numbers(None, "anchor", 3, reader._get(el, "anchor", cls, "0 0 0", "equality"), where)
+                anchor = _xml.numbers(
+                    None, "anchor", 3, reader.attribute(el, "anchor", cls, "0 0 0", "equality"), where
+                )
                 connects.append(Connect(el.get("body1", ""), el.get("body2") or "world", anchor, where))
                 continue
             if el.tag == "weld" and el.get("body1"):
@@ -470,7 +486,7 @@ def _equalities(
                     "flexes); linear <joint> and <tendon> equalities, <connect> and <weld body1> loops are"
                 )
             where = f"{path}: {where}" if path else where
-            c = _xml.numbers(None, "polycoef", 5, reader._get(el, "polycoef", cls, "0 1 0 0 0", "equality"), where)
+            c = _xml.numbers(None, "polycoef", 5, reader.attribute(el, "polycoef", cls, "0 1 0 0 0", "equality"), where)
             if el.tag == "joint":
                 joint, coupling = _joint_coupling(el, c, scalar, where)
             else:
@@ -564,7 +580,7 @@ def _weld(reader: _Reader, el: ET.Element, cls: str, where: str) -> list[Connect
     """A ``<weld body1 body2 relpose>`` as three connects (:data:`WELD_ARM`): body2's pose in body1 fixed,
     either ``relpose`` (position, quaternion) or, with its quaternion all zero (the default), the relative
     pose at the reference configuration. (Its ``anchor`` and ``torquescale`` shape MuJoCo's forces only.)"""
-    relpose = _xml.numbers(None, "relpose", 7, reader._get(el, "relpose", cls, "0 1 0 0 0 0 0", "equality"), where)
+    relpose = _xml.numbers(None, "relpose", 7, reader.attribute(el, "relpose", cls, "0 1 0 0 0 0 0", "equality"), where)
     points = [np.zeros(3), WELD_ARM * np.eye(3)[0], WELD_ARM * np.eye(3)[1]]
     body2 = el.get("body2") or "world"
     if not np.any(relpose[3:]):
@@ -621,7 +637,7 @@ def _included(el: ET.Element, folder: str, inside: tuple[str, ...], seen: set[st
     return included, path
 
 
-def _expand_includes(root: ET.Element, folder: str) -> None:
+def expand_includes(root: ET.Element, folder: str) -> None:
     """Replace every ``<include file=...>`` by the children of the included ``<mujoco>``, at any depth.
 
     Each file may be included once in the whole model (MuJoCo's rule; repeated includes would
@@ -651,7 +667,7 @@ def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
         root: the ``<mujoco>`` element (modified: its includes are expanded in place).
         path: the file it was read from (includes are relative to its folder), or ``None``.
     """
-    _expand_includes(root, os.path.dirname(path) if path else os.getcwd())
+    expand_includes(root, os.path.dirname(path) if path else os.getcwd())
     reader = _Reader(root)
     for el in root.findall("worldbody"):
         reader.worldbody(el)

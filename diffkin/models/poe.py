@@ -9,12 +9,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin import _rigid as rg
+from diffkin import _validate as check
 from diffkin._checks import instance
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._static import host
 from diffkin._xla import segment_end
 from diffkin.models import _scanned
-from diffkin.models import _validate as check
 from diffkin.models.dh import DHChain, poe_arrays
 from diffkin.models.forward import ChainPass, Pass
 

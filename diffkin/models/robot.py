@@ -25,11 +25,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin import _rigid as rg
+from diffkin import _validate as check
 from diffkin import _xla
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._static import host, is_concrete
 from diffkin.models import _ball, _loops, _scanned
-from diffkin.models import _validate as check
 from diffkin.models._passes import RobotPass
 from diffkin.models.poe import PoEChain, _screw_types
 

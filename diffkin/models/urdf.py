@@ -6,7 +6,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from diffkin.models import _xml
+from diffkin import _xml
 from diffkin.models._tree import JointSpec, build
 from diffkin.models.poe import PoEChain
 from diffkin.models.robot import Robot

@@ -6,10 +6,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffkin import _validate as check
 from diffkin import robots
 from diffkin._checks import instance
 from diffkin._pytree import pytree_dataclass
-from diffkin.models import _validate as check
 from diffkin.models.dh import DHChain
 
 # Standard DH twists of the iiwa-type SRS arm; all a = 0 and theta_offset = 0.

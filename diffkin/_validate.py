@@ -1,4 +1,5 @@
-"""Host-side checks shared by the model constructors: each error names the field and what was expected."""
+"""Host-side checks of the pytree models' fields (the model constructors', :class:`diffkin.srs.SRSArm`'s): each
+error names the field and what was expected."""
 
 from __future__ import annotations
 

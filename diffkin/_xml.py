@@ -1,4 +1,5 @@
-"""Reading robot description files (URDF, MJCF): a path or the XML text itself."""
+"""Reading robot description files (URDF, MJCF): a path or the XML text itself, parsed with the errors
+named (the model readers' and :func:`diffkin.collision.load`'s)."""
 
 from __future__ import annotations
 
