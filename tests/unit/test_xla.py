@@ -183,3 +183,16 @@ def test_solver_jit_gives_its_options_to_top_level_calls_only(public, monkeypatc
     np.testing.assert_array_equal(np.asarray(jax.jit(g)(np.zeros(3))), np.ones(3))  # would raise with the options
     np.testing.assert_array_equal(np.asarray(jax.vmap(g)(np.zeros((2, 3)))), np.ones((2, 3)))
     assert SOLVER_COMPILE == {"xla_cpu_use_fusion_emitters": False}
+
+
+def test_solver_jit_gives_its_options_to_the_cpu_backend_only(monkeypatch):
+    """A GPU's compiler rejects the CPU emitter's options ("No such compile option"): on another backend the
+    plain jit is used. Posed here with an option no backend knows, which the CPU path must pass on."""
+    from diffkin import _xla
+
+    monkeypatch.setattr(_xla, "SOLVER_COMPILE", {"no_such_option_anywhere": True})
+    monkeypatch.setattr(_xla, "_default_backend", lambda: "gpu")
+    np.testing.assert_array_equal(np.asarray(_xla.solver_jit(lambda x: x + 1.0)(np.zeros(3))), np.ones(3))
+    monkeypatch.setattr(_xla, "_default_backend", lambda: "cpu")
+    with pytest.raises(Exception, match="no_such_option_anywhere"):
+        _xla.solver_jit(lambda x: x + 2.0)(np.zeros(3))
