@@ -12,7 +12,7 @@ from collections.abc import Callable, Mapping
 from typing import Any, NamedTuple
 
 from diffkin._checks import instance
-from diffkin.collision._robot import check_geometry
+from diffkin.collision.interface import check_geometry
 from diffkin.ik import _args
 from diffkin.ik._terms import Constraint, Target, com, pose, relative
 from diffkin.ik._terms.avoid import Avoid, AvoidTerm

@@ -205,7 +205,7 @@ def sample_self_motion(
 
 def _check_avoid(avoid) -> None:
     """``avoid`` is ``(robot, Avoid)``: a seven-joint robot and an ``Avoid`` of its geometry."""
-    from diffkin.collision._robot import check_geometry
+    from diffkin.collision.interface import check_geometry
     from diffkin.ik import Avoid
     from diffkin.models.robot import Robot
 

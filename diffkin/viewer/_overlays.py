@@ -111,7 +111,7 @@ def shape_primitives(shapes, names: list[str]) -> list[Primitive]:
 
 def _hull_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(vertices, faces)`` of the convex hull of ``points`` (a flat or tiny set: no faces)."""
-    from diffkin.collision._fit import hull
+    from diffkin.collision.interface import hull
 
     return hull(points)
 

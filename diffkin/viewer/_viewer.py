@@ -15,7 +15,7 @@ import viser.transforms as vtf
 import diffkin as dk
 from diffkin._checks import positive_int
 from diffkin._npz import read_npz
-from diffkin.collision._robot import check_geometry
+from diffkin.collision.interface import check_geometry
 from diffkin.viewer import _overlays, _visuals
 from diffkin.viewer._arm_panel import ArmPanel
 from diffkin.viewer._gui import Page, node, plain, shown

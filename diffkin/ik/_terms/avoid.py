@@ -27,13 +27,13 @@ import numpy as np
 from diffkin import _rigid as rg
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._xla import blocks_joined
-from diffkin.collision._geometry import Geometry, moved
-from diffkin.collision._near import near_motions
-from diffkin.collision._robot import (
-    World,
+from diffkin.collision import Geometry, World
+from diffkin.collision.interface import (
     batch_last,
     check_geometry,
     expanded,
+    moved,
+    near_motions,
     obstacles_last,
     pair_blocks,
     smallest_distance,

@@ -1,0 +1,32 @@
+"""What the packages built on collision use beyond its public names (internal: not in API.md).
+
+IK's clearance term (and the trajectories that reuse it) places the shapes by its own frames' poses and
+measures distances and their motions in its own layouts; every function that takes a ``dk.ik.Avoid``
+checks its geometry against the robot; the viewer draws a convex shape by its hull.
+"""
+
+from diffkin.collision._fit import hull
+from diffkin.collision._geometry import moved
+from diffkin.collision._near import near_motions
+from diffkin.collision._robot import (
+    batch_last,
+    check_geometry,
+    expanded,
+    obstacles_last,
+    pair_blocks,
+    smallest_distance,
+    take,
+)
+
+__all__ = [
+    "batch_last",
+    "check_geometry",
+    "expanded",
+    "hull",
+    "moved",
+    "near_motions",
+    "obstacles_last",
+    "pair_blocks",
+    "smallest_distance",
+    "take",
+]
