@@ -20,16 +20,15 @@ def _ik_fn(key: tuple, num_seeds: int):
 
     Its arguments are ``(targets, key, q0 or None, pos_tol, rot_tol)``; the tolerances are traced.
     """
-    jax = jax_x64()
+    jax_x64()
     import diffkin as dk
-    from diffkin._xla import SOLVER_COMPILE
+    from diffkin._xla import solver_jit
 
     chain = chain_for(key)
-    return jax.jit(
+    return solver_jit(
         lambda T, k, q0, pos_tol, rot_tol: dk.ik.solve(
             chain, T, key=k, q0=q0, num_seeds=num_seeds, pos_tol=pos_tol, rot_tol=rot_tol
-        ),
-        compiler_options=SOLVER_COMPILE,
+        )
     )
 
 
@@ -100,12 +99,12 @@ def _avoid_ik_fn(spec: str, key: tuple, end: str, num_seeds: int, self_collision
     (a ``dk.collision.World``; one compilation per count of each kind), the tolerances and the margin
     are traced.
     """
-    jax = jax_x64()
+    jax_x64()
     import diffkin as dk
-    from diffkin._xla import SOLVER_COMPILE
+    from diffkin._xla import solver_jit
 
     robot, geom = robot_with_geometry(spec, [path for path, _ in srdf])
-    return jax.jit(
+    return solver_jit(
         lambda T, k, q0, pos_tol, rot_tol, world, margin: dk.ik.solve(
             robot,
             {end: T},
@@ -115,8 +114,7 @@ def _avoid_ik_fn(spec: str, key: tuple, end: str, num_seeds: int, self_collision
             pos_tol=pos_tol,
             rot_tol=rot_tol,
             avoid=dk.ik.Avoid(geom, world, margin, self_collision),
-        ),
-        compiler_options=SOLVER_COMPILE,
+        )
     )
 
 

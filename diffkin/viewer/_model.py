@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import diffkin as dk
-from diffkin._xla import SOLVER_COMPILE
+from diffkin._xla import solver_jit
 
 
 @dataclasses.dataclass
@@ -118,9 +118,7 @@ def make_ik(kin: Kinematics, end: str, num_seeds: int) -> tuple[Callable, np.nda
     (``n`` its joints): ``dk.ik.solve(chain, T, q0=q0, key=key, num_seeds=num_seeds)``.
     """
     chain, index = kin.chain(end)
-    solve = jax.jit(
-        lambda T, q0, key: dk.ik.solve(chain, T, q0=q0, key=key, num_seeds=num_seeds), compiler_options=SOLVER_COMPILE
-    )
+    solve = solver_jit(lambda T, q0, key: dk.ik.solve(chain, T, q0=q0, key=key, num_seeds=num_seeds))
     return solve, index
 
 
@@ -144,4 +142,4 @@ def make_ik_avoiding(kin: Kinematics, end: str, num_seeds: int, avoid) -> tuple[
         res = dk.ik.solve(robot, {end: T}, q0=q0, key=key, num_seeds=num_seeds, base=base, avoid=avoid)
         return res._replace(pos_err=res.pos_err[..., 0], rot_err=res.rot_err[..., 0])
 
-    return jax.jit(solve, compiler_options=SOLVER_COMPILE), np.arange(kin.dof)
+    return solver_jit(solve), np.arange(kin.dof)
