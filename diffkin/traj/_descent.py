@@ -68,9 +68,10 @@ class Curves:
         r, J = _rows.rows(self.model, avoid, self.locked, self.base, self.k, q)
         return W_CLEAR * r, W_CLEAR * J
 
-    def normal(self, X: jax.Array, W: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-        """``(cost (C,), g (C, n dof), H (C, n dof, n dof))``: ``|r|^2``, ``J^T r`` and ``J^T J`` at
-        ``X`` ``(C, n, dof)``, ``W`` ``(Q, N)`` the basis weights of the clearance samples."""
+    def normal(self, X: jax.Array, W: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+        """``(cost (C,), g (C, n dof), H (C, n dof, n dof), blocked (C,))``: ``|r|^2``, ``J^T r`` and
+        ``J^T J`` at ``X`` ``(C, n, dof)``, ``W`` ``(Q, N)`` the basis weights of the clearance samples;
+        ``blocked``: a clearance row is not zero (always, without ``avoid``: only smoothness to descend)."""
         C, n, dof = X.shape
         P = self.control(X)
         D_host, D_free_host = _smoothing(P.shape[1], n)
@@ -79,16 +80,18 @@ class Curves:
         cost = jnp.sum(rs**2, axis=(1, 2))
         g = jnp.einsum("rk,crj->ckj", D_free, rs).reshape(C, n * dof)
         H = jnp.broadcast_to(jnp.kron(D_free.T @ D_free, jnp.eye(dof, dtype=X.dtype)), (C, n * dof, n * dof))
+        blocked = jnp.full((C,), self.avoid is None)
         if self.avoid is not None:
             q = jnp.einsum("qk,ckj->cqj", W, P)  # (C, Q, dof)
             r, J = self._clearance_rows(q)  # (m, C, Q), (m, dof, C, Q)
             Wf = W[:, _spline.ENDS : _spline.ENDS + n]  # (Q, n)
-            cost = cost + jnp.sum(r**2, axis=(0, 2))
+            clearance = jnp.sum(r**2, axis=(0, 2))
+            cost, blocked = cost + clearance, clearance > 0
             Jr = jnp.einsum("mjcq,mcq->cqj", J, r)  # (C, Q, dof)
             g = g + jnp.einsum("qk,cqj->ckj", Wf, Jr).reshape(C, n * dof)
             G = jnp.einsum("mjcq,mlcq->cqjl", J, J)  # (C, Q, dof, dof)
             H = H + jnp.einsum("qk,qi,cqjl->ckjil", Wf, Wf, G).reshape(C, n * dof, n * dof)
-        return cost, g, H
+        return cost, g, H, blocked
 
     def samples(self, N: int, dtype) -> jax.Array:
         """``(Q, N)`` the basis weights of the clearance samples: :data:`SAMPLES` per segment and the end."""
@@ -97,27 +100,35 @@ class Curves:
         return _spline.basis(jnp.asarray(u, dtype), N).astype(dtype)
 
     def descend(self, X: jax.Array, iters: int) -> jax.Array:
-        """``X`` ``(C, n, dof)`` after ``iters`` Levenberg-Marquardt iterations."""
+        """``X`` ``(C, n, dof)`` after at most ``iters`` Levenberg-Marquardt iterations: fewer once no
+        curve has a clearance row left (or every such curve's damping is at its largest: stalled),
+        since the smoothness rows alone change the curves only slightly and each iteration costs the
+        clearance rows' distances."""
         C, n, dof = X.shape
         X = self.project(X)
         W = self.samples(n + 2 * _spline.ENDS, X.dtype)
         eye = jnp.eye(n * dof, dtype=X.dtype)
 
-        def step(_, state):
-            X, cost, g, H, mu = state
+        def step(state):
+            it, X, cost, g, H, blocked, mu = state
             lam = jnp.where(jnp.isfinite(cost), mu * cost, 0.0) + 1e-10
             dx = jnp.linalg.solve(H + lam[:, None, None] * eye, -g[..., None])[..., 0]
             X_try = self.project(X + dx.reshape(C, n, dof))
-            cost_try, g_try, H_try = self.normal(X_try, W)
+            cost_try, g_try, H_try, blocked_try = self.normal(X_try, W)
             take = jnp.isfinite(cost_try) & (cost_try < cost)
             pick = lambda new, old: jnp.where(take.reshape((C,) + (1,) * (new.ndim - 1)), new, old)  # noqa: E731
             mu = jnp.where(take, jnp.maximum(mu * _MU_DOWN, _MU_MIN), jnp.minimum(mu * _MU_UP, _MU_MAX))
-            return pick(X_try, X), pick(cost_try, cost), pick(g_try, g), pick(H_try, H), mu
+            new = (pick(X_try, X), pick(cost_try, cost), pick(g_try, g), pick(H_try, H), pick(blocked_try, blocked))
+            return (it + 1, *new, mu)
+
+        def going(state):
+            it, blocked, mu = state[0], state[5], state[6]
+            return (it == 0) | ((it <= iters) & jnp.any(blocked & (mu < _MU_MAX)))
 
         # the first iteration evaluates X itself (a zero step from an infinite cost): the residual is
         # compiled once, inside the loop
         cost = jnp.full((C,), jnp.inf, X.dtype)
         g, H = jnp.zeros((C, n * dof), X.dtype), jnp.broadcast_to(eye, (C, n * dof, n * dof))
         mu = jnp.full((C,), _MU_INIT, X.dtype)
-        X, *_ = jax.lax.fori_loop(0, iters + 1, step, (X, cost, g, H, mu))
-        return X
+        state = (jnp.int32(0), X, cost, g, H, jnp.ones((C,), bool), mu)
+        return jax.lax.while_loop(going, step, state)[1]

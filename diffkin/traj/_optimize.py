@@ -45,16 +45,16 @@ def optimize(
 
     The motion is a uniform cubic B-spline in joint space with ``knots`` knots (``knots + 2`` control
     points: the start and the goal three times each, so it starts and stops at rest). Every problem
-    runs ``num_seeds`` seeds (the straight line, then curves through random via points) through
-    ``max_iters`` Levenberg-Marquardt iterations on its free control points (smoothness rows and the
+    runs ``num_seeds`` seeds (the straight line, then curves through random via points) through at
+    most ``max_iters`` Levenberg-Marquardt iterations on its free control points (smoothness rows and the
     clearance rows of collision-aware IK at 4 samples per segment, pushed through the spline's
     basis); each result is then timed and certified:
 
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
       hull of the control polygon's differences);
-    - **clearance**: a certified lower bound over the whole motion (each segment halved 5 times; on a
-      piece, the distances at its middle minus how far the shapes can move within it, from the joint
+    - **clearance**: a certified lower bound over the whole motion (each segment cut into 32 pieces; on
+      a piece, the distances at its middle minus how far the shapes can move within it, from the joint
       speeds and each joint's reach to the shapes it moves: :mod:`diffkin.traj._certify`).
 
     The best seed of each problem is kept: a successful one of the shortest duration, else the one

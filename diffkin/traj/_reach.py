@@ -9,7 +9,8 @@ one 1 (times the length of its axis). So over a motion each point of ``s`` moves
 The distance from joint ``c``'s axis to a point ``x`` of ``s`` depends on the joints between them; it
 is bounded without them by the triangle inequality along the chain of joints ``c = c_1, ..., c_m``
 that move ``s``: each ``c_k`` has a point ``a_k`` on its axis (fixed in the bodies on both sides of
-it), ``|a_k - a_{k+1}|`` is constant (both points fixed in the body between the two joints), so
+it; the one nearest its child body's origin, so that the steps are about the links' lengths),
+``|a_k - a_{k+1}|`` is constant (both points fixed in the body between the two joints), so
 ``|x - a_1| <= sum_k |a_k - a_{k+1}| + |a_m - centre_s| + radius_s``, measured once at ``q = 0``. A
 prismatic joint's point slides with it: its stroke (the largest ``|q|`` within its limits) is
 added; an unlimited one makes the bound infinite (nothing downstream is then certified).
@@ -79,8 +80,11 @@ def reach(robot: Robot, geom: Geometry) -> np.ndarray:
         depth[c] = sizes[f]
         v_c, w_c = twists[f, c, :3], twists[f, c, 3:]
         nw = np.linalg.norm(w_c)
-        if nw > 1e-12:  # revolute: the foot of the axis from the origin; pitch motion (v + w x a) kept
-            a = np.cross(w_c, v_c) / nw**2
+        if nw > 1e-12:  # revolute: the point of the axis nearest its child body's origin (a file's joint
+            # origin lies on its axis: the chain's steps are then the links' lengths, not the distances
+            # between the axes' feet from the world origin); pitch motion (v + w x a) kept
+            foot, unit = np.cross(w_c, v_c) / nw**2, w_c / nw
+            a = foot + unit * np.dot(origins[f] - foot, unit)
             point[c] = a
             speed_w[c], speed_v[c] = nw, np.linalg.norm(v_c + np.cross(w_c, a))
         else:  # prismatic: the child body's origin (it slides with the joint)

@@ -201,3 +201,52 @@ def test_bad_limits():
         dk.traj.Limits(velocity=1.0, acceleration=-1.0)
     with pytest.raises(TypeError, match="Limits.velocity"):
         dk.traj.Limits(velocity="fast", acceleration=1.0)
+
+
+# an arm whose first and last joints turn about vertical axes away from the world origin: the feet of
+# those axes from the origin lie far below the joints, the points nearest the joints' origins do not
+OFFSET_ARM = """<robot name="arm">
+  <link name="base"/>
+  <link name="l1"><collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.04" length="0.4"/></geometry>
+    </collision></link>
+  <link name="l2"><collision><origin xyz="0.15 0 0"/><geometry><box size="0.3 0.05 0.05"/></geometry>
+    </collision></link>
+  <link name="l3"><collision><origin xyz="0 0 -0.15"/><geometry><capsule radius="0.03" length="0.3"/></geometry>
+    </collision></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0.3 0.2 0.1"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.9"/>
+    <axis xyz="0 1 0"/><limit lower="-2.5" upper="2.5"/></joint>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0.3 0 0"/>
+    <axis xyz="0 0 1"/><limit lower="-2.8" upper="2.8"/></joint>
+</robot>"""
+
+
+def test_reach_bounds_every_points_speed_and_follows_the_links():
+    robot = dk.load_robot(OFFSET_ARM)
+    geom = dk.collision.load(OFFSET_ARM, robot)
+    R = _reach.reach(robot, geom)
+    l1, l2, l3 = (geom.shape_links.index(n) for n in ("l1", "l2", "l3"))
+    # j3 to its own capsule: the capsule's far end (0.3) plus its radius; j1 to it: the step to j2's
+    # axis (0.9), to j3's (0.3), then 0.33; measured along the links, not from the feet of the axes
+    np.testing.assert_allclose(R[2, l3], 0.33, rtol=1e-6)
+    np.testing.assert_allclose(R[1, l3], 0.3 + 0.33, rtol=1e-6)
+    np.testing.assert_allclose(R[0, l3], 0.9 + 0.3 + 0.33, rtol=1e-6)
+    assert R[1, l1] == 0 and R[2, l2] == 0
+    # and every bound holds: at random configurations, the speed of each shape's corner points per
+    # unit of each joint's motion (central differences) stays within R minus the radius
+    corners = {l1: [(0, 0, 0.0), (0, 0, 0.4)], l3: [(0, 0, 0.0), (0, 0, -0.3)]}
+    corners[l2] = [(x, y, z) for x in (0.0, 0.3) for y in (-0.025, 0.025) for z in (-0.025, 0.025)]
+    radius = {l1: 0.04, l2: 0.0, l3: 0.03}
+    frames = {s: robot.frame_names.index(geom.shape_links[s]) for s in corners}
+    q = np.random.default_rng(0).uniform(-2.5, 2.5, (200, 3))
+    eps = 1e-6
+    with jax.enable_x64(True):
+        for c in range(3):
+            step = eps * np.eye(3)[c]
+            ahead, behind = (np.asarray(dk.link_poses(robot, jnp.asarray(q + d))) for d in (step, -step))
+            for s, points in corners.items():
+                p = np.c_[np.asarray(points), np.ones(len(points))]
+                moved = (ahead[:, frames[s]] - behind[:, frames[s]]) @ p.T / (2 * eps)  # (200, 4, n)
+                speed = np.max(np.linalg.norm(moved[:, :3], axis=1))
+                assert speed <= max(R[c, s] - radius[s], 0.0) + 1e-6, (c, s, speed, R[c, s])
