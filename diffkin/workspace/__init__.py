@@ -25,7 +25,7 @@ The package: the front doors :func:`reachability` and :func:`capability` here; t
 (``_driver.py``); the map and its file format (``_map.py``), the capability map's (``_capability.py``),
 what is sampled and the grid (``_sampling.py``), the per-sample bins and manipulability
 (``_bins.py``), the compiled sharded step and its reduction (``_step.py``), base placement
-(``_placement.py``), the plots (``_plot.py``).
+(``_placement.py``) and what obstacles rule out of it (``_blocked.py``), the plots (``_plot.py``).
 """
 
 from __future__ import annotations

@@ -14,6 +14,7 @@ import numpy as np
 from diffkin._checks import positive_int
 from diffkin.models.robot import Robot
 from diffkin.workspace._bins import _orientation_bin
+from diffkin.workspace._blocked import blocked, checked
 from diffkin.workspace._capability import CapabilityMap, split_bins
 
 
@@ -60,6 +61,11 @@ class Placement:
         yaw: ``(nyaw,)`` base yaw, radians, ``2 pi k / nyaw``.
         base_height: base z, metres.
         tasks: ``(N, 4, 4)`` ``T_world_task``, the task poses.
+        blocked_bases: ``(nx, ny, nyaw)`` bool, with ``avoid``: the bases whose root body is within the
+            margin of an obstacle (they collide at every configuration: score 0); ``None`` without.
+        blocked_tasks: ``(N,)`` bool, with ``avoid``: the tasks whose tool body, at the task pose, is
+            within the margin of an obstacle (they collide at every solution: reached from no base);
+            ``None`` without.
     """
 
     score: np.ndarray
@@ -68,6 +74,8 @@ class Placement:
     yaw: np.ndarray
     base_height: float
     tasks: np.ndarray
+    blocked_bases: np.ndarray | None = None
+    blocked_tasks: np.ndarray | None = None
 
     def base(self, i, j, k) -> np.ndarray:
         """``T_world_base`` of cell ``(i, j, k)`` (int arrays broadcast together): ``(..., 4, 4)``."""
@@ -177,6 +185,8 @@ def base_placement(
     base_height: float = 0.0,
     cell: float | None = None,
     min_count: int = 1,
+    model=None,
+    avoid=None,
 ) -> Placement:
     """Score planar base poses by the fraction of the task poses a capability map says they reach.
 
@@ -187,6 +197,13 @@ def base_placement(
     layer do not depend on the base's x and y: the map's ``(x, y)`` slices that the tasks need are
     gathered once, and every base cell then costs one look-up per task.
 
+    With ``avoid`` (obstacles in the world), what collides at every solution is ruled out before any
+    IK: a base whose robot's root body (the shapes no joint moves) is within the margin of an
+    obstacle scores 0, and a task whose tool body (the shapes fixed to the tool frame), placed at the
+    task pose, is within the margin counts for no base (:attr:`Placement.blocked_bases`,
+    :attr:`Placement.blocked_tasks`). The links between are checked by IK:
+    :meth:`Placement.verify` with the same ``avoid``.
+
     Args:
         cap: the :class:`CapabilityMap` of the robot (in its base frame).
         tasks: ``(N, 4, 4)`` ``T_world_task``, the tool poses to reach, world frame, metres.
@@ -195,6 +212,9 @@ def base_placement(
         base_height: the base's z in the world, metres.
         cell: edge of the base grid's squares, metres (default: the map's voxel size).
         min_count: samples a map cell needs to count as reached (:meth:`CapabilityMap.reaches`).
+        model: with ``avoid``, the map's ``(robot, frame_name)`` pair.
+        avoid: a :class:`~diffkin.ik.Avoid` of ``model``'s robot with obstacles (one world, in the world
+            frame, metres): bases and tasks within its margin of them at every solution score 0 (above).
 
     Returns:
         The :class:`Placement`; :meth:`Placement.best` gives the best bases and
@@ -214,6 +234,9 @@ def base_placement(
     yaw_bins = positive_int(yaw_bins, "yaw_bins")
     min_count = positive_int(min_count, "min_count")
     base_height = _number(base_height, "base_height")
+    if avoid is None and model is not None:
+        raise ValueError("model: only needed with avoid (the robot whose shapes are checked)")
+    robot_frame = None if avoid is None else checked(model, avoid)
     cell = cap.voxel_size if cell is None else _number(cell, "cell", positive=True)
     nx, ny = (max(1, math.ceil(s / cell - 1e-9)) for s in r[1] - r[0])
     if nx * ny * yaw_bins * T.shape[0] > 2**31:
@@ -249,6 +272,13 @@ def base_placement(
     c = np.einsum("yij,nj->yni", turn[:, :2, :2], T[:, :2, 3])
     bx, by = np.meshgrid(xs, ys, indexing="ij")
     d = np.einsum("yij,abj->yabi", turn[:, :2, :2], np.stack([bx, by], axis=-1))
+    blocked_bases = blocked_tasks = None
+    if robot_frame is not None:
+        ii, jj, kk = np.meshgrid(np.arange(nx), np.arange(ny), np.arange(yaw_bins), indexing="ij")
+        bases = planar_poses(xs[ii], ys[jj], yaws[kk], base_height).reshape(-1, 4, 4)
+        blocked_bases, blocked_tasks = blocked(*robot_frame, avoid, bases, T)
+        blocked_bases = blocked_bases.reshape(nx, ny, yaw_bins)
+        slices = np.where(blocked_tasks[None], -1, slices)  # reached from no base
     score = _scores(
         jnp.asarray(flat_table.reshape(-1, mx, my)),
         jnp.asarray(slices, jnp.int32),
@@ -257,4 +287,7 @@ def base_placement(
         jnp.asarray(cap.origin[:2], dtype),
         jnp.asarray(1 / cap.voxel_size, dtype),
     )
-    return Placement(np.asarray(score, np.float64), xs, ys, yaws, base_height, T)
+    score = np.asarray(score, np.float64)
+    if blocked_bases is not None:
+        score = np.where(blocked_bases, 0.0, score)
+    return Placement(score, xs, ys, yaws, base_height, T, blocked_bases, blocked_tasks)

@@ -138,3 +138,58 @@ def test_capability_with_avoid_counts_the_clear_samples_and_verify_solves_clear(
     np.testing.assert_allclose(check.bases[0], np.eye(4), atol=1e-12)
     with pytest.raises(ValueError, match="avoid: needs a"):
         placement.verify(robot.chain("hand"), k=1, avoid=avoid)
+
+
+def test_placement_with_obstacles_against_ik_from_every_base():
+    """``base_placement(..., avoid=)``: the capsule arm on a base box, a post where one base stands and a
+    ball where one task's hand goes. Brute force, ``verify`` with ``avoid`` from every base of the grid:
+    no base or task the placement rules out is solved clear by IK (they collide at every solution),
+    though IK without the obstacles solves them; everything else scores as without obstacles."""
+    from _shapes import CAPSULE_ARM
+
+    from diffkin.collision import Box, Sphere, World
+
+    urdf = CAPSULE_ARM.replace(
+        '<link name="base"/>',
+        '<link name="base"><collision><geometry><box size="0.2 0.2 0.1"/></geometry></collision></link>',
+    )
+    robot = dk.load_robot(urdf)
+    geom = dk.collision.load(urdf, robot)
+    model = (robot, "hand")
+    chain = robot.chain("hand")
+    q = np.array([[0.3, 0.8, 1.0], [-0.4, 1.1, 0.6], [0.2, -0.9, -1.2]])
+    T_root_hand = np.asarray(dk.fk(chain, q))
+    at = planar_poses([0.0, 0.0, 1.0], 0.0, 0.0, 0.0)  # tasks 0, 1 from the base at the origin, 2 from x = 1
+    tasks = at @ T_root_hand
+    post = np.eye(4)
+    post[:3, 3] = [1.0, 0.0, 0.05]
+    world = World(Box(post[None], np.array([[0.05, 0.05, 0.05]])), Sphere(tasks[1, None, :3, 3], np.array([0.03])))
+    avoid = dk.ik.Avoid(geom, world, margin=0.02)
+    cap = ws.capability(model, 100_000, key=KEY, voxel_size=0.1, orientation_bins=192)
+    kw = dict(region=[[-0.5, -0.5], [1.5, 0.5]], yaw_bins=2, cell=1.0)  # bases at x = 0 and 1, yaws 0 and 180 deg
+    plain = ws.base_placement(cap, tasks, **kw)
+    placement = ws.base_placement(cap, tasks, model=model, avoid=avoid, **kw)
+    assert placement.score.shape == (2, 1, 2) and plain.blocked_bases is None
+    np.testing.assert_array_equal(placement.blocked_tasks, [False, True, False])
+    np.testing.assert_array_equal(placement.blocked_bases[:, 0], [[False, False], [True, True]])  # on the post
+    # Everything else scores as without the obstacles, less the blocked task.
+    cells = plain.best_cells(4)
+    said = cap.reaches(np.linalg.inv(plain.best(4))[:, None] @ tasks)  # (4, 3) the map's look-ups
+    blocked = placement.blocked_bases[tuple(cells.T)]
+    expected = np.where(blocked, 0.0, (said & [True, False, True]).mean(axis=1))
+    np.testing.assert_allclose(placement.score[tuple(cells.T)], expected, atol=1e-6)
+    assert said[:, [0, 2]].any(axis=0).all() and plain.score.max() > placement.score.max() > 0
+    # Brute force: IK from every base on every task, clear of the obstacles and not.
+    clear = placement.verify(model, k=4, avoid=avoid, key=KEY, num_seeds=8)
+    free = placement.verify(model, k=4, key=KEY, num_seeds=8)
+    ruled_out = placement.blocked_bases[tuple(placement.best_cells(4).T)][:, None] | placement.blocked_tasks
+    assert ruled_out.sum() == 8 and not np.any(clear.success & ruled_out)  # never solved clear
+    on_post = clear.bases[:, 0, 3] == 1.0
+    assert free.success[~on_post, 1].all() and free.success[on_post, 2].all()  # but solved without the obstacles
+    assert clear.success[~on_post, 0].all()  # and the rest is solved clear
+    with pytest.raises(ValueError, match=r"avoid: needs model=\(robot, frame_name\)"):
+        ws.base_placement(cap, tasks, avoid=avoid, **kw)
+    with pytest.raises(ValueError, match="model: only needed with avoid"):
+        ws.base_placement(cap, tasks, model=model, **kw)
+    with pytest.raises(TypeError, match="avoid: expected a dk.ik.Avoid"):
+        ws.base_placement(cap, tasks, model=model, avoid=world, **kw)
