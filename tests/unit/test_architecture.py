@@ -325,3 +325,20 @@ def f(reader, self):
         "ik/_terms/avoid.py:3: imports diffkin.collision._private_name",
         "ik/_terms/avoid.py:9: imports diffkin.collision._near",
     ]
+
+
+def _compiler_options_outside_xla() -> list[str]:
+    """``module:line`` of every ``compiler_options=`` keyword outside :mod:`diffkin._xla`."""
+    return [
+        f"{name}:{node.lineno}"
+        for name, (path, tree) in _trees().items()
+        if name != "diffkin._xla"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Call) and any(k.arg == "compiler_options" for k in node.keywords)
+    ]
+
+
+def test_compiler_options_only_through_xla():
+    """XLA's compiler options are backend-specific (a GPU's compiler rejects the CPU emitter's): code compiles
+    with options through ``diffkin._xla.solver_jit``, which gives them to CPU compiles only."""
+    assert _compiler_options_outside_xla() == []
