@@ -121,6 +121,16 @@ class CapabilityMap:
         voxel, b = np.divmod(self.cells, self.orientation_bins)
         ij, k = np.divmod(voxel, self.shape[2])
         layers = b * self.shape[2] + k
+        n_ij = self.shape[0] * self.shape[1]
+        key_bits = max(int(self.orientation_bins * self.shape[2] * n_ij - 1).bit_length(), 1)
+        count_bits = 63 - key_bits
+        if self.cell_counts.size and int(self.cell_counts.max()) < 1 << count_bits:
+            # One plain sort of (layer, ij, count) packed in an int64: the keys (layer, ij) are unique, so
+            # it orders as the stable argsort by layer (ij ascending within a layer: the cells' order) at
+            # a fraction of its time (the sort is vectorized; 8.8 M cells: 1 s against 5 s).
+            packed = np.sort(((layers * n_ij + ij) << count_bits) | self.cell_counts)
+            key = packed >> count_bits
+            return key // n_ij, key % n_ij, packed & ((1 << count_bits) - 1)
         order = np.argsort(layers, kind="stable")
         return layers[order], ij[order], self.cell_counts[order]
 

@@ -202,3 +202,19 @@ def test_cell_counter_merges_batches_into_sorted_counts():
     cells, counts = np.unique(np.concatenate(batches), return_counts=True)
     np.testing.assert_array_equal(counter.cells, cells)
     np.testing.assert_array_equal(counter.counts, counts)
+
+
+@pytest.mark.parametrize("huge_counts", [False, True])
+def test_layers_are_the_cells_ordered_by_bin_and_layer(cap, huge_counts):
+    """``CapabilityMap.layers`` (one packed sort; counts too large to pack: a stable argsort) against the
+    stable argsort of the cells by ``(bin, z layer)``."""
+    import dataclasses
+
+    counts = cap.cell_counts << 40 if huge_counts else cap.cell_counts
+    m = dataclasses.replace(cap, cell_counts=counts)
+    voxel, b = np.divmod(m.cells, BINS)
+    ij, k = np.divmod(voxel, m.shape[2])
+    layer = b * m.shape[2] + k
+    order = np.argsort(layer, kind="stable")
+    for got, expected in zip(m.layers, (layer[order], ij[order], counts[order]), strict=True):
+        np.testing.assert_array_equal(got, expected)
