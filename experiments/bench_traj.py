@@ -23,7 +23,7 @@ the self pairs by the margin on the real meshes (a witness that the goal is reac
 motion exists). Times: the first call (the first scene's batch, compile included) apart, then each
 scene once, warm (its problems batched in one call, each with its own world).
 
-    python experiments/bench_traj.py --quick           # 3 scenes x 3 problems, capsules
+    python experiments/bench_traj.py --quick           # 3 scenes x 3 problems, hulls
     python experiments/bench_traj.py --all --write     # all 700 (long on a CPU)
 """
 
@@ -133,7 +133,7 @@ def judge_motions(judge: Judge, traj, problems: list, kind: str, limits, samples
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--model", choices=("capsules", "hulls"), default="capsules", help="robot model (capsules)")
+    parser.add_argument("--model", choices=("capsules", "hulls"), default="hulls", help="robot model (hulls)")
     parser.add_argument("--quick", action="store_true", help=f"3 problems of each of {', '.join(QUICK_SCENES)}")
     parser.add_argument("--all", action="store_true", help="all 700 problems (7 scenes x 100)")
     parser.add_argument("--per-scene", type=int, metavar="N", help="N problems per scene, spread evenly")
