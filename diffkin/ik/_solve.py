@@ -422,7 +422,8 @@ def constraints_at(spec: Spec, problem: Problem, x: jax.Array) -> tuple[dict[str
         return {}, None
     kin = Kinematics(problem, x)
     ((constraint, bound),) = zip(spec.constraints, problem.bound[len(spec.targets) :], strict=True)
-    return {"clearance": constraint.clearance(kin, bound)}, constraint.slack(kin, bound) >= 0
+    value = constraint.clearance(kin, bound)  # measured once: its slack follows from it
+    return {"clearance": value}, constraint.slack_of(value, bound) >= 0
 
 
 def result(

@@ -84,7 +84,8 @@ class Target(Term, Protocol):
 class Constraint(Term, Protocol):
     """A term that reports its own value, ``clearance(kin, bound) -> (P,)`` (``IKResult.clearance``),
     computed exactly at the returned states, and ``slack(kin, bound) -> (P,)``, by how much it holds
-    (in its own unit): it is met where ``slack >= 0``, which success needs.
+    (in its own unit; ``slack_of(value, bound)`` from a value): it is met where ``slack >= 0``, which
+    success needs.
 
     ``bind(data)`` takes its data (a pytree in the solver's dtype: :class:`~diffkin.ik.Avoid`), which
     has ``cast(dtype)``, ``flat(lead)`` (parts per problem, of problem axes broadcasting to the
@@ -101,3 +102,7 @@ class Constraint(Term, Protocol):
     def clearance(self, kin, bound) -> jax.Array: ...
 
     def slack(self, kin, bound) -> jax.Array: ...
+
+    def slack_of(self, value: jax.Array, bound) -> jax.Array:
+        """The slack of ``value`` ``(P,)``, what :meth:`clearance` returned (no second measure)."""
+        ...

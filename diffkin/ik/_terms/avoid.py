@@ -210,6 +210,10 @@ class AvoidTerm:
         the distances below the margin need computing)."""
         return self._smallest(kin, avoid, avoid.margin) - avoid.margin
 
+    def slack_of(self, clearance: jax.Array, avoid: Avoid) -> jax.Array:
+        """``(P,)`` the slack of an exact ``clearance`` (:meth:`clearance`): it less the margin."""
+        return clearance - avoid.margin
+
     def rows(self, kin, avoid: Avoid, jacobian: bool, off=None) -> Rows:
         """The rows of the module docstring, their band narrowed to the targets' error ``off`` ``(P,)``
         where given: a goal that clears the margin is then reached exactly (the rows vanish there),
