@@ -36,15 +36,44 @@ def checked(model, avoid) -> tuple[Robot, str]:
     return robot, frame
 
 
+def subset(geom, shapes: np.ndarray):
+    """The :class:`~diffkin.collision.Geometry` of only ``shapes`` (sorted indices into ``geom``'s shapes,
+    which are ordered by kind), without self-collision pairs: its distances are those shapes' rows."""
+    import dataclasses
+
+    import jax
+
+    starts = np.cumsum((0, *geom.counts))
+    kinds = tuple(
+        jax.tree.map(lambda x, i=shapes[(shapes >= lo) & (shapes < hi)] - lo: x[i], kind)
+        for kind, lo, hi in zip(geom.shapes, starts[:-1], starts[1:], strict=True)
+    )
+
+    def pick(values: tuple) -> tuple:
+        return tuple(values[i] for i in shapes) if values else values
+
+    return dataclasses.replace(
+        geom,
+        shapes=kinds,
+        shape_frames=pick(geom.shape_frames),
+        shape_names=pick(geom.shape_names),
+        shape_bodies=pick(geom.shape_bodies),
+        shape_links=pick(geom.shape_links),
+        pair_list=(),
+        fits=(),
+        shape_overshoot=pick(geom.shape_overshoot),
+    )
+
+
 def _gap(robot: Robot, avoid, shapes: np.ndarray, T_world_root: np.ndarray) -> np.ndarray:
     """``(M,)`` the smallest distance of ``shapes`` (indices in ``avoid.geom``) to the obstacles, the robot's
     root at ``T_world_root (M, 4, 4)`` and its joints at the middle of their limits (the shapes checked
-    are those the joints do not move relative to that pose)."""
+    are those the joints do not move relative to that pose; only they are measured)."""
     from diffkin.collision import world_distances
 
     q = np.broadcast_to(_mid(robot), (len(T_world_root), robot.dof))
-    d = np.asarray(world_distances(robot, avoid.geom, q, avoid.world, base=T_world_root))
-    return d[:, shapes].min(axis=(1, 2), initial=np.inf)
+    d = np.asarray(world_distances(robot, subset(avoid.geom, shapes), q, avoid.world, base=T_world_root))
+    return d.min(axis=(1, 2), initial=np.inf)
 
 
 def _mid(robot: Robot) -> np.ndarray:
