@@ -12,9 +12,8 @@ import numpy as np
 from diffkin._checks import positive_int, real_array
 from diffkin._static import combine, is_concrete, partition
 from diffkin._xla import solver_jit
-from diffkin.ik._args import check_batched, default_key, finite
-from diffkin.ik._prepare import cast, detach
-from diffkin.ik._terms.avoid import Avoid
+from diffkin.ik import Avoid
+from diffkin.ik.interface import cast, check_batched, default_key, detach, finite
 from diffkin.models.robot import Robot
 from diffkin.traj import _limits, _reach, _spline
 from diffkin.traj._certify import certified

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from diffkin import _rigid as rg
-from diffkin.collision._geometry import Geometry
+from diffkin.collision import Geometry
 from diffkin.models.robot import Robot
 
 

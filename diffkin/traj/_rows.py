@@ -13,8 +13,8 @@ import jax
 import jax.numpy as jnp
 
 from diffkin import _rigid as rg
-from diffkin.ik._problem import Kinematics, Problem, Spec
-from diffkin.ik._terms.avoid import Avoid, AvoidTerm
+from diffkin.ik import Avoid
+from diffkin.ik.interface import AvoidTerm, Kinematics, Problem, Spec
 
 
 def problem(model, avoid: Avoid, locked: tuple[bool, ...], base, k: int, Q: int) -> tuple[Problem, AvoidTerm, Avoid]:
@@ -44,7 +44,7 @@ def distances(model, avoid: Avoid, locked, base, k: int, q: jax.Array, reach=jnp
     C, Q, dof = q.shape
     prob, term, data = problem(model, avoid, locked, base, k, Q)
     kin = Kinematics(prob, q.reshape(C * Q, dof).T)
-    blocks, d_self, d_world, _, _ = term._measure(kin, data, reach)
+    blocks, d_self, d_world, _, _ = term.measure(kin, data, reach)
     self_d = None
     if blocks:
         order = jnp.concatenate([jnp.asarray(rows) for rows, *_ in blocks])

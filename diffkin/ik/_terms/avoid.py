@@ -170,7 +170,7 @@ class AvoidTerm:
     def bind(self, avoid: Avoid) -> Avoid:
         return avoid
 
-    def _measure(self, kin, avoid: Avoid, reach, jacobian: bool = False):
+    def measure(self, kin, avoid: Avoid, reach, jacobian: bool = False):
         """The self pairs' blocks (:func:`pair_blocks`) with their distances ``(n_pairs, P)`` each and the
         world distances ``(S, W, P)`` at the state, exact below ``reach`` and lower bounds above it
         (:func:`near_motions`); with ``jacobian``, also the wrenches of the self pairs'
@@ -197,7 +197,7 @@ class AvoidTerm:
 
     def _smallest(self, kin, avoid: Avoid, reach) -> jax.Array:
         """``(P,)`` the smallest checked distance: exact below ``reach``, a lower bound above it."""
-        _, d_self, d_world, _, _ = self._measure(kin, avoid, reach)
+        _, d_self, d_world, _, _ = self.measure(kin, avoid, reach)
         d = d_self + ([] if d_world is None else [d_world.reshape(-1, kin.shape[0])])
         return jnp.min(jnp.concatenate(d), axis=0)
 
@@ -220,7 +220,7 @@ class AvoidTerm:
         not left where the band's push balances the pose's pull."""
         dtype = kin.dtype
         reach = avoid.margin + (BAND if off is None else jnp.minimum(BAND, off))
-        blocks, d_self, d_world, w_self, w_world = self._measure(kin, avoid, avoid.margin + BAND, jacobian)
+        blocks, d_self, d_world, w_self, w_world = self.measure(kin, avoid, avoid.margin + BAND, jacobian)
         a_self = [jnp.maximum(reach - d, 0.0) for d in d_self]  # (n_pairs, P) each
         r = list(a_self)
         if d_world is not None:
@@ -254,7 +254,7 @@ class AvoidTerm:
         constraints): ``d`` ``(k, P)`` metres (the self pairs, then each robot shape against each
         obstacle), exact below ``reach`` and a lower bound at least ``reach`` above it, and ``J``
         ``(k, C, P)``: ``dd/dx`` per column of the state (zero above ``reach``)."""
-        blocks, d_self, d_world, w_self, w_world = self._measure(kin, avoid, reach, True)
+        blocks, d_self, d_world, w_self, w_world = self.measure(kin, avoid, reach, True)
         twists = self._twists(kin)  # (F, C, 6, P)
         slot = np.asarray(self.slots, dtype=np.int64)
         starts = np.cumsum((0, *avoid.geom.counts))
@@ -278,7 +278,7 @@ class AvoidTerm:
 
     def screen(self, kin, avoid: Avoid) -> rg.Entry:
         reach = avoid.margin + BAND
-        _, d_self, d_world, _, _ = self._measure(kin, avoid, reach)
+        _, d_self, d_world, _, _ = self.measure(kin, avoid, reach)
         cost = sum(jnp.sum(jnp.maximum(reach - d, 0.0) ** 2, axis=0) for d in d_self)
         if d_world is not None:
             cost = cost + jnp.sum(jnp.maximum(reach - d_world, 0.0) ** 2, axis=(0, 1))

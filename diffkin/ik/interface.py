@@ -1,0 +1,13 @@
+"""What the packages built on IK use beyond its public names (internal: not in API.md).
+
+The trajectories (:mod:`diffkin.traj`) check and cast their arguments as ``dk.ik.solve`` does, and build
+their clearance rows from IK's problem and its clearance term (:class:`AvoidTerm`, whose ``measure``
+gives the distances per pair block).
+"""
+
+from diffkin.ik._args import check_batched, default_key, finite
+from diffkin.ik._prepare import cast, detach
+from diffkin.ik._problem import Kinematics, Problem, Spec
+from diffkin.ik._terms.avoid import AvoidTerm
+
+__all__ = ["AvoidTerm", "Kinematics", "Problem", "Spec", "cast", "check_batched", "default_key", "detach", "finite"]
