@@ -9,8 +9,8 @@ import numpy as np
 from diffkin._pytree import pytree_dataclass
 from diffkin._static import is_concrete
 
-#: rad/s (m/s for a prismatic joint) per joint when no :class:`Limits` are given: diffkin's models do
-#: not carry the files' ``<limit velocity>``, so a conservative speed every arm can move at
+#: rad/s (m/s for a prismatic joint) for a joint without a velocity limit in its file when no
+#: :class:`Limits` are given: a conservative speed every arm can move at
 DEFAULT_VELOCITY = 1.0
 #: rad/s^2 (m/s^2) per joint when no :class:`Limits` are given
 DEFAULT_ACCELERATION = 2.0
@@ -69,7 +69,10 @@ class Limits:
         return velocity, acceleration, out[2]
 
 
-def default(dof: int) -> Limits:
-    """The limits used when none are given: :data:`DEFAULT_VELOCITY` and :data:`DEFAULT_ACCELERATION`
-    for every joint, no jerk bound."""
-    return Limits(jnp.full(dof, DEFAULT_VELOCITY), jnp.full(dof, DEFAULT_ACCELERATION))
+def default(velocity: jax.Array) -> Limits:
+    """The limits used when none are given: the model's ``velocity`` ``(dof,)`` (its file's velocity limits;
+    :data:`DEFAULT_VELOCITY` where it has none, ``inf`` or 0), :data:`DEFAULT_ACCELERATION` for every
+    joint, no jerk bound."""
+    v = jnp.asarray(velocity)
+    given = jnp.isfinite(v) & (v > 0)
+    return Limits(jnp.where(given, v, DEFAULT_VELOCITY), jnp.full(v.shape, DEFAULT_ACCELERATION))

@@ -74,9 +74,9 @@ def optimize(
             with ``avoid``, warm-started at ``q_start`` (any branch).
         avoid: :class:`diffkin.ik.Avoid`: the geometry, obstacles (shared, or one world per problem)
             and margin the whole motion keeps; ``None``: no clearance.
-        limits: :class:`Limits`; default :data:`diffkin.traj._limits.DEFAULT_VELOCITY` (1 rad/s) and
-            :data:`~diffkin.traj._limits.DEFAULT_ACCELERATION` (2 rad/s^2) per joint, no jerk bound
-            (diffkin's models do not carry the files' velocity limits).
+        limits: :class:`Limits`; default: the model's ``velocity`` (a URDF's ``<limit velocity>``;
+            :data:`diffkin.traj._limits.DEFAULT_VELOCITY`, 1 rad/s, for a joint without one) and
+            :data:`~diffkin.traj._limits.DEFAULT_ACCELERATION` (2 rad/s^2) per joint, no jerk bound.
         knots: static, ``K >= 5``.
         key: PRNG key of the random seeds (and of a pose goal's IK); default ``jax.random.key(0)``.
         num_seeds: static, ``>= 1`` seeds per problem (the first the straight line).
@@ -109,7 +109,7 @@ def optimize(
     if avoid is not None and not isinstance(model, Robot):
         raise TypeError(f"avoid: needs a diffkin.Robot with collision geometry, got a {type(model).__name__}")
     if limits is None:
-        limits = _limits.default(dof)
+        limits = _limits.default(model.velocity)
     if not isinstance(limits, _limits.Limits):
         raise TypeError(f"limits: expected a diffkin.traj.Limits or None, got {type(limits).__name__}")
     velocity, acceleration, jerk = limits.per_joint(dof, dtype)

@@ -16,7 +16,7 @@ from _shapes import planar_capsule_arm
 
 import diffkin as dk
 from diffkin.collision import Sphere, World
-from diffkin.traj import _certify, _reach, _spline
+from diffkin.traj import _certify, _limits, _reach, _spline
 
 URDF = planar_capsule_arm()
 ROBOT = dk.load_robot(URDF)
@@ -250,3 +250,18 @@ def test_reach_bounds_every_points_speed_and_follows_the_links():
                 moved = (ahead[:, frames[s]] - behind[:, frames[s]]) @ p.T / (2 * eps)  # (200, 4, n)
                 speed = np.max(np.linalg.norm(moved[:, :3], axis=1))
                 assert speed <= max(R[c, s] - radius[s], 0.0) + 1e-6, (c, s, speed, R[c, s])
+
+
+def test_default_limits_are_the_files_velocities():
+    """Without ``limits`` a joint moves at most at its URDF ``<limit velocity>`` (1 rad/s where the file gives
+    none), and beyond 1 rad/s where its file allows it."""
+    urdf = OFFSET_ARM.replace('<limit lower="-3" upper="3"/>', '<limit lower="-3" upper="3" velocity="2.5"/>', 1)
+    robot = dk.load_robot(urdf)
+    np.testing.assert_array_equal(np.asarray(robot.velocity), [2.5, np.inf, np.inf])
+    limits = _limits.default(robot.velocity)
+    np.testing.assert_array_equal(np.asarray(limits.velocity), [2.5, 1.0, 1.0])
+    q0, q1 = jnp.zeros(3), jnp.array([2.0, 0.2, 0.1])
+    traj = dk.traj.optimize(robot, q0, q1, knots=6, num_seeds=1, max_iters=5)
+    speed = np.max(np.abs(np.asarray(traj.at(jnp.linspace(0, traj.duration, 999), 1))), axis=0)
+    assert bool(traj.success) and np.all(speed <= np.array([2.5, 1.0, 1.0]) * (1 + 1e-6))
+    assert speed[0] > 1.0  # faster than the old 1 rad/s default: the file's limit is used
