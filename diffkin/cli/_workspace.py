@@ -15,6 +15,7 @@ def cmd_workspace(args) -> int:
     ``--capability`` a capability map (``--orientation-bins`` per voxel), which ``diffkin place`` reads."""
     jax = jax_x64()
     import diffkin as dk
+    from diffkin.workspace.interface import voxel_grid
 
     chain = load_robot(args.robot, args.end_link, args.base_link)
     out = Path(args.out)
@@ -31,7 +32,7 @@ def cmd_workspace(args) -> int:
             raise CLIError(f"{flag}: no such directory {str(path.parent)!r}")
     if args.plot:
         need("matplotlib", "--plot", "plot")
-        origin, voxel, shape = dk.workspace._grid(chain, args.voxel, None)  # the map's grid, known in advance
+        origin, voxel, shape = voxel_grid(chain, args.voxel, None)  # the map's grid, known in advance
         a = "xyz".index(args.axis)
         lo, hi = origin[a], origin[a] + voxel * shape[a]
         if not lo <= args.value < hi:

@@ -40,7 +40,7 @@ from diffkin.workspace._driver import run
 from diffkin.workspace._map import ReachabilityMap
 from diffkin.workspace._placement import Placement, Verification, base_placement
 from diffkin.workspace._plot import plot_placement, plot_slice
-from diffkin.workspace._sampling import _grid, sample_configs  # noqa: F401  # _grid: the CLI's grid in advance
+from diffkin.workspace._sampling import sample_configs
 from diffkin.workspace._step import _compiled  # noqa: F401  # its cache, for the tests
 
 MAX_GRID_BYTES = 2 * 1024**3

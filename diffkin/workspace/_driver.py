@@ -15,7 +15,7 @@ from jax.sharding import PartitionSpec as P
 
 from diffkin._checks import positive_int
 from diffkin._static import partition
-from diffkin.workspace._sampling import _as_chain, _grid
+from diffkin.workspace._sampling import _as_chain, voxel_grid
 from diffkin.workspace._step import _AXIS, _collision_check, _compiled
 
 _INT32_MAX = 2**31 - 1
@@ -107,7 +107,7 @@ def run(
     chain = _as_chain(chain)
     n_samples = positive_int(n_samples, "n_samples")
     chunk = positive_int(chunk, "chunk")
-    origin, voxel_size, shape = _grid(chain, voxel_size, bounds)
+    origin, voxel_size, shape = voxel_grid(chain, voxel_size, bounds)
     n_chunks = -(-n_samples // chunk)
     if n_chunks > _INT32_MAX:
         raise ValueError(f"n_samples: expected at most {_INT32_MAX} chunks of {chunk} samples, got {n_samples} samples")

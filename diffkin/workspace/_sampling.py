@@ -10,9 +10,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin._checks import instance, positive_int
-from diffkin.models._ranges import ball_starts, sampling_ranges, uniform
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain, to_poe
+from diffkin.models.ranges import ball_starts, sampling_ranges, uniform
 from diffkin.models.robot import Robot
 
 
@@ -69,7 +69,7 @@ def _reach(chain) -> float:
     return reach + float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
 
 
-def _grid(chain, voxel_size, bounds) -> tuple[np.ndarray, float, tuple[int, ...]]:
+def voxel_grid(chain, voxel_size, bounds) -> tuple[np.ndarray, float, tuple[int, ...]]:
     """``(origin (3,), voxel_size, shape)`` of the voxel grid, validated."""
     if isinstance(voxel_size, bool) or not isinstance(voxel_size, (int, float, np.integer, np.floating)):
         raise TypeError(f"voxel_size: expected a positive number of metres, got {type(voxel_size).__name__}")

@@ -16,7 +16,7 @@ from jax.sharding import PartitionSpec as P
 from diffkin._checks import instance
 from diffkin._static import ModelKey, partition
 from diffkin._xla import opaque_index
-from diffkin.models._ranges import sampling_ranges, uniform
+from diffkin.models.ranges import sampling_ranges, uniform
 from diffkin.models.robot import Robot
 from diffkin.workspace._bins import _flat_index, _manipulability, _orientation_bin
 
@@ -34,7 +34,7 @@ class _Collision(NamedTuple):
 
 def _collision_check(pair, avoid) -> _Collision:
     """The static collision check of a map of ``pair = (robot, frame_name)`` with ``avoid``, checked on the host."""
-    from diffkin.collision._robot import check_geometry
+    from diffkin.collision.interface import check_geometry
     from diffkin.ik import Avoid
 
     if not (isinstance(pair, tuple) and len(pair) == 2 and isinstance(pair[0], Robot)):

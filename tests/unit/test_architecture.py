@@ -156,17 +156,6 @@ def test_the_cycle_check_sees_a_cycle():
 # packages define (``reader._get(...)`` on an object of another package's class; ``HOOKS`` aside).
 # Imports inside functions count.
 
-# Private uses across packages known and not yet mended, each as "path: what" (paths under diffkin/): in
-# code being changed by other work now (diffkin/traj/, diffkin/workspace/), and the CLI's use of the
-# workspace's grid, which needs a public name there (issue 55). A new one fails the test, and so does an
-# entry here that is no longer found.
-KNOWN_REACHES = {
-    "cli/_workspace.py: reads diffkin.workspace._grid",
-    "workspace/_sampling.py: imports diffkin.models._ranges",
-    "workspace/_step.py: imports diffkin.collision._robot",
-    "workspace/_step.py: imports diffkin.models._ranges",
-}
-
 
 def _owner(module: str) -> str:
     """The package a module of ``diffkin`` belongs to: ``diffkin.<first part>`` (a sub-package or a top-level
@@ -266,16 +255,8 @@ def _all_reaches() -> set[str]:
 
 def test_no_package_reaches_into_another():
     """Across packages: no private module, no underscore name, no underscore attribute of another's class."""
-    found = _all_reaches()
-    unknown = sorted(r for r in found if _without_line(r) not in KNOWN_REACHES)
-    assert not unknown, "private uses across packages (give the package an interface):\n" + "\n".join(unknown)
-    mended = KNOWN_REACHES - {_without_line(r) for r in found}
-    assert not mended, f"mended: remove them from KNOWN_REACHES: {sorted(mended)}"
-
-
-def _without_line(reach: str) -> str:
-    where, what = reach.split(": ", 1)
-    return f"{where.rsplit(':', 1)[0]}: {what}"
+    found = sorted(_all_reaches())
+    assert not found, "private uses across packages (give the package an interface):\n" + "\n".join(found)
 
 
 def test_the_reach_check_sees_a_violation():
