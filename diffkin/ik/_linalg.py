@@ -16,7 +16,13 @@ from diffkin._xla import inverse_sqrt, materialize
 
 def _cholesky_solve(A: list[list], b: list) -> list:
     """Solve ``A x = b`` for a symmetric positive definite ``A`` (``n x n`` nested lists)."""
-    n = len(b)
+    return cholesky_substitute(*cholesky(A), b)
+
+
+def cholesky(A: list[list]) -> tuple[list[list], list]:
+    """The lower Cholesky factor ``L`` of a symmetric positive definite ``A`` (``n x n`` nested lists,
+    read from its lower triangle) and ``1 / L[j][j]``: its entries below the diagonal and the inverses."""
+    n = len(A)
     L: list[list[rg.Entry]] = [[0.0] * n for _ in range(n)]
     inv_diag = []
     for j in range(n):
@@ -25,9 +31,25 @@ def _cholesky_solve(A: list[list], b: list) -> list:
         inv_diag.append(inv)
         for i in range(j + 1, n):
             L[i][j] = rg.mul(rg.add(A[i][j], *(-rg.mul(L[i][k], L[j][k]) for k in range(j))), inv)
+    return L, inv_diag
+
+
+def cholesky_substitute(L: list[list], inv_diag: list, b: list) -> list:
+    """``x`` of ``L L^T x = b`` for the factor of :func:`cholesky`: two triangular substitutions."""
+    return back_substitute(L, inv_diag, forward_substitute(L, inv_diag, b))
+
+
+def forward_substitute(L: list[list], inv_diag: list, b: list) -> list:
+    """``y`` of ``L y = b`` for the factor of :func:`cholesky`."""
     y: list[rg.Entry] = []
-    for i in range(n):
+    for i in range(len(b)):
         y.append(rg.mul(rg.add(b[i], *(-rg.mul(L[i][k], y[k]) for k in range(i))), inv_diag[i]))
+    return y
+
+
+def back_substitute(L: list[list], inv_diag: list, y: list) -> list:
+    """``x`` of ``L^T x = y`` for the factor of :func:`cholesky`."""
+    n = len(y)
     x: list[rg.Entry] = [0.0] * n
     for i in reversed(range(n)):
         x[i] = rg.mul(rg.add(y[i], *(-rg.mul(L[k][i], x[k]) for k in range(i + 1, n))), inv_diag[i])

@@ -11,9 +11,10 @@ Method: a primal-dual interior-point method with Mehrotra's predictor-corrector 
 affine step (their (16.60) heuristic), stopped when every problem of the batch has its residuals
 and complementarity below ``TOL_EPS`` machine epsilons relative to the problem's scale, or after
 ``MAX_ITERS`` iterations. Each iteration factors the reduced ``n x n`` system ``H + A^T (Z/S) A``
-once (a batched LAPACK Cholesky: per problem, ``jax.vmap`` of one problem's code) and solves it
-twice. The box is then enforced exactly
-by clipping ``v`` into ``[lo, hi]`` (a move of the order of the stopping tolerance).
+once and solves it twice; every operation is elementwise along the batch (the factorisation
+unrolled entry by entry: :func:`_factor`), so XLA vectorises each over the problems. The box is
+then enforced exactly by clipping ``v`` into ``[lo, hi]`` (a move of the order of the stopping
+tolerance).
 
 Tolerance: on non-degenerate problems (strict complementarity) the solution matches an exact
 active-set enumeration to ~1e-10 relative in float64 (``tests/unit/test_step.py`` checks 1e-8
@@ -25,10 +26,14 @@ the same tolerance. The rows must be feasible together with the box (``dk.ik.ste
 from __future__ import annotations
 
 import functools
+import itertools
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+
+from diffkin._xla import materialize
+from diffkin.ik._linalg import back_substitute, cholesky, forward_substitute
 
 #: Iterations at most (float64 converges in 10-20 on the problems of ``dk.ik.step``).
 MAX_ITERS = 40
@@ -68,57 +73,102 @@ class Solution(NamedTuple):
 
 def solve(qp: QP, max_iters: int = MAX_ITERS) -> Solution:
     """The minimiser of each problem of ``qp`` (see the module docstring for the method and its tolerance)."""
-    last = lambda *a: tuple(jnp.moveaxis(x, -1, 0) for x in a)  # noqa: E731
-    v, iters = jax.vmap(functools.partial(_solve_one, max_iters=max_iters))(*last(*qp))
+    v, iters = _solve(*qp, max_iters=max_iters)
     H, g, lo, hi, G, h, on = qp
-    v = jnp.where(jnp.isfinite(v), v, jnp.clip(0.0, lo.T, hi.T)).T  # (never: a guard for infeasible rows)
-    violation = jnp.max(jnp.where(on, h - jnp.einsum("mnp,np->mp", G, v), 0.0), axis=0, initial=0.0)
+    v = jnp.where(jnp.isfinite(v), v, jnp.clip(0.0, lo, hi))  # (never: a guard for infeasible rows)
+    violation = jnp.max(jnp.where(on, h - jnp.sum(G * v[None], axis=1), 0.0), axis=0, initial=0.0)
     return Solution(v, iters, violation)
 
 
-def _solve_one(H, g, lo, hi, G, h, on, *, max_iters: int) -> tuple[jax.Array, jax.Array]:
-    """One problem: ``H`` ``(n, n)``, ``g``, ``lo``, ``hi`` ``(n,)``, ``G`` ``(m, n)``, ``h``, ``on`` ``(m,)``;
-    returns ``v`` ``(n,)`` (clipped into the box) and the iterations."""
+#: Largest ``n`` factored entry by entry (:func:`_factor`); above it, a batched LAPACK Cholesky
+#: (the unrolled factorisation's trace and compile time grow as ``n^3``).
+_UNROLL_MAX = 16
+
+
+def _factor(M: jax.Array):
+    """The Cholesky factorisation of each ``M`` ``(n, n, P)``, for :func:`_substitute`.
+
+    Up to :data:`_UNROLL_MAX`, entry by entry over the batch (:func:`diffkin.ik._linalg.cholesky`,
+    every operation elementwise along ``P``, the factor's entries computed once:
+    :func:`diffkin._xla.materialize`): LAPACK on a tiny matrix, one call per problem, made the QP of
+    ``dk.ik.step`` slow (the measurements: ``experiments/results/amd-epyc-2-cores-step.md``).
+    """
+    n = M.shape[0]
+    if n > _UNROLL_MAX:
+        return jax.scipy.linalg.cho_factor(jnp.moveaxis(M, -1, 0), lower=True)
+    L, inv_diag = cholesky([[M[i, j] for j in range(i + 1)] for i in range(n)])
+    below = [(i, j) for i in range(n) for j in range(i)]
+    flat = materialize([L[i][j] for i, j in below] + inv_diag)
+    for k, (i, j) in enumerate(below):
+        L[i][j] = flat[k]
+    return L, list(flat[len(below) :])
+
+
+def _substitute(factor, b: jax.Array) -> jax.Array:
+    """``M^-1 b`` for ``b`` ``(n, P)`` and the factorisation of :func:`_factor`."""
+    if isinstance(factor[0], jax.Array):
+        return jax.scipy.linalg.cho_solve(factor, b.T[..., None])[..., 0].T
+    L, inv_diag = factor
+    # Each substitution's entries computed once: fused into its consumers, each would redo the chain.
+    y = list(materialize(forward_substitute(L, inv_diag, list(b))))
+    return materialize(back_substitute(L, inv_diag, y))
+
+
+def _computed(*arrays: jax.Array) -> tuple[jax.Array, ...]:
+    """``arrays`` (``(k_i, P)``) computed once (:func:`diffkin._xla.materialize`, joined along their first
+    axis): without it XLA's fusion recomputes a Newton direction inside each of its many consumers."""
+    sizes = [a.shape[0] for a in arrays]
+    joined = materialize([row for a in arrays for row in a])
+    return tuple(jnp.split(joined, list(itertools.accumulate(sizes))[:-1]))
+
+
+def _solve(H, g, lo, hi, G, h, on, *, max_iters: int) -> tuple[jax.Array, jax.Array]:
+    """Every problem at once, problem axis last: ``H`` ``(n, n, P)``, ``g``, ``lo``, ``hi`` ``(n, P)``, ``G``
+    ``(m, n, P)``, ``h``, ``on`` ``(m, P)``; returns ``v`` ``(n, P)`` (clipped into the box) and the
+    iterations ``(P,)``. Each problem's iterates are those of the problem alone: it stops when it
+    converges, the others go on (the loop runs while any has not)."""
     dtype, n = g.dtype, g.shape[0]
     eps = jnp.finfo(dtype).eps
     # The constraints a^T v - b >= 0: the lower bounds (a = e_i), the upper (a = -e_i), the rows.
     has_lo, has_hi = jnp.isfinite(lo), jnp.isfinite(hi)
-    mask = jnp.concatenate([has_lo, has_hi, on])  # (2n + m,)
+    mask = jnp.concatenate([has_lo, has_hi, on])  # (2n + m, P)
     b = jnp.where(mask, jnp.concatenate([lo, -hi, h]), 0.0)
-    count = jnp.maximum(jnp.sum(mask), 1)
-    scale = 1.0 + jnp.max(jnp.abs(g)) + jnp.max(jnp.abs(b))
+    count = jnp.maximum(jnp.sum(mask, axis=0), 1)
+    scale = 1.0 + jnp.max(jnp.abs(g), axis=0) + jnp.max(jnp.abs(b), axis=0)
     tol = TOL_EPS * eps * scale
     rows = G.shape[0] > 0
+    eye = jnp.eye(n, dtype=dtype)[:, :, None]
 
-    def times_a(v):  # A v (2n + m,)
-        return jnp.where(mask, jnp.concatenate([v, -v, G @ v if rows else v[:0]]), 0.0)
+    def times_a(v):  # A v (2n + m, P)
+        return jnp.where(mask, jnp.concatenate([v, -v, jnp.sum(G * v[None], axis=1) if rows else v[:0]]), 0.0)
 
-    def times_at(y):  # A^T y (n,)
-        return y[:n] - y[n : 2 * n] + (G.T @ y[2 * n :] if rows else 0.0)
+    def times_at(y):  # A^T y (n, P)
+        return y[:n] - y[n : 2 * n] + (jnp.sum(G * y[2 * n :, None], axis=0) if rows else 0.0)
 
     def factor(d):  # Cholesky of H + A^T diag(d) A
-        M = H + jnp.diag(d[:n] + d[n : 2 * n])
+        M = H + eye * (d[:n] + d[n : 2 * n])[None]
         if rows:
-            M = M + (G.T * d[2 * n :]) @ G
-        return jax.scipy.linalg.cho_factor(M, lower=True)
+            M = M + jnp.sum(G[:, :, None] * G[:, None, :] * d[2 * n :, None, None], axis=0)
+        return _factor(M)
 
-    def residuals(v, z):
-        return H @ v + g - times_at(z), times_a(v) - b
+    def residuals(v, z):  # H v written out column by column (elementwise along P; a reduction is slower)
+        Hv = functools.reduce(jnp.add, [H[:, j] * v[j] for j in range(n)])
+        return Hv + g - times_at(z), times_a(v) - b
 
     def direction(c, s, z, r_d, r_p, r_c):
         """The Newton direction ``(dv, ds, dz)`` for complementarity residual ``r_c``."""
         y = jnp.where(mask, (r_c + z * r_p) / s, 0.0)
-        dv = jax.scipy.linalg.cho_solve(c, -r_d - times_at(y))
+        dv = _substitute(c, -r_d - times_at(y))
         ds = times_a(dv) + r_p
         dz = jnp.where(mask, -(r_c + z * ds) / s, 0.0)
-        return dv, ds, dz
+        return _computed(dv, ds, dz)
 
     def longest(s, ds, z, dz):  # the largest step keeping s, z >= 0 (inf: any)
         ratio = lambda x, dx: jnp.where(mask & (dx < 0), -x / jnp.where(dx < 0, dx, -1.0), jnp.inf)  # noqa: E731
-        return jnp.min(jnp.minimum(ratio(s, ds), ratio(z, dz)), initial=jnp.inf)
+        return jnp.min(jnp.minimum(ratio(s, ds), ratio(z, dz)), axis=0, initial=jnp.inf)
 
     # Start: the unconstrained minimiser, slacks and multipliers from one affine step (N&W 16.60).
-    v = jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(H, lower=True), -g)
+    v = _substitute(_factor(H), -g)
     s, z = jnp.ones_like(b), mask.astype(dtype)  # off rows keep s = 1, z = 0
     r_d, r_p = residuals(v, z)
     r_p = r_p - jnp.where(mask, s, 0.0)
@@ -130,16 +180,16 @@ def _solve_one(H, g, lo, hi, G, h, on, *, max_iters: int) -> tuple[jax.Array, ja
     def measure(v, s, z):  # residuals, mu and whether converged
         r_d, r_p = residuals(v, z)
         r_p = jnp.where(mask, r_p - s, 0.0)
-        mu = jnp.sum(s * z) / count
-        worst = jnp.maximum(jnp.max(jnp.abs(r_d)), jnp.max(jnp.abs(r_p), initial=0.0))
+        mu = jnp.sum(s * z, axis=0) / count
+        worst = jnp.maximum(jnp.max(jnp.abs(r_d), axis=0), jnp.max(jnp.abs(r_p), axis=0, initial=0.0))
         return r_d, r_p, mu, (worst <= tol) & (mu <= tol)
 
     def body(state):
-        i, v, s, z, (r_d, r_p, mu, _) = state
+        i, v, s, z, (r_d, r_p, mu, done) = state
         c = factor(jnp.where(mask, z / s, 0.0))
         dv_a, ds_a, dz_a = direction(c, s, z, r_d, r_p, s * z)
         alpha = jnp.minimum(1.0, longest(s, ds_a, z, dz_a))
-        mu_aff = jnp.sum((s + alpha * ds_a) * (z + alpha * dz_a) * mask) / count
+        mu_aff = jnp.sum((s + alpha * ds_a) * (z + alpha * dz_a) * mask, axis=0) / count
         sigma = jnp.where(mu > 0, (mu_aff / jnp.where(mu > 0, mu, 1.0)) ** 3, 0.0)
         r_c = jnp.where(mask, s * z + ds_a * dz_a - sigma * mu, 0.0)
         dv, ds, dz = direction(c, s, z, r_d, r_p, r_c)
@@ -150,16 +200,25 @@ def _solve_one(H, g, lo, hi, G, h, on, *, max_iters: int) -> tuple[jax.Array, ja
             jnp.where(mask, jnp.maximum(z + alpha * dz, 0.0), 0.0),
         )
         # Past the attainable accuracy the system degenerates (z / s overflows): stop where it was.
-        finite = jnp.all(jnp.array([jnp.all(jnp.isfinite(x)) for x in new]))
-        v, s, z = (jnp.where(finite, a, b) for a, b in zip(new, (v, s, z), strict=True))
-        r_d, r_p, mu, done = measure(v, s, z)
-        return i + 1, v, s, z, (r_d, r_p, mu, done | ~finite)
+        finite = jnp.all(jnp.concatenate([jnp.isfinite(x) for x in new]), axis=0)
+        v_new, s_new, z_new = _computed(*(jnp.where(finite, a, b) for a, b in zip(new, (v, s, z), strict=True)))
+        r_d_new, r_p_new, mu_new, done_new = measure(v_new, s_new, z_new)
+        # Only the problems still running move (as each problem's own loop would).
+        go = (i < max_iters) & ~done
+        keep = lambda a, b: jnp.where(go, a, b)  # noqa: E731
+        return (
+            i + go.astype(i.dtype),
+            keep(v_new, v),
+            keep(s_new, s),
+            keep(z_new, z),
+            (keep(r_d_new, r_d), keep(r_p_new, r_p), keep(mu_new, mu), keep(done_new | ~finite, done)),
+        )
 
     def cond(state):
         i, *_, (_, _, _, done) = state
-        return (i < max_iters) & ~done
+        return jnp.any((i < max_iters) & ~done)
 
-    start = (jnp.asarray(0, jnp.int32), v, s, z, measure(v, s, z))
+    start = (jnp.zeros(g.shape[1:], jnp.int32), v, s, z, measure(v, s, z))
     iters, v, *_ = jax.lax.while_loop(cond, body, start)
     return jnp.clip(v, lo, hi), iters
 
