@@ -90,7 +90,7 @@ def top_level(*args) -> bool:
 
 
 def _top_level_public(*args) -> bool:
-    """:func:`top_level` through public API only (30 us): no argument is a tracer (``vmap``, ``grad``
+    """:func:`top_level` through public API only (slower): no argument is a tracer (``vmap``, ``grad``
     or ``jit`` of the call) and a fresh constant is not staged out as one (a ``jit`` around it)."""
     if any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(args)):
         return False
