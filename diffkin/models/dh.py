@@ -13,11 +13,12 @@ from diffkin import _validate as check
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._xla import segment_end
 from diffkin.models import _scanned
+from diffkin.models._serial import SerialChain, builder_fields
 from diffkin.models.forward import ChainPass, Pass
 
 
 @pytree_dataclass
-class DHChain:
+class DHChain(SerialChain):
     """A serial chain described by a Denavit-Hartenberg table.
 
     Standard DH (``modified=False``): link ``i`` is ``Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``
@@ -58,23 +59,16 @@ class DHChain:
     name: str = static(default="")
     velocity: jax.Array = None  # type: ignore[assignment]  # filled: check.no_velocity_limits
 
-    def _fill(self) -> dict:
-        return check.no_velocity_limits(self)
-
-    @property
-    def dof(self) -> int:
-        return len(self.joint_types)
-
-    def _check(self, concrete: bool) -> None:
-        """Static fields and leaf shapes always; values (finite, limits, rigid base/tool) when concrete."""
-        dof = check.chain_statics(self)
+    def _check_own_leaves(self, dof: int, concrete: bool) -> None:
+        """The convention flag and the DH parameters (finite when concrete)."""
         check.flag(self.modified, "modified")
         for field in ("a", "alpha", "d", "theta_offset"):
             check.leaf(getattr(self, field), field, (dof,), concrete)
-        lo, hi = check.limit_leaves(self, dof, concrete)
-        check.velocity_leaf(self, dof, concrete)
+
+    def _check_own_values(self, own: None, lower: np.ndarray | None, upper: np.ndarray | None, concrete: bool) -> None:
+        """The limits, then base and tool: their shapes always, rigid transforms when concrete."""
         if concrete:
-            check.limits(lo, hi, dof)
+            check.limits(lower, upper, self.dof)
         for field in ("base", "tool"):
             value = getattr(self, field)
             if check.leaf(value, field, (4, 4), concrete) is not None:
@@ -139,15 +133,8 @@ class DHChain:
             tool=f(tool_T),
             joint_types=types,
             modified=check.flag(modified, "modified"),
-            joint_names=check.joint_names(joint_names, dof),
-            name=name,
-            velocity=f(check.velocity(velocity, dof)),
+            **builder_fields(joint_names, name, velocity, dof),
         )
-
-    @property
-    def actuated_types(self) -> str:
-        """``"R"``/``"P"`` of each entry of ``q`` (:attr:`joint_types`)."""
-        return self.joint_types
 
     def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> Pass:
         """The forward pass (:mod:`diffkin.models.forward`): the DH product, frame ``i`` after joint ``i`` (more than

@@ -15,12 +15,13 @@ from diffkin._pytree import pytree_dataclass, static
 from diffkin._static import host
 from diffkin._xla import segment_end
 from diffkin.models import _scanned
+from diffkin.models._serial import SerialChain, builder_fields
 from diffkin.models.dh import DHChain, poe_arrays
 from diffkin.models.forward import ChainPass, Pass
 
 
 @pytree_dataclass
-class PoEChain:
+class PoEChain(SerialChain):
     """A serial chain as a product of exponentials, ``T(q) = exp([S1] q1) ... exp([Sn] qn) M``.
 
     Attributes:
@@ -48,24 +49,20 @@ class PoEChain:
     name: str = static(default="")
     velocity: jax.Array = None  # type: ignore[assignment]  # filled: check.no_velocity_limits
 
-    def _fill(self) -> dict:
-        return check.no_velocity_limits(self)
-
-    @property
-    def dof(self) -> int:
-        return len(self.joint_types)
-
-    def _check(self, concrete: bool) -> None:
-        """Static fields and leaf shapes always; values (unit screws, limits, rigid poses) when concrete."""
-        dof = check.chain_statics(self)
+    def _check_own_leaves(self, dof: int, concrete: bool) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The shapes of ``screws``, ``home`` and ``link_homes`` (finite when concrete); the screws and link homes."""
         S = check.leaf(self.screws, "screws", (dof, 6), concrete)
         check.leaf(self.home, "home", (4, 4), concrete)
         L = check.leaf(self.link_homes, "link_homes", (dof, 4, 4), concrete)
-        lo, hi = check.limit_leaves(self, dof, concrete)
-        check.velocity_leaf(self, dof, concrete)
+        return S, L
+
+    def _check_own_values(self, own: tuple[np.ndarray | None, np.ndarray | None], lower, upper, concrete: bool) -> None:
+        """When concrete: unit screws of the joint types, rigid home and link poses, then the limits."""
         if not concrete:
             return
+        S, L = own
         assert S is not None and L is not None  # concrete: check.leaf returned the values
+        dof = self.dof
         tol = check.tolerance(self.screws)
         for i, given in enumerate(_screw_types(S, tol)):
             if given != self.joint_types[i]:
@@ -75,7 +72,7 @@ class PoEChain:
         check.rigid_transform(self.home, "home", tol=check.tolerance(self.home))
         for i in range(dof):
             check.rigid_transform(L[i], f"link_homes[{i}]", tol=check.tolerance(self.link_homes))
-        check.limits(lo, hi, dof)
+        check.limits(lower, upper, dof)
 
     @classmethod
     def from_screws(
@@ -148,15 +145,8 @@ class PoEChain:
             lower=f(lo),
             upper=f(hi),
             joint_types=types,
-            joint_names=check.joint_names(joint_names, dof),
-            name=name,
-            velocity=f(check.velocity(velocity, dof)),
+            **builder_fields(joint_names, name, velocity, dof),
         )
-
-    @property
-    def actuated_types(self) -> str:
-        """``"R"``/``"P"`` of each entry of ``q`` (:attr:`joint_types`)."""
-        return self.joint_types
 
     def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> Pass:
         """The forward pass (:mod:`diffkin.models.forward`): the product of exponentials (more than

@@ -352,3 +352,22 @@ def test_bool_and_complex_tables_and_q_are_type_errors():
             dk.fk(chain, q)
         with pytest.raises(TypeError, match=r"^q: expected real joint values"):
             dk.jacobian(chain, q)
+
+
+@pytest.mark.parametrize(
+    "kind, changes, match",
+    [  # two faults each: the first in the order of the checks is named
+        ("dh", {"a": np.zeros(6), "velocity": np.ones(6)}, r"^a: expected shape"),
+        ("dh", {"velocity": np.ones(6), "base": np.eye(3)}, r"^velocity: expected shape"),
+        ("dh", {"lower": np.full(7, 1.0), "upper": np.zeros(7), "base": _SCALED}, r"^lower\[0\] = 1.0 > upper"),
+        ("poe", {"home": np.eye(3), "lower": np.zeros(6)}, r"^home: expected shape"),
+        ("poe", {"joint_types": "RRRRRRP", "upper": np.full(7, -10.0)}, r"^joint_types\[6\]: 'P' contradicts"),
+        ("poe", {"joint_names": ("a",) * 7, "screws": np.zeros((6, 6))}, r"^joint_names: expected distinct"),
+    ],
+)
+def test_chains_check_their_fields_in_one_order(kind, changes, match):
+    """The serial chains' shared check: static fields, the chain's own leaves, ``lower``/``upper``/``velocity``,
+    then the chain's own values (DH: the limits, then base and tool; PoE: screws and poses, then the limits)."""
+    chain = dk.robots.iiwa14() if kind == "dh" else dk.load_urdf(IIWA_URDF)
+    with pytest.raises(ValueError, match=match):
+        chain.replace(**changes)
