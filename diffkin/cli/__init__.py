@@ -7,7 +7,7 @@
         [--avoid scene.json [--margin M] [--srdf FILE.srdf ...]]
     diffkin workspace ROBOT_OR_FILE --samples N --voxel V --out map.npz [--plot slice.png] [--capability]
     diffkin place ROBOT_OR_FILE --tasks tasks.npy --region XMIN YMIN XMAX YMAX [--map cap.npz] [--plot place.png]
-        [--verify K] [--out place.npz]
+        [--verify K] [--out place.npz] [--avoid scene.json [--margin M] [--srdf FILE.srdf ...]] [--view]
     diffkin view ROBOT_OR_FILE [--map map.npz] [--ik-results res.npz] [--end FRAME ...]
         [--avoid scene.json [--margin M] [--srdf FILE.srdf ...]]
 

@@ -141,7 +141,8 @@ def _add_robot(p: argparse.ArgumentParser) -> None:
 
 
 def _add_avoid(p: argparse.ArgumentParser, what: str) -> None:
-    """``--avoid SCENE.json`` and ``--margin M`` (``ik``, ``view``); ``what`` says what the command does with them."""
+    """``--avoid SCENE.json``, ``--margin M`` and ``--srdf`` (``ik``, ``place``, ``view``); ``what`` says what
+    the command does with them."""
     p.add_argument(
         "--avoid",
         metavar="SCENE.json",
@@ -327,7 +328,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="where to put the robot: base poses scored by the tasks a capability map reaches",
         description="Base placement (dk.workspace.base_placement): a grid of planar base poses (x, y, yaw) "
         "over --region, each scored by the fraction of the task poses that a capability map says it reaches "
-        "(built here, or read with --map); the best bases printed, optionally verified by IK and plotted.",
+        "(built here, or read with --map); the best bases printed, optionally verified by IK, plotted and shown "
+        "in the viewer. With --avoid, the bases and tasks that collide at every solution are ruled out.",
     )
     _add_robot(p)
     p.add_argument(
@@ -361,6 +363,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="PLACE.npz", help="save the scores and the best bases")
     p.add_argument("--seed", type=_seed, default=0, help="PRNG seed (default 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_avoid(
+        p,
+        "the file's whole robot with its collision geometry; a base whose root body, or a task whose tool body, is "
+        "within the margin of an obstacle is ruled out, and --verify solves clear of them",
+    )
+    p.add_argument(
+        "--view",
+        action="store_true",
+        help="then serve the viewer on the --best bases and the tasks until Ctrl-C (pip install 'diffkin[viewer]')",
+    )
+    p.add_argument("--host", metavar="HOST", help="with --view: address to serve on (default 127.0.0.1)")
+    p.add_argument(
+        "--port",
+        type=_positive_int,
+        metavar="PORT",
+        help="with --view: port (default 8080; the next free one if taken)",
+    )
     p.set_defaults(func=cmd_place)
 
     p = add_parser(

@@ -1,4 +1,5 @@
-"""The obstacles of ``--avoid SCENE.json`` (``ik``, ``view``): a ``dk.collision.Scene`` read for the commands."""
+"""The obstacles of ``--avoid SCENE.json`` (``ik``, ``place``, ``view``): a ``dk.collision.Scene`` read for the
+commands."""
 
 from __future__ import annotations
 

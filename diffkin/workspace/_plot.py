@@ -91,8 +91,9 @@ def plot_placement(placement: Placement, yaw: int | None = None, *, path=None, a
 
     Each pixel is a base cell: the fraction of the tasks the capability map says a base there
     reaches. The tasks are drawn at their ``(x, y)`` in the world (their tool x axis as a short
-    arrow), and the best base of that yaw as a cross with its heading. Needs matplotlib (the
-    ``plot`` extra), imported here only.
+    arrow), and the best base of that yaw as a cross with its heading; with obstacles
+    (``base_placement(..., avoid=)``), the blocked bases of that yaw grey and the blocked tasks as
+    black crosses. Needs matplotlib (the ``plot`` extra), imported here only.
 
     Args:
         placement: the :class:`Placement`.
@@ -124,6 +125,13 @@ def plot_placement(placement: Placement, yaw: int | None = None, *, path=None, a
         tasks[:, 0], tasks[:, 1], p.tasks[:, 0, 0], p.tasks[:, 1, 0], color="white", width=0.003, scale=40, alpha=0.8
     )
     ax.scatter(tasks[:, 0], tasks[:, 1], s=6, c="red", label=f"{len(tasks)} tasks (tool x axis)")
+    if p.blocked_bases is not None and p.blocked_tasks is not None:  # avoid=: grey bases, crossed tasks
+        blocked = p.blocked_bases[:, :, yaw]
+        grey = np.ma.masked_where(~blocked.T, np.ones(blocked.T.shape))
+        ax.imshow(grey, origin="lower", extent=extent, interpolation="nearest", cmap="gray", vmin=0, vmax=2)
+        ax.fill([], [], color="0.5", label=f"{int(blocked.sum())} bases blocked by obstacles at this yaw")
+        out = p.blocked_tasks
+        ax.scatter(tasks[out, 0], tasks[out, 1], s=24, c="black", marker="x", label=f"{int(out.sum())} tasks blocked")
     i, j = np.unravel_index(np.argmax(score), score.shape)
     heading = p.yaw[yaw]
     ax.plot(p.x[i], p.y[j], "wx", ms=12, mew=3)

@@ -79,6 +79,10 @@ def test_cli_capability_map_then_place(capsys, tmp_path):
     assert (tmp_path / "place.png").stat().st_size > 10_000
 
 
+# the capsule arm (without a base body), a pose and a map of nothing: the errors come before any placement
+_PLACE_ARM = ["place", "ARM", "--tasks", "GOOD", "--region", "-1", "-1", "1", "1", "--map", "CAP"]
+
+
 @pytest.mark.parametrize(
     "argv, match",
     [
@@ -86,19 +90,148 @@ def test_cli_capability_map_then_place(capsys, tmp_path):
         (["place", "panda", "--tasks", "nothing.npy", "--region", "-1", "-1", "1", "1"], "--tasks: no such file"),
         (["place", "panda", "--tasks", "BAD", "--region", "-1", "-1", "1", "1"], "--tasks: expected task poses"),
         (["place", "panda", "--tasks", "GOOD", "--region", "1", "-1", "-1", "1", "--map", "CAP"], "region"),
+        ([*_PLACE_ARM, "--avoid", "nothing.json"], "--avoid: [Errno 2] No such file or directory: 'nothing.json'"),
+        ([*_PLACE_ARM, "--avoid", "BAD_SCENE"], "--avoid: BAD_SCENE: planes[0].normal: expected a non-zero vector"),
+        ([*_PLACE_ARM, "--avoid", "SCENE", "--margin", "-0.1"], "--margin: expected a non-negative number"),
+        ([*_PLACE_ARM, "--avoid", "SCENE", "--margin", "x"], "--margin: invalid number: 'x'"),
+        ([*_PLACE_ARM, "--margin", "0.1"], "--margin goes with --avoid"),
+        ([*_PLACE_ARM, "--srdf", "SCENE"], "--srdf goes with --avoid"),
+        ([*_PLACE_ARM, "--avoid", "SCENE", "--srdf", "nothing.srdf"], "--srdf: no such file 'nothing.srdf'"),
+        ([*_PLACE_ARM, "--avoid", "SCENE", "--base-link", "l1"], "--base-link does not apply to --avoid"),
+        ([*_PLACE_ARM, "--avoid", "SCENE", "--end-link", "hnd"], "--end-link: unknown frame 'hnd'"),
+        (["place", "panda", "--tasks", "GOOD", "--region", "-1", "-1", "1", "1", "--avoid", "SCENE"], "no collision"),
+        ([*_PLACE_ARM, "--port", "8081"], "--port goes with --view"),
+        ([*_PLACE_ARM, "--host", "0.0.0.0"], "--host goes with --view"),
+        ([*_PLACE_ARM, "--view", "--port", "0"], "--port: expected a positive integer, got '0'"),
     ],
 )
 def test_cli_user_errors(capsys, tmp_path, argv, match):
+    from _shapes import CAPSULE_ARM, SCENE
+
+    (tmp_path / "arm.urdf").write_text(CAPSULE_ARM)
+    (tmp_path / "scene.json").write_text(json.dumps(SCENE))
+    (tmp_path / "bad_scene.json").write_text(json.dumps({"planes": [{"normal": [0, 0, 0], "offset": 0}]}))
     np.save(tmp_path / "bad.npy", np.eye(4))
     np.save(tmp_path / "good.npy", np.eye(4)[None])
     ws.CapabilityMap(
         *(np.zeros(0, np.int64),) * 2, np.zeros((1, 1, 1), np.int64), np.zeros((1, 1, 1)), np.zeros(3), 0.1, 1, 1, 24
     ).save(tmp_path / "cap.npz")
-    names = {"BAD": tmp_path / "bad.npy", "GOOD": tmp_path / "good.npy", "CAP": tmp_path / "cap.npz"}
+    names = {
+        "BAD": tmp_path / "bad.npy",
+        "GOOD": tmp_path / "good.npy",
+        "CAP": tmp_path / "cap.npz",
+        "ARM": tmp_path / "arm.urdf",
+        "SCENE": tmp_path / "scene.json",
+        "BAD_SCENE": tmp_path / "bad_scene.json",
+    }
     code, out, err = run(capsys, *(names.get(a, a) for a in argv))
     lines = err.strip().splitlines()
     assert code == 2 and len(lines) == 1 and lines[0].startswith("diffkin: error: "), err
-    assert match in lines[0], lines[0]
+    assert match.replace("BAD_SCENE", str(names["BAD_SCENE"])) in lines[0], lines[0]
+    assert "map:" not in out  # said before any map is built or read
+
+
+@pytest.fixture(scope="module")
+def placed_arm(tmp_path_factory):
+    """The capsule arm on a base box (its root body), three tasks, a capability map of its hand (saved), and a
+    scene: a post where the bases at x = 1 stand and a ball where task 1's hand goes (margin 0.02 m)."""
+    from _shapes import CAPSULE_ARM
+
+    folder = tmp_path_factory.mktemp("place")
+    urdf = CAPSULE_ARM.replace(
+        '<link name="base"/>',
+        '<link name="base"><collision><geometry><box size="0.2 0.2 0.1"/></geometry></collision></link>',
+    )
+    (folder / "arm.urdf").write_text(urdf)
+    chain = dk.load_robot(urdf).chain("hand")
+    q = np.array([[0.3, 0.8, 1.0], [-0.4, 1.1, 0.6], [0.2, -0.9, -1.2]])
+    tasks = planar_poses([0.0, 0.0, 1.0], 0.0, 0.0, 0.0) @ np.asarray(dk.fk(chain, q), np.float64)
+    np.save(folder / "tasks.npy", tasks)
+    scene = {
+        "margin": 0.02,
+        "boxes": [{"position": [1.0, 0.0, 0.05], "half_extents": [0.05, 0.05, 0.05]}],
+        "spheres": [{"center": tasks[1, :3, 3].tolist(), "radius": 0.03}],
+    }
+    (folder / "scene.json").write_text(json.dumps(scene))
+    ws.capability(chain, 100_000, key=KEY, voxel_size=0.1, orientation_bins=192).save(folder / "cap.npz")
+    return folder
+
+
+def _stub_viewer(monkeypatch) -> dict:
+    """``dk.viewer.show`` replaced (it would serve until Ctrl-C; viser not needed): what it is called with."""
+    import types
+
+    shown: dict = {}
+    fake = types.ModuleType("diffkin.viewer")
+    fake.show = lambda model, **kwargs: shown.update(model=model, **kwargs)  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "diffkin.viewer", fake)
+    monkeypatch.setattr(dk, "viewer", fake, raising=False)
+    return shown
+
+
+def test_cli_place_avoid_rules_out_the_post_and_the_ball(capsys, placed_arm, monkeypatch):
+    """``--avoid``: the bases on the post and the task in the ball are reported, saved, drawn and shown, and
+    ``--verify`` solves clear of the obstacles (``Placement.verify`` with ``avoid``: recorded here, it is
+    checked against IK in the test below; compiling IK with obstacles takes minutes)."""
+    pytest.importorskip("matplotlib")
+    f = placed_arm
+    shown = _stub_viewer(monkeypatch)
+    verified = {}
+
+    def verify(self, model, k=10, *, avoid=None, key=None, **kwargs):
+        verified.update(model=model, k=k, avoid=avoid)
+        n = len(self.tasks)
+        return ws.Verification(self.best(k), self.score[tuple(self.best_cells(k).T)], np.ones((k, n), bool), np.ones(k))
+
+    monkeypatch.setattr(ws.Placement, "verify", verify)
+    code, out, err = run(
+        capsys, "place", f / "arm.urdf", "--tasks", f / "tasks.npy", "--region", -0.5, -0.5, 1.5, 0.5, "--map",
+        f / "cap.npz", "--yaw-bins", 2, "--cell", 1.0, "--best", 4, "--avoid", f / "scene.json", "--margin", 0.03,
+        "--verify", 2, "--out", f / "place.npz", "--plot", f / "place.png", "--view", "--port", 8123,
+    )  # fmt: skip
+    assert code == 0, err
+    assert (
+        f"obstacles: 2 of 4 bases and 1 of 3 tasks ruled out (within the margin 0.03 m of the 2 obstacles of "
+        f"{f / 'scene.json'} at every solution" in out
+    )
+    saved = np.load(f / "place.npz")
+    np.testing.assert_array_equal(saved["blocked_bases"][:, 0], [[False, False], [True, True]])  # on the post
+    np.testing.assert_array_equal(saved["blocked_tasks"], [False, True, False])  # in the ball
+    assert np.all(saved["score"][1] == 0) and saved["score"].max() > 0  # the post's bases score 0, not the rest
+    # the model, avoid and margin of the scene reach base_placement, verify and the viewer
+    robot, frame = verified["model"]
+    assert isinstance(robot, dk.Robot) and frame == "hand" and verified["k"] == 2
+    assert float(verified["avoid"].margin) == 0.03 and verified["avoid"].world.size == 2
+    assert "fraction of the tasks solved clear of the obstacles from each base" in out
+    assert shown["model"] is robot and shown["source"] == str(f / "arm.urdf") and shown["ends"] == ["hand"]
+    assert shown["avoid"] is verified["avoid"] and shown["best_bases"] == 4 and shown["block"]
+    assert shown["port"] == 8123 and shown["host"] == "127.0.0.1"
+    np.testing.assert_array_equal(shown["placement"].blocked_bases, saved["blocked_bases"])
+    np.testing.assert_array_equal(shown["placement"].score, saved["score"])
+    assert (f / "place.png").stat().st_size > 10_000
+
+
+def test_cli_place_view_serves_the_best_bases(capsys, placed_arm, monkeypatch):
+    """``--view`` without obstacles: the file's whole robot (its meshes from the file), the placement printed."""
+    f = placed_arm
+    shown = _stub_viewer(monkeypatch)
+    code, out, err = run(
+        capsys, "place", f / "arm.urdf", "--tasks", f / "tasks.npy", "--region", -0.5, -0.5, 1.5, 0.5, "--map",
+        f / "cap.npz", "--yaw-bins", 2, "--cell", 1.0, "--best", 3, "--view", "--host", "0.0.0.0",
+    )  # fmt: skip
+    assert code == 0, err
+    assert "viewer: the 3 best bases and the tasks" in out and "obstacles:" not in out
+    assert isinstance(shown["model"], dk.Robot) and shown["source"] == str(f / "arm.urdf")
+    assert shown["avoid"] is None and shown["placement"].blocked_bases is None and shown["best_bases"] == 3
+    assert shown["host"] == "0.0.0.0" and shown["port"] == 8080 and shown["ends"] == ["hand"]
+    expected = ws.base_placement(
+        ws.CapabilityMap.load(f / "cap.npz"),
+        np.load(f / "tasks.npy"),
+        region=[[-0.5, -0.5], [1.5, 0.5]],
+        yaw_bins=2,
+        cell=1.0,
+    )
+    np.testing.assert_array_equal(shown["placement"].score, expected.score)
 
 
 def test_plot_placement_draws_the_best_yaw_and_the_tasks():
@@ -112,6 +245,17 @@ def test_plot_placement_draws_the_best_yaw_and_the_tasks():
     np.testing.assert_array_equal(ax.images[0].get_array().T, placement.score[:, :, best[2]])
     with pytest.raises(ValueError, match="yaw"):
         ws.plot_placement(placement, yaw=4)
+    # with obstacles: the blocked bases of the yaw drawn grey, the blocked tasks as crosses, both counted
+    blocked = np.zeros(placement.score.shape, bool)
+    blocked[:3, :2, best[2]] = True
+    import dataclasses
+
+    ruled_out = dataclasses.replace(placement, blocked_bases=blocked, blocked_tasks=np.array([True, False]))
+    ax = ws.plot_placement(ruled_out)
+    grey = ax.images[1].get_array()
+    np.testing.assert_array_equal(~np.ma.getmaskarray(grey).T, blocked[:, :, best[2]])
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "6 bases blocked by obstacles at this yaw" in labels and "1 tasks blocked" in labels
 
 
 def test_capability_with_avoid_counts_the_clear_samples_and_verify_solves_clear():
