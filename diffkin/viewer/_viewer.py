@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, TypedDict, Unpack
 
 import jax
 import jax.numpy as jnp
@@ -597,30 +597,36 @@ def _checked_avoid(avoid, model):
     return avoid
 
 
-def show(
-    model,
-    *,
-    source=None,
-    ends: Sequence[str] | None = None,
-    arm=None,
-    q0=None,
-    workspace_map=None,
-    results=None,
-    avoid=None,
-    placement=None,
-    best_bases: int = 10,
-    host: str = "127.0.0.1",
-    port: int = 8080,
-    num_seeds: int = 8,
-    warmup: bool = True,
-    block: bool = False,
-    verbose: bool = True,
-) -> Viewer:
+class ViewerOptions(TypedDict, total=False):
+    """The keywords of :class:`Viewer` (its defaults apply to those left out), which :func:`show` passes on."""
+
+    source: Any
+    ends: Sequence[str] | None
+    arm: Any
+    q0: Any
+    workspace_map: Any
+    results: Any
+    avoid: Any
+    placement: Any
+    best_bases: int
+    host: str
+    port: int
+    num_seeds: int
+    warmup: bool
+
+
+def show(model, *, block: bool = False, verbose: bool = True, **options: Unpack[ViewerOptions]) -> Viewer:
     """Serve an interactive 3D view of a robot in the browser (viser).
 
     Args:
         model: a ``DHChain``, ``PoEChain`` or ``Robot``; or a built-in robot name (``"iiwa14"``),
             or the path of a URDF (or MJCF, where :func:`diffkin.load_robot` reads it) file.
+        block: serve until interrupted (Ctrl-C) instead of returning.
+        verbose: print the URL.
+        **options: the keywords of :class:`Viewer` (below), passed on after ``model``, ``workspace_map``
+            and ``results`` given as names or paths are read.
+
+    Other Parameters:
         source: the description file of ``model`` (a path or XML text), for its visual meshes;
             set automatically when ``model`` is a path.
         ends: frames that get an IK gizmo (default: a chain's ``ee``, a robot's leaf frames).
@@ -649,12 +655,10 @@ def show(
             (:func:`diffkin.workspace.base_placement`): its task poses are drawn as axes, the root is
             drawn at its best base, and a "Base placement" folder's slider (``viewer.show_base(rank)``
             from Python) goes through its ``best_bases`` best bases, each with its map score.
-        best_bases: the number of best bases of ``placement`` to go through.
-        host, port: where to serve (the next free port is taken if ``port`` is in use).
-        num_seeds: seeds of each interactive IK solve (the warm start is one of them).
-        warmup: compile the IK functions in a background thread right away.
-        block: serve until interrupted (Ctrl-C) instead of returning.
-        verbose: print the URL.
+        best_bases: the number of best bases of ``placement`` to go through (default 10).
+        host, port: where to serve (default ``127.0.0.1``, 8080; the next free port is taken if ``port`` is in use).
+        num_seeds: seeds of each interactive IK solve (the warm start is one of them; default 8).
+        warmup: compile the IK functions in a background thread right away (default ``True``).
 
     Returns:
         The :class:`Viewer` (``viewer.stop()`` ends it).
@@ -663,33 +667,21 @@ def show(
         if model in BUILTIN:
             name = model
             model = getattr(dk.robots, name)()
-            if arm is None and name in _ARM_NAMES:
-                arm = getattr(dk.srs, name)()
+            if options.get("arm") is None and name in _ARM_NAMES:
+                options["arm"] = getattr(dk.srs, name)()
         else:
-            source = model if source is None else source
+            if options.get("source") is None:
+                options["source"] = model
             model = dk.load_robot(model)
-    elif arm is None and isinstance(model, dk.DHChain) and getattr(model, "name", "") in _ARM_NAMES:
-        arm = getattr(dk.srs, model.name)()
+    elif options.get("arm") is None and isinstance(model, dk.DHChain) and getattr(model, "name", "") in _ARM_NAMES:
+        options["arm"] = getattr(dk.srs, model.name)()
+    workspace_map = options.get("workspace_map")
     if isinstance(workspace_map, (str, bytes)) or hasattr(workspace_map, "__fspath__"):
-        workspace_map = dk.workspace.ReachabilityMap.load(workspace_map)
+        options["workspace_map"] = dk.workspace.ReachabilityMap.load(workspace_map)
+    results = options.get("results")
     if isinstance(results, (str, bytes)) or hasattr(results, "__fspath__"):
-        results = read_npz(results, "of batch results (q, and optionally success, pos_err, rot_err, base)")
-    viewer = Viewer(
-        model,
-        source=source,
-        ends=ends,
-        arm=arm,
-        q0=q0,
-        workspace_map=workspace_map,
-        results=results,
-        avoid=avoid,
-        placement=placement,
-        best_bases=best_bases,
-        host=host,
-        port=port,
-        num_seeds=num_seeds,
-        warmup=warmup,
-    )
+        options["results"] = read_npz(results, "of batch results (q, and optionally success, pos_err, rot_err, base)")
+    viewer = Viewer(model, **options)
     if verbose:
         print(f"diffkin viewer: {viewer.url}  (Ctrl-C to stop)", flush=True)
         if viewer.missing:
