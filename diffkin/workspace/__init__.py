@@ -109,34 +109,22 @@ def reachability(
         raise ValueError(
             f"orientation_bins: expected a multiple of 6 (6 cube faces x roll sectors), got {orientation_bins}"
         )
-    maps = run(
+    maps, shared = _sampled(
         chain,
         n_samples,
+        orientation_bins,
+        n_dir=1,
+        cells=False,
         key=key,
         voxel_size=voxel_size,
         bounds=bounds,
         chunk=chunk,
         devices=devices,
-        orientation_bins=orientation_bins,
-        n_dir=1,
-        cells=False,
         dtype=dtype,
         progress=progress,
         avoid=avoid,
-        max_grid_bytes=MAX_GRID_BYTES,
-        desc="reachability",
     )
-    return ReachabilityMap(
-        counts=maps.counts,
-        manipulability=maps.best,
-        dexterity=maps.dexterity,
-        origin=maps.origin,
-        voxel_size=maps.voxel_size,
-        n_samples=n_samples,
-        n_outside=n_samples - int(maps.counts.sum()),
-        orientation_bins=orientation_bins,
-        chain_name=maps.chain.name,
-    )
+    return ReachabilityMap(dexterity=maps.dexterity, **shared)
 
 
 def capability(
@@ -204,27 +192,42 @@ def capability(
     """
     n_dir, _ = split_bins(orientation_bins)
     orientation_bins = int(orientation_bins)
-    maps = run(
+    maps, shared = _sampled(
         chain,
         n_samples,
+        orientation_bins,
+        n_dir=n_dir,
+        cells=True,
         key=key,
         voxel_size=voxel_size,
         bounds=bounds,
         chunk=chunk,
         devices=devices,
-        orientation_bins=orientation_bins,
-        n_dir=n_dir,
-        cells=True,
         dtype=dtype,
         progress=progress,
         avoid=avoid,
-        max_grid_bytes=MAX_GRID_BYTES,
-        desc="capability",
     )
     assert maps.cells is not None and maps.cell_counts is not None
-    return CapabilityMap(
-        cells=maps.cells,
-        cell_counts=maps.cell_counts,
+    return CapabilityMap(cells=maps.cells, cell_counts=maps.cell_counts, **shared)
+
+
+def _sampled(chain, n_samples: int, orientation_bins: int, *, n_dir: int, cells: bool, **options):
+    """The sampling loop of :func:`reachability` (``cells=False``) and :func:`capability` (``cells=True``,
+    the cells reached counted), and the fields both maps take from it (grid, counts, best
+    manipulability, samples outside); ``options`` are the loop's (key, voxel_size, bounds, chunk, devices,
+    dtype, progress, avoid)."""
+    desc = "capability" if cells else "reachability"
+    maps = run(
+        chain,
+        n_samples,
+        orientation_bins=orientation_bins,
+        n_dir=n_dir,
+        cells=cells,
+        max_grid_bytes=MAX_GRID_BYTES,
+        desc=desc,
+        **options,
+    )
+    shared = dict(
         counts=maps.counts,
         manipulability=maps.best,
         origin=maps.origin,
@@ -234,6 +237,7 @@ def capability(
         orientation_bins=orientation_bins,
         chain_name=maps.chain.name,
     )
+    return maps, shared
 
 
 __all__ = [

@@ -13,7 +13,7 @@ import numpy as np
 
 from diffkin._npz import read_dataclass_fields, save_dataclass
 from diffkin.workspace._bins import _orientation_bin
-from diffkin.workspace._map import ReachabilityMap
+from diffkin.workspace._map import ReachabilityMap, grid_fields
 
 BIN_COUNTS = {24 * d**3: d for d in range(1, 13)}
 """The valid ``orientation_bins`` of a capability map, ``24 d^3``, and their ``d``: ``6 d^2`` cells of
@@ -221,12 +221,5 @@ class CapabilityMap:
         return cls(
             cells=fields["cells"].astype(np.int64),
             cell_counts=fields["cell_counts"].astype(np.int64),
-            counts=fields["counts"],
-            manipulability=fields["manipulability"],
-            origin=fields["origin"],
-            voxel_size=float(fields["voxel_size"]),
-            n_samples=int(fields["n_samples"]),
-            n_outside=int(fields["n_outside"]),
-            orientation_bins=int(fields["orientation_bins"]),
-            chain_name=str(fields["chain_name"]),
+            **grid_fields(fields),
         )

@@ -59,14 +59,19 @@ class ReachabilityMap:
             FileNotFoundError: no such file.
         """
         path, fields = read_dataclass_fields(cls, path, "reachability map")
-        return cls(
-            counts=fields["counts"],
-            manipulability=fields["manipulability"],
-            dexterity=fields["dexterity"],
-            origin=fields["origin"],
-            voxel_size=float(fields["voxel_size"]),
-            n_samples=int(fields["n_samples"]),
-            n_outside=int(fields["n_outside"]),
-            orientation_bins=int(fields["orientation_bins"]),
-            chain_name=str(fields["chain_name"]),
-        )
+        return cls(dexterity=fields["dexterity"], **grid_fields(fields))
+
+
+def grid_fields(fields: dict) -> dict:
+    """The fields a reachability and a capability map share, read from a file's arrays ``fields``: the
+    voxel grid's counts, manipulability and origin as stored, its scalars as Python numbers."""
+    return dict(
+        counts=fields["counts"],
+        manipulability=fields["manipulability"],
+        origin=fields["origin"],
+        voxel_size=float(fields["voxel_size"]),
+        n_samples=int(fields["n_samples"]),
+        n_outside=int(fields["n_outside"]),
+        orientation_bins=int(fields["orientation_bins"]),
+        chain_name=str(fields["chain_name"]),
+    )
