@@ -39,6 +39,23 @@ def read_tasks(path: str) -> np.ndarray:
     return tasks
 
 
+def _rigid_targets(tasks: np.ndarray, path: str) -> None:
+    """Task poses that ``--verify`` can hand to IK: rigid transforms in float64 (said before the map is built).
+
+    Raises:
+        CLIError: the first task that is not a rigid transform within 1e-9 (e.g. rounded or float32 poses).
+    """
+    from diffkin._checks import rigid_poses, rigid_tol
+
+    bad = np.flatnonzero(~rigid_poses(tasks))
+    if bad.size:
+        raise CLIError(
+            f"--tasks: task {bad[0]} of {path!r} is not a rigid transform within {rigid_tol(tasks.dtype):g} "
+            "(R^T R = I, det R = +1, last row 0 0 0 1), which --verify needs to solve it by IK: write the poses "
+            "at full float64 precision"
+        )
+
+
 def _obstacles(args):
     """``(model, avoid, scene)`` of ``--avoid``: the file's whole robot and the frame the tasks are poses of
     (``--end-link``, default the single leaf), its ``dk.ik.Avoid`` with the scene's obstacles, and the scene."""
@@ -115,6 +132,8 @@ def cmd_place(args) -> int:
             raise CLIError(str(e)) from None
     chain = load_robot(args.robot, args.end_link, args.base_link)
     tasks = read_tasks(args.tasks)
+    if args.verify:
+        _rigid_targets(tasks, args.tasks)
     model = avoid = scene = None
     if args.avoid is not None:
         model, avoid, scene = _obstacles(args)

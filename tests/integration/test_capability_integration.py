@@ -103,6 +103,7 @@ _PLACE_ARM = ["place", "ARM", "--tasks", "GOOD", "--region", "-1", "-1", "1", "1
         ([*_PLACE_ARM, "--port", "8081"], "--port goes with --view"),
         ([*_PLACE_ARM, "--host", "0.0.0.0"], "--host goes with --view"),
         ([*_PLACE_ARM, "--view", "--port", "0"], "--port: expected a positive integer, got '0'"),
+        (["place", "panda", "--tasks", "ROUNDED", "--region", "-1", "-1", "1", "1", "--verify", "1"], "task 1 of"),
     ],
 )
 def test_cli_user_errors(capsys, tmp_path, argv, match):
@@ -113,6 +114,9 @@ def test_cli_user_errors(capsys, tmp_path, argv, match):
     (tmp_path / "bad_scene.json").write_text(json.dumps({"planes": [{"normal": [0, 0, 0], "offset": 0}]}))
     np.save(tmp_path / "bad.npy", np.eye(4))
     np.save(tmp_path / "good.npy", np.eye(4)[None])
+    rounded = np.tile(np.eye(4), (2, 1, 1))
+    rounded[1, :3, :3] = [[0.0, -1.0, 0.0], [0.707107, 0.0, 0.707107], [-0.707107, 0.0, 0.707107]]  # 6 decimals
+    np.save(tmp_path / "rounded.npy", rounded)
     ws.CapabilityMap(
         *(np.zeros(0, np.int64),) * 2, np.zeros((1, 1, 1), np.int64), np.zeros((1, 1, 1)), np.zeros(3), 0.1, 1, 1, 24
     ).save(tmp_path / "cap.npz")
@@ -123,6 +127,7 @@ def test_cli_user_errors(capsys, tmp_path, argv, match):
         "ARM": tmp_path / "arm.urdf",
         "SCENE": tmp_path / "scene.json",
         "BAD_SCENE": tmp_path / "bad_scene.json",
+        "ROUNDED": tmp_path / "rounded.npy",
     }
     code, out, err = run(capsys, *(names.get(a, a) for a in argv))
     lines = err.strip().splitlines()
