@@ -445,7 +445,7 @@ def _screw_exp(screw: np.ndarray, theta: float) -> np.ndarray:
 
 
 def _equalities(
-    reader: _Reader, root: ET.Element, joints: list[JointSpec], path: str | None
+    reader: _Reader, root: ET.Element, joints: list[JointSpec], path: str | None, site_frames: dict[str, str]
 ) -> tuple[list[JointSpec], list[Connect]]:
     """Apply the linear couplings of ``<equality><joint>`` and ``<equality><tendon>``
     (:func:`_joint_coupling`, :func:`_tendon_coupling`; :mod:`diffkin.models._couplings`), and read the
@@ -453,6 +453,7 @@ def _equalities(
 
     Args:
         path: the file the model was read from (named in error messages), or ``None``.
+        site_frames: the frame name of each site of the robot, by site name (MuJoCo's namespace of sites).
     """
     index = {j.name: k for k, j in enumerate(joints)}
     scalar = {j.name for j in joints if j.kind in ("R", "P")}
@@ -477,8 +478,9 @@ def _equalities(
             if el.tag == "connect":
                 if not (el.get("site1") and el.get("site2")):
                     raise ValueError(f"{where}: expected body1 (and body2, anchor) or site1 and site2")
-                zero = np.zeros(3)  # the two sites' origins coincide (frames named as sites; see robot_from_mjcf)
-                connects.append(Connect(f"\0site:{el.get('site1')}", f"\0site:{el.get('site2')}", zero, where, zero))
+                zero = np.zeros(3)  # the two sites' origins coincide
+                site1, site2 = (_site_frame(site_frames, el.get(key, ""), where) for key in ("site1", "site2"))
+                connects.append(Connect(site1, site2, zero, where, zero))
                 continue
             if el.tag not in ("joint", "tendon"):
                 raise ValueError(
@@ -500,6 +502,13 @@ def _equalities(
             j = joints[index[name]]
             joints[index[name]] = dataclasses.replace(j, kind="F", origin=j.origin @ _screw_exp(j.screw, bias))
     return _couplings.as_mimics(joints, {n: r for n, r in resolved.items() if r[0]}), connects
+
+
+def _site_frame(site_frames: dict[str, str], site: str, where: str) -> str:
+    """The frame of the robot's site ``site`` (``site:{name}`` where a body has its name)."""
+    if site not in site_frames:
+        raise ValueError(f"{where}: unknown site {site!r}")
+    return site_frames[site]
 
 
 def _joint_coupling(el: ET.Element, c: np.ndarray, scalar: set[str], where: str) -> tuple[str, Coupling]:
@@ -688,10 +697,11 @@ def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
                     f"floating root {name!r}; one tree is supported"
                 )
         parts = [part]
-    joints, connects = _equalities(reader, root, [j for p in parts for j in p.joints], path)
     links = [n for p in parts for n in p.links]
     bodies = set(links)
-    sites = [(f"site:{n}" if n in bodies else n, body, T) for p in parts for n, body, T in p.sites]
+    site_frames = {n: f"site:{n}" if n in bodies else n for p in parts for n, _, _ in p.sites}
+    sites = [(site_frames[n], body, T) for p in parts for n, body, T in p.sites]
+    joints, connects = _equalities(reader, root, [j for p in parts for j in p.joints], path, site_frames)
     total = reader.mass_rules.total
     scale = 1.0
     if total is not None:  # settotalmass: over every body of the model (MuJoCo's), including those left out here
@@ -710,13 +720,6 @@ def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
     )
     if not connects:
         return robot
-    site_frame = {
-        f"\0site:{n}": name for p in parts for n, _, _ in p.sites for name in [f"site:{n}" if n in bodies else n]
-    }
-    connects = [
-        dataclasses.replace(c, body1=site_frame.get(c.body1, c.body1), body2=site_frame.get(c.body2, c.body2))
-        for c in connects
-    ]
     actuated = _actuated(root)
     balls = {n.rsplit(":", 1)[0] for n in robot.joint_names if robot.actuated_types[robot.joint_names.index(n)] == "B"}
     passive = {n for n in robot.joint_names if n not in actuated and n.rsplit(":", 1)[0] not in (actuated & balls)}

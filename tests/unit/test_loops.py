@@ -143,6 +143,26 @@ def test_a_connect_between_sites_is_the_same_loop(solved):
     )
 
 
+def test_a_connect_names_sites_in_their_own_namespace(solved):
+    """A site named as a body is the frame ``site:{name}`` (MuJoCo keeps sites and bodies apart), and the connect
+    pins that site, not the body; a site that is not there is named in the error."""
+    sites = FOUR_BAR.replace('<site name="tip"', '<site name="pin_c" pos=".1 .2 0"/><site name="tip"').replace(
+        '<geom size=".01" mass=".1"/></body>',
+        '<geom size=".01" mass=".1"/><site name="rocker" pos="-.05 .2 0"/></body>',
+    )
+    robot = dk.load_robot(
+        sites.replace('body1="coupler" body2="rocker" anchor=".1 .2 0"', 'site1="pin_c" site2="rocker"')
+    )
+    assert "site:rocker" in robot.frame_names and "rocker" in robot.frame_names
+    theta = np.linspace(-3.0, 3.0, 7)
+    np.testing.assert_allclose(
+        np.asarray(dk.loop_closure(robot, theta[:, None])[0]), np.asarray(solved(_batch(theta))[0])[:7], atol=1e-12
+    )
+    missing = sites.replace('body1="coupler" body2="rocker" anchor=".1 .2 0"', 'site1="pin_c" site2="nowhere"')
+    with pytest.raises(ValueError, match=r"^MJCF <equality><connect>: unknown site 'nowhere'$"):
+        dk.load_robot(missing)
+
+
 @pytest.mark.parametrize("relpose", ["", ' relpose=".1 .2 0 0.9659258 0 0 0.2588190"'], ids=["reference", "relpose"])
 def test_a_weld_holds_the_relative_pose(relpose):
     """The weld keeps body2's pose in body1: the one at the reference configuration, or ``relpose`` (position,
