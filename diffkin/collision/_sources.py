@@ -279,7 +279,7 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
         The specs; the ``<contact><exclude>`` body pairs; whether MuJoCo's parent filter is on
         (``<option><flag filterparent>``, default enabled).
     """
-    from diffkin.models import mjcf  # the model reader's default classes, orientations and includes
+    from diffkin.models import mjcf  # the model reader's default classes, orientations, frames and includes
 
     mjcf.expand_includes(root, os.path.dirname(path) if path else os.getcwd())
     reader = mjcf.Attributes(root)
@@ -303,18 +303,6 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
             assets[name] = (resolve_mesh(file, mesh_dir) if file else None, file or name, scale, inline)
     specs: list[Spec] = []
     counter = {"body": 1, "geom": 0}
-
-    def contents(el: ET.Element, cls: str):
-        out, todo = [], [(child, np.eye(4), cls) for child in reversed(el)]
-        while todo:
-            child, T, c = todo.pop()
-            if child.tag == "frame":
-                inner = reader.class_of(child, c, "childclass")
-                T_frame = T @ reader.pose(child)
-                todo.extend((g, T_frame, inner) for g in reversed(child))
-            elif child.tag in ("geom", "body"):
-                out.append((child, T, c))
-        return out
 
     def geom(el: ET.Element, T_body_container: np.ndarray, cls: str, body: str) -> None:
         gid = counter["geom"]
@@ -365,7 +353,7 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
 
     todo: list[tuple[ET.Element, str, str]] = []
     for worldbody in root.findall("worldbody"):
-        for child, _, cls in contents(worldbody, "main"):
+        for child, _, cls in reader.contents(worldbody, "main", ("geom", "body")):
             if child.tag == "body":
                 todo.append((child, cls, ""))
             else:  # a world geom: the environment, but it takes a MuJoCo geom id
@@ -378,7 +366,7 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
         body = el.get("name") or f"body{bid}"
         inner = reader.class_of(el, cls, "childclass")
         later = []
-        for child, T, c in contents(el, inner):
+        for child, T, c in reader.contents(el, inner, ("geom", "body")):
             if child.tag == "geom":
                 geom(child, T, c, body)
             else:

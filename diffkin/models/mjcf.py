@@ -271,6 +271,26 @@ class Attributes:
         T[:3, 3] = _xml.numbers(None, "pos", 3, self.attribute(el, "pos", cls, "0 0 0"), where)
         return T
 
+    def contents(
+        self, el: ET.Element, cls: str, tags: Sequence[str] = ("joint", "freejoint", "site", "body", "geom", "inertial")
+    ) -> list[tuple[ET.Element, np.ndarray, str]]:
+        """The elements of a body (or the world body) with one of ``tags``, through its ``<frame>``s (any
+        depth), in document order, each as ``(element, pose of its container in the body frame, class)``;
+        ``cls`` is the body's class (its ``childclass`` resolved). Raises on the elements MuJoCo generates
+        from (``<attach>``, ``<replicate>``, ``<composite>``, ``<flexcomp>``): not supported."""
+        out = []
+        todo = [(child, np.eye(4), cls) for child in reversed(el)]
+        while todo:
+            child, T, cls = todo.pop()
+            if child.tag in _REJECTED:
+                raise ValueError(f"{_describe(child)}: <{child.tag}> is not supported")
+            if child.tag == "frame":
+                inner, T_frame = self.class_of(child, cls, "childclass"), T @ self.pose(child)
+                todo.extend((grandchild, T_frame, inner) for grandchild in reversed(child))
+            elif child.tag in tags:
+                out.append((child, T, cls))
+        return out
+
 
 class _Reader(Attributes):
     """One pass over a ``<mujoco>`` element (includes already expanded)."""
@@ -283,22 +303,6 @@ class _Reader(Attributes):
         self.mass_rules = _mjcf_mass.Compiler(root, self)
 
     # -- the body tree
-
-    def _contents(self, el: ET.Element, cls: str) -> list[tuple[ET.Element, np.ndarray, str]]:
-        """The joints, sites, bodies, geoms and inertial of a body (through its ``<frame>``s, any depth),
-        in document order, each as ``(element, pose of its container in the body frame, class)``."""
-        out = []
-        todo = [(child, np.eye(4), cls) for child in reversed(el)]
-        while todo:
-            child, T, cls = todo.pop()
-            if child.tag in _REJECTED:
-                raise ValueError(f"{_describe(child)}: <{child.tag}> is not supported")
-            if child.tag == "frame":
-                inner, T_frame = self.class_of(child, cls, "childclass"), T @ self.pose(child)
-                todo.extend((grandchild, T_frame, inner) for grandchild in reversed(child))
-            elif child.tag in ("joint", "freejoint", "site", "body", "geom", "inertial"):
-                out.append((child, T, cls))
-        return out
 
     def _joint(self, el: ET.Element, T: np.ndarray, cls: str, body: str) -> tuple[list[JointSpec], bool]:
         """A hinge or slide joint as a spec from the body's parent side (``origin`` set later), a ball
@@ -371,7 +375,7 @@ class _Reader(Attributes):
                 continue
             name = self._add_body(el, parent, T, cls, part)
             later = []
-            for child, T_body_container, c in self._contents(el, self.class_of(el, cls, "childclass")):
+            for child, T_body_container, c in self.contents(el, self.class_of(el, cls, "childclass")):
                 if child.tag == "site" and child.get("name"):
                     later.append((child, name, T_body_container @ self.pose(child, self.class_of(child, c)), c))
                 elif child.tag == "body":
@@ -384,7 +388,7 @@ class _Reader(Attributes):
         name = el.get("name") or f"body{bid}"
         part.links.append(name)
         moving: list[JointSpec] = []
-        contents = self._contents(el, self.class_of(el, cls, "childclass"))
+        contents = self.contents(el, self.class_of(el, cls, "childclass"))
         inertial = _mjcf_mass.body(self, self.mass_rules, el, name, contents)
         if isinstance(inertial, str):
             part.unknown_masses.append(inertial)
@@ -417,7 +421,7 @@ class _Reader(Attributes):
             parent = child
 
     def worldbody(self, el: ET.Element) -> None:
-        for child, T, cls in self._contents(el, "main"):
+        for child, T, cls in self.contents(el, "main"):
             if child.tag in ("joint", "freejoint"):
                 raise ValueError(f"{_describe(child)}: the world body cannot have joints")
             if child.tag == "site" and child.get("name"):
