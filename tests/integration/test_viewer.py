@@ -1,5 +1,6 @@
 """The browser viewer (diffkin.viewer, viser): scene graph, sliders, IK gizmos, arm angle, overlays, a real browser."""
 
+import inspect
 import json
 import os
 import re
@@ -23,6 +24,7 @@ from _shapes import SCENE, SCENE_FILE
 import diffkin as dk  # noqa: E402
 from diffkin.viewer import _visuals, show  # noqa: E402
 from diffkin.viewer._arm_panel import GC_OPTIONS  # noqa: E402
+from diffkin.viewer._viewer import ViewerOptions  # noqa: E402
 
 FINGER = os.path.join(DATA, "example-robot-data", "robots", "finger_edu_description", "robots", "finger_edu.urdf")
 FINGER_MESHES = {"finger_base_link": 4, "finger_upper_link": 1, "finger_middle_link": 1, "finger_lower_link": 1}
@@ -933,3 +935,13 @@ def test_cylinders_and_polytopes_are_drawn():
     vertices, faces = cube.mesh
     assert vertices.shape == (8, 3) and faces.shape == (12, 3)
     np.testing.assert_allclose(np.abs(vertices), 0.1)
+
+
+def test_show_passes_on_every_keyword_of_the_viewer():
+    """``show``'s ``**options`` (the ``ViewerOptions`` that mypy checks calls against) are the keyword-only
+    parameters of ``Viewer``, in order, and its docstring documents each."""
+    params = inspect.signature(dk.viewer.Viewer).parameters.values()
+    keywords = [p.name for p in params if p.kind is inspect.Parameter.KEYWORD_ONLY]
+    assert list(ViewerOptions.__annotations__) == keywords
+    documented = re.findall(r"^        (\w+)(?:, (\w+))?:", show.__doc__ or "", re.M)
+    assert set(keywords) <= {name for pair in documented for name in pair if name}
