@@ -6,13 +6,15 @@ apart. Every reported success is re-checked with Pinocchio's float64 forward kin
 pytorch-kinematics solves one end effector of one serial chain, so it has no row here.
 
 - Dual arm: Baxter, both grippers (2 pose targets, 17 joints).
+- Relative targets (``--relative``): Baxter's left gripper at a pose and the right one held in the
+  left one's frame (``relative=``), beside the same targets as two world poses, same run.
 - Humanoid: Talos (talos_reduced, 32 joints), both soles and both grippers (4 pose targets), the
   root pose solved too (``solve_base=True``) from the identity; targets from random root poses.
 - Secondary objectives on the iiwa14 and the Panda (7 joints): a pose target with the rotation
   about the tool z axis free (5 constraints), solved without and with ``rest`` (stay near the
   zero posture) and ``limits`` (stay mid-range): the secondary cost drops, success and errors stay.
 
-Run: ``python experiments/bench_ik_robots.py [--n 1000]``
+Run: ``python experiments/bench_ik_robots.py [--n 1000] [--relative]``
 """
 
 import argparse
@@ -136,6 +138,46 @@ def several_targets(n: int):
     print(table(["problem", "joints", "success", "mean iters", "time (ms)", "problems/s", "compile (s)"], rows))
 
 
+def relative_targets(n: int):
+    """Baxter's hands from random in-limit configurations: two world poses, then the left one in the
+    world and the right one in the left one's frame (the same problems, one term coupling both arms)."""
+    baxter = dk.load_robot(BAXTER)
+    hands = ["left_gripper", "right_gripper"]
+    T = np.asarray(dk.fk(baxter, random_q(baxter, n, 5), hands))
+    T_l_r = np.linalg.inv(T[:, 0]) @ T[:, 1]
+    left, right = jnp.asarray(T[:, 0], jnp.float32), jnp.asarray(T[:, 1], jnp.float32)
+    cases = {
+        "two world poses": (lambda l, r: dk.ik.solve(baxter, {hands[0]: l, hands[1]: r}), right, T[:, 1]),
+        "left in the world, right in left's frame": (
+            lambda l, r: dk.ik.solve(baxter, {hands[0]: l}, relative={tuple(hands): r}),
+            jnp.asarray(T_l_r, jnp.float32),
+            T_l_r,
+        ),
+    }
+    rows = []
+    for name, (solve, second, T_second) in cases.items():
+        compile_s, dt, res = timed(jax.jit(solve), left, second)
+        ok = np.asarray(res.success)
+        got = pinocchio_poses(BAXTER, baxter, res.q, hands)
+        if T_second is T_l_r:
+            got[:, 1] = np.linalg.inv(got[:, 0]) @ got[:, 1]
+        assert np.all(verified(got, np.stack([T[:, 0], T_second], axis=1))[ok]), "a success fails Pinocchio FK"
+        reached = np.asarray((res.pos_err <= TOL[0]) & (res.rot_err <= TOL[1]))  # (n, 2)
+        rows.append(
+            [
+                name,
+                f"{ok.mean():.1%}",
+                f"{reached[:, 0].mean():.1%}",
+                f"{reached[:, 1].mean():.1%}",
+                f"{np.mean(res.iters):.1f}",
+                f"{dt * 1e3:.0f}",
+                f"{compile_s:.1f}",
+            ]
+        )
+    headers = ["Baxter's hands", "success", "left reached", "right reached", "mean iters", "time (ms)", "compile (s)"]
+    print(table(headers, rows))
+
+
 def secondary_objectives(n: int):
     rows = []
     for path, frame in ((dk.robots.urdf_path("iiwa14"), "iiwa14_link_ee"), (PANDA, "panda_hand")):
@@ -197,8 +239,13 @@ def secondary_objectives(n: int):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=1000, help="problems per row")
+    parser.add_argument("--relative", action="store_true", help="only the relative-target rows")
     args = parser.parse_args()
     print(f"# IK of whole robots, {args.n} problems, float32, 1e-5 m / 1e-4 rad. {machine_line()}\n")
+    if args.relative:
+        print("## Relative targets: the right hand in the left hand's frame\n")
+        relative_targets(args.n)
+        return
     print("## Several targets at once (pytorch-kinematics: not possible, one end effector per chain)\n")
     several_targets(args.n)
     print("\n## Secondary objectives in the null space (tool rotation about z free: 5 constraints, 7 joints)\n")

@@ -43,6 +43,31 @@ _SCREEN = 8  # each random seed is the best (least screening cost) of this many 
 _JITTER = 0.05  # a polishing round's perturbations: each a step of this fraction towards a random seed
 
 
+def redrawn(moves: jax.Array, reached: jax.Array, own: bool = True) -> jax.Array:
+    """``(dof, m)`` the joints a later round's random seeds draw anew; the others keep the best state's values.
+
+    Args:
+        moves: ``(dof, k)`` bool, whether joint ``i`` moves target ``k``.
+        reached: ``(k, m)`` bool, whether the best state of problem ``m`` reached target ``k``.
+        own: ``False``: every joint that moves an unreached target (with deferred terms: the
+            clearance, moved by every joint, is not cleared by the joints of its own, such as a
+            finger's, alone).
+
+    Per unreached target, the joints that move it and no reached target, or, where there are none,
+    every joint that moves it: a joint shared with a reached target is drawn anew only where the
+    unreached target has no joint of its own. A two-arm problem with one arm solved searches for
+    the other arm only, whether its targets are two world poses or the second hand in the first
+    hand's frame (a relative target, which both arms move: the seeds draw the unsolved arm alone).
+    Unchanged where nothing is reached: every joint that moves a target.
+    """
+    drawn = moves[:, :, None]  # (dof, k, m)
+    if own:
+        on_reached = jnp.any(moves[:, :, None] & reached[None], axis=1)  # (dof, m)
+        alone = drawn & ~on_reached[:, None]
+        drawn = jnp.where(jnp.any(alone, axis=0, keepdims=True), alone, drawn)
+    return jnp.any(drawn & ~reached[None], axis=1)
+
+
 class Seeds(NamedTuple):
     """Iteration state of every seed (problem axis last)."""
 
@@ -61,7 +86,8 @@ class Best(NamedTuple):
     ``slack``: the deferred terms' least slack (the clearance less the margin: met where ``>= 0``) at
     ``x`` where ``x`` is on its targets and a round without those terms measured it, ``-inf``
     elsewhere. Without a success, a larger slack is better (a later round starts from the state
-    nearest to a solution), then a smaller residual.
+    nearest to a solution), then (several targets, none deferred) fewer targets missed, then a smaller
+    residual.
     """
 
     x: jax.Array
@@ -176,13 +202,15 @@ def _unmeasured(s: Seeds) -> jax.Array:
     return jnp.full(s.success.shape, -jnp.inf, s.ev.cost.dtype)
 
 
-def _best(s: Seeds, num_targets: int, rank, slack=None, on_pose=None) -> Best:
+def _best(s: Seeds, num_targets: int, rank, slack=None, on_pose=None, missed=None) -> Best:
     """The best seed of every target (leaves end with ``(num_targets,)``).
 
     A successful seed wins, the one of least ``rank`` (``(seeds, targets)``, e.g. the distance to
     a warm start) when given, else of least residual; without a success, the seed of least residual,
     or, given the deferred terms' ``slack`` ``(P,)`` at every seed and which seeds are ``on_pose``
-    ``(P,)``, the seed on the pose of greatest slack where there is one. Ties go to the first seed.
+    ``(P,)``, the seed on the pose of greatest slack where there is one. Given ``missed(ev)``
+    ``(P,)``, the targets a seed has not reached, the seeds without a success that miss the fewest
+    compete on residual. Ties go to the first seed.
     """
 
     def per_target(x):  # (..., P) -> (..., seeds, targets)
@@ -191,6 +219,9 @@ def _best(s: Seeds, num_targets: int, rank, slack=None, on_pose=None) -> Best:
     success, cost = per_target(s.success), per_target(s.ev.cost)
     order_by = cost if rank is None else rank
     best_success = jnp.argmin(jnp.where(success, order_by, jnp.inf), axis=0)
+    if missed is not None:
+        fewest = per_target(missed(s.ev))
+        cost = jnp.where(fewest == jnp.min(fewest, axis=0), cost, jnp.inf)
     fallback = jnp.argmin(cost, axis=0)
     if slack is None:
         slack = _unmeasured(s)
@@ -233,11 +264,30 @@ def search(
         method: the iteration (:class:`diffkin.ik._methods.Steps`).
         settings: seeds, iterations, polishing rounds and tolerances.
         moves: ``(dof, k)`` bool, which joints move which of ``k`` targets (several targets), or
-            ``None``. Then the random seeds of later rounds keep the best state's joints that
-            move only targets it already reached (and its root pose if it reached any): a
-            two-arm problem with one arm solved searches for the other arm only.
+            ``None``. Then (without deferred terms) a target's best state without a success is
+            one that misses the fewest targets (then of least residual), and the random seeds of
+            later rounds draw anew only the joints :func:`redrawn` names for its unreached
+            targets (with deferred terms, every joint that moves one) and keep the others (and
+            its root pose if it reached any): a two-arm problem with one arm solved searches for
+            the other arm only, also where the second hand's target is in the first hand's frame
+            (a least residual alone would prefer a state with both hands near their targets,
+            where seeds must restart both arms).
     """
     dtype, dof = lower.dtype, lower.shape[0]
+
+    def on_target(ev: Eval) -> jax.Array:  # (k, P)
+        return (ev.pos_err <= settings.pos_tol) & (ev.rot_err <= settings.rot_tol)
+
+    first_group = min(settings.num_seeds, GROUP)
+    random_rounds = -(-(settings.num_seeds - first_group) // GROUP)
+    rounds = 1 + random_rounds + settings.polish
+    # Deferred terms (the clearance) are left out of the first round, which then costs what the
+    # problem without them costs, and of a target's random rounds; a target whose states break them
+    # gets them in its last random round and its polishing rounds.
+    defer = rounds > 1 and build(jnp.arange(1), 1).defers
+    # Several targets without deferred ones: a state that misses fewer targets is the better start.
+    partial = moves is not None and not defer
+    missed = (lambda ev: jnp.sum(~on_target(ev), axis=0)) if partial else None
 
     def run_from(idx, x, live=None, x_first=None, defer: bool = False, every: bool = False) -> Best:
         """Iterate the states ``x`` ``(copies, m, n_state)`` of the targets ``idx``; the best of each.
@@ -259,7 +309,7 @@ def search(
         seeds = _iterate(iterated, x, live, method, m, x_first is not None, settings, every_seed=defer and every)
         per_target = seeds.x.reshape(seeds.x.shape[0], copies, m)
         if not defer:
-            return _best(seeds, m, rank(idx, per_target))
+            return _best(seeds, m, rank(idx, per_target), missed=missed)
         whole = build(idx, 1)
         if every:
             slack = problem.deferred_slack(seeds.x)
@@ -278,18 +328,17 @@ def search(
     def seeds(idx, round_index, group: int, best=None, defer: bool = False):
         """``group`` random seeds per target, ``(group, len(idx), n_state)``, each the best of ``_SCREEN`` draws.
 
-        With ``best`` (and ``moves``), joints that move only reached targets keep their best values.
+        With ``best`` (and ``moves``), the joints :func:`redrawn` leaves keep their best values.
         With ``defer``, the draws are screened without the deferred terms.
         """
         q = _seed_configs(key, idx, round_index, lower, upper, _SCREEN * group, dtype)
         x = lift(idx, q)
         if best is not None and moves is not None:
             near = best.x[:, idx].T  # (m, n_state)
-            reached = (best.ev.pos_err[:, idx] <= settings.pos_tol) & (best.ev.rot_err[:, idx] <= settings.rot_tol)
-            only_reached = ~jnp.any(moves[:, :, None] & ~reached[None], axis=1)  # (dof, m)
+            reached = on_target(best.ev)[:, idx]
             keep = jnp.concatenate(
                 [
-                    only_reached.T,
+                    ~redrawn(moves, reached, own=partial).T,
                     jnp.broadcast_to(jnp.any(reached, axis=0)[:, None], (idx.shape[0], x.shape[-1] - dof)),
                 ],
                 axis=-1,
@@ -301,30 +350,31 @@ def search(
         best = jnp.argmin(cost, axis=0)
         return jnp.take_along_axis(x.reshape((_SCREEN, group) + x.shape[1:]), best[None, ..., None], axis=0)[0]
 
-    first_group = min(settings.num_seeds, GROUP)
-    random_rounds = -(-(settings.num_seeds - first_group) // GROUP)
-    rounds = 1 + random_rounds + settings.polish
-    # Deferred terms (the clearance) are left out of the first round, which then costs what the
-    # problem without them costs, and of a target's random rounds; a target whose states break them
-    # gets them in its last random round and its polishing rounds.
-    defer = rounds > 1 and build(jnp.arange(1), 1).defers
     first_seeds = seeds(jnp.arange(n), jnp.zeros(n, jnp.int32), first_group, defer=defer)
     best = run_from(jnp.arange(n), first_seeds, x_first=first, defer=defer)
     if rounds > 1:
         chunk = min(n, max(_MIN_CHUNK, -(-n // _CHUNK_DIV)))
 
         def attempt(idx, round_index, live, best, defer: bool = False):
-            """Round ``round_index`` (per target) for the targets ``idx``: random or polishing seeds."""
+            """Round ``round_index`` (per target) for the targets ``idx``: random or polishing seeds.
+
+            A polishing round goes on from the best state and perturbations of it; where that state
+            reached some of several targets (and no term is deferred), the perturbations are the
+            random seeds, which keep the joints of the reached targets (a small step rarely leaves
+            the local minimum of the others)."""
             fresh = seeds(idx, round_index, _DEFERRED_GROUP if defer else GROUP, best, defer)
             near = best.x[:, idx].T  # (m, n_state)
             joints = near[:, :dof] + _JITTER * (fresh[1:, :, :dof] - near[:, :dof])
             nearby = jnp.concatenate([joints, jnp.broadcast_to(near[:, dof:], fresh[1:, :, dof:].shape)], axis=-1)
+            if partial:
+                some = jnp.any(on_target(best.ev)[:, idx], axis=0)  # (m,) unsolved: some targets, not all
+                nearby = jnp.where(some[:, None], fresh[1:], nearby)
             nearby = jnp.concatenate([near[None], nearby])
             polishing = round_index > random_rounds
             found = run_from(idx, jnp.where(polishing[:, None], nearby, fresh), live, defer=defer, every=defer)
             return found._replace(iters=found.iters + jnp.where(polishing, best.iters[idx], 0))
 
-        best = _retry_unsolved(attempt, best, rounds, chunk, defer, whole_from=max(1, random_rounds))
+        best = _retry_unsolved(attempt, best, rounds, chunk, defer, whole_from=max(1, random_rounds), missed=missed)
     return best
 
 
@@ -334,13 +384,16 @@ def follow(problem, x: jax.Array, method, settings: Settings) -> Best:
     return Best(s.x, s.ev, s.success, s.iters, _unmeasured(s))
 
 
-def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int, defer: bool = False, whole_from: int = 1) -> Best:
+def _retry_unsolved(
+    attempt, best: Best, rounds: int, chunk: int, defer: bool = False, whole_from: int = 1, missed=None
+) -> Best:
     """Rounds ``1 .. rounds - 1`` for every unsolved target, ``chunk`` targets at a time.
 
     Each pass takes the first unsolved targets with rounds left, runs
     ``attempt(idx, round_index, live, best)`` on them (each at its own next round) and keeps
-    whatever is better per target. A target's result does not depend on the others: its rounds
-    are tried in order, from its own keys and its own best so far.
+    whatever is better per target (:class:`Best`; given ``missed(ev)`` ``(P,)``, the number of
+    targets a state misses, fewer missed wins over a smaller residual). A target's result does not
+    depend on the others: its rounds are tried in order, from its own keys and its own best so far.
 
     With ``defer``, a target's rounds leave the deferred terms out (``attempt(..., defer=True)``: a
     result that breaks them costs ``inf``); once its best state or a round's result has broken them,
@@ -362,7 +415,11 @@ def _retry_unsolved(attempt, best: Best, rounds: int, chunk: int, defer: bool = 
             safe_idx = jnp.where(live, idx, 0)
             new = attempt(safe_idx, done[safe_idx], live, best)
             old_slack = best.slack[safe_idx]
-            lower = (new.slack == old_slack) & (new.ev.cost < best.ev.cost[safe_idx])
+            lower = new.ev.cost < best.ev.cost[safe_idx]
+            if missed is not None:  # fewer targets missed first
+                new_missed, old_missed = missed(new.ev), missed(best.ev)[safe_idx]
+                lower = (new_missed < old_missed) | ((new_missed == old_missed) & lower)
+            lower = (new.slack == old_slack) & lower
             better = live & (new.success | (new.slack > old_slack) | lower)
             best = jax.tree.map(
                 lambda old, x: old.at[..., idx].set(jnp.where(better, x, old[..., safe_idx]), mode="drop"), best, new

@@ -16,7 +16,7 @@ from _reference import dh_fk
 
 import diffkin as dk
 import diffkin.ik as ik
-from diffkin.ik._keywords import KEYWORDS
+from diffkin.ik._keywords import KEYWORDS, terms_of
 
 
 def test_planar_2r_matches_closed_form():
@@ -210,6 +210,54 @@ def test_seed_draws_are_uniform_independent_and_per_target():
     for v in (other_round, other_key):
         assert np.mean(v == u) < 1e-3
     np.testing.assert_array_equal(raw_key, u)  # a raw key holds the same words as the typed one
+
+
+def test_later_seeds_redraw_the_joints_of_unreached_targets_only():
+    """diffkin.ik._search.redrawn on a small tree (a shoulder under two branches): a reached target keeps
+    the joints that move it, shared ones too, where the unreached one has joints of its own (the left
+    hand placed, the right one held in its frame: the right branch alone, not both); on random
+    matrices, every unreached target keeps a redrawn joint that moves it, and only joints that move an
+    unreached target are redrawn (with ``own=False``, as with deferred terms: all of those)."""
+    from _models import _TREE
+
+    from diffkin.ik._search import redrawn
+    from diffkin.ik._solve import _moves
+
+    robot, T = dk.load_robot(_TREE), np.eye(4)
+    left_and_relative = terms_of(robot, {"left": T}, {"relative": {("left", "right"): T}}, None).targets
+    moves = jnp.asarray(_moves(robot, left_and_relative))  # joints shoulder, left, right
+    reached = jnp.asarray([[True, False, True, False], [False, True, True, False]])  # (2 targets, 4 problems)
+    expected = [[False, True, False, True], [False, True, False, True], [True, False, False, True]]
+    np.testing.assert_array_equal(redrawn(moves, reached), expected)
+    two_hands = jnp.asarray(_moves(robot, terms_of(robot, {"left": T, "right": T}, {}, None).targets))
+    reached = jnp.asarray([[True, False], [False, False]])
+    np.testing.assert_array_equal(redrawn(two_hands, reached), [[False, True], [False, True], [True, True]])
+
+    rng = np.random.default_rng(7)
+    moves, reached = rng.random((12, 4, 500)) < 0.4, rng.random((4, 500)) < 0.5  # (dof, k, m), (k, m)
+    got = np.asarray(jax.vmap(lambda mv, r: redrawn(mv, r[:, None])[:, 0], in_axes=(2, 1), out_axes=1)(moves, reached))
+    on_unreached = np.any(moves & ~reached[None], axis=1)  # (dof, m): the joints drawn anew before
+    assert np.all(~got | on_unreached) and np.any(got != on_unreached)
+    every = jax.vmap(lambda mv, r: redrawn(mv, r[:, None], own=False)[:, 0], in_axes=(2, 1), out_axes=1)
+    np.testing.assert_array_equal(every(moves, reached), on_unreached)  # with deferred terms (the clearance)
+    movable = np.any(moves, axis=0) & ~reached  # (k, m) unreached targets some joint moves
+    assert np.all(np.any(got[:, None] & moves, axis=0)[movable])
+
+
+def test_without_a_success_the_seed_that_misses_fewest_targets_is_kept():
+    """diffkin.ik._search._best with several targets: a seed that reaches one hand beats one with a
+    smaller residual that misses both (later rounds then search for the other hand alone)."""
+    from diffkin.ik._problem import Eval
+    from diffkin.ik._search import Seeds, _best
+
+    pos_err = jnp.asarray([[1e-3, 0.0], [1e-3, 5e-2]])  # (2 targets, 2 seeds of one problem)
+    cost = jnp.sum(pos_err**2, axis=0)
+    ev = Eval(jnp.zeros((1, 2)), jnp.zeros((1, 1, 2)), cost, pos_err, jnp.zeros((2, 2)))
+    x, no = jnp.asarray([[0.0, 1.0]]), jnp.zeros(2, bool)
+    seeds = Seeds(x, ev, None, x, no, no, jnp.zeros(2, jnp.int32))
+    missed = lambda ev: jnp.sum(ev.pos_err > 1e-5, axis=0)  # noqa: E731
+    assert float(_best(seeds, 1, None).x[0, 0]) == 0.0
+    assert float(_best(seeds, 1, None, missed=missed).x[0, 0]) == 1.0
 
 
 STATIC = (
