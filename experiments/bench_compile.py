@@ -128,6 +128,30 @@ def panda_avoid():
     )
 
 
+def panda_mbm(avoid: bool):
+    """``(f, args)``: the Panda's IK of one MotionBenchMaker problem (``bench_mbm.py``'s first: the box scene's
+    first grasp, its fingers locked), with ``avoid=`` (``meshes="hulls"``, the problem's own boxes and
+    cylinders padded as bench_mbm pads them, 5 mm margin) or, ``avoid=False``, the same IK without it:
+    the issue's first call and what it is compared with."""
+    import jax
+    import jax.numpy as jnp
+    from bench_geometry import FINGER, MARGIN, MBM, PAD, panda, world_of
+    from bench_mbm import EE, target_of
+
+    import diffkin as dk
+
+    robot, urdf, srdf = panda()
+    problem = json.loads(MBM.read_text())["problems"]["box"][0]
+    T = jnp.asarray(target_of(problem)[None], jnp.float32)
+    locked = {"panda_finger_joint1": FINGER}
+    if not avoid:
+        return (lambda t: dk.ik.solve(robot, {EE: t}, locked=locked)), (T,)
+    geom = dk.collision.load(urdf, robot, srdf=srdf, meshes="hulls")
+    world = jax.tree.map(lambda x: jnp.asarray(x, jnp.float32), world_of(problem, PAD))
+    solve = lambda t, w: dk.ik.solve(robot, {EE: t}, avoid=dk.ik.Avoid(geom, w, margin=MARGIN), locked=locked)  # noqa: E731
+    return solve, (T, world)
+
+
 def case_function(work: str, model: str):
     """``(f, args)`` of one case: a function of arrays and its float32 arguments."""
     import jax
@@ -138,6 +162,8 @@ def case_function(work: str, model: str):
 
     if model == "panda-avoid":
         return panda_avoid()
+    if model in ("panda-mbm", "panda-mbm-avoid"):
+        return panda_mbm(model == "panda-mbm-avoid")
     if model in ROBOT_IK:
         path, frames, floating = ROBOT_IK[model]
         m = erd_robot(path, floating)
@@ -269,6 +295,8 @@ def cases(parts, quick: bool = False) -> list[tuple[str, str]]:
             out.append(("IK (LM defaults, 1,000 targets)", str(dof)))
     if quick:
         return out[:1]
+    if "clutter" in parts and example_robot_data_root() is not None:
+        out += [("IK (1 target)", "panda-mbm"), ("IK (1 target)", "panda-mbm-avoid")]
     if "ik" in parts or "ik-robots" in parts:
         out += [("IK (LM defaults, 1,000 targets)", model) for model in ROBOT_IK if erd_robot(ROBOT_IK[model][0])]
     if talos() is not None:
@@ -286,6 +314,8 @@ NAMES = {
     "baxter": "Baxter, two grippers (2 poses)",
     "talos-contacts": "Talos, 2 soles + 2 grippers (4 poses), root solved",
     "panda-avoid": "Panda with avoid= (capsules, 3 obstacles, 5 mm margin)",
+    "panda-mbm": "Panda, one MotionBenchMaker target, no avoid=",
+    "panda-mbm-avoid": "Panda, one MotionBenchMaker target, avoid= (hulls, its obstacles padded to 21, 5 mm margin)",
 }
 
 
@@ -363,7 +393,10 @@ def main() -> int:
     parser.add_argument("--case", nargs=2, metavar=("WORK", "MODEL"), help=argparse.SUPPRESS)
     parser.add_argument("--quick", action="store_true", help="the first case only (FK of the 7-joint arm)")
     parser.add_argument(
-        "--only", default="fk,jacobian,ik", help="comma-separated parts: fk,jacobian,ik (ik includes ik-robots)"
+        "--only",
+        default="fk,jacobian,ik",
+        help="comma-separated parts: fk,jacobian,ik (ik includes ik-robots),clutter (MotionBenchMaker, with and "
+        "without avoid=)",
     )
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds per case (default 300)")
     parser.add_argument("--max-gb", type=float, default=4.0, help="resident memory per case (default 4 GB)")
