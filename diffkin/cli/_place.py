@@ -103,7 +103,8 @@ def _view(args, placement, model, avoid) -> None:
     elif args.base_link is not None:  # the root of the file's robot is not the chain's base
         shown, source, ends = load_robot(args.robot, args.end_link, args.base_link), None, None
     else:
-        shown, source, ends = tree(args.robot), args.robot, [args.end_link or single_end(tree(args.robot))]
+        shown, source = tree(args.robot), args.robot
+        ends = [args.end_link or single_end(shown)]
     print(f"viewer: the {min(args.best, placement.score.size)} best bases and the tasks", flush=True)
     viewer.show(
         shown,

@@ -107,9 +107,14 @@ class Settings(NamedTuple):
     rot_tol: jax.Array
 
 
+def within_tolerance(ev: Eval, pos_tol, rot_tol) -> jax.Array:
+    """Each target within tolerance: shaped as the errors, ``(P,)`` or ``(k, P)``."""
+    return (ev.pos_err <= pos_tol) & (ev.rot_err <= rot_tol)
+
+
 def succeeded(ev: Eval, pos_tol, rot_tol) -> jax.Array:
     """``(P,)`` every target of the problem within tolerance (errors ``(P,)`` or ``(k, P)``)."""
-    ok = (ev.pos_err <= pos_tol) & (ev.rot_err <= rot_tol)
+    ok = within_tolerance(ev, pos_tol, rot_tol)
     return jnp.all(ok, axis=tuple(range(ok.ndim - 1)))
 
 
@@ -276,7 +281,7 @@ def search(
     dtype, dof = lower.dtype, lower.shape[0]
 
     def on_target(ev: Eval) -> jax.Array:  # (k, P)
-        return (ev.pos_err <= settings.pos_tol) & (ev.rot_err <= settings.rot_tol)
+        return within_tolerance(ev, settings.pos_tol, settings.rot_tol)
 
     first_group = min(settings.num_seeds, GROUP)
     random_rounds = -(-(settings.num_seeds - first_group) // GROUP)
@@ -286,8 +291,8 @@ def search(
     # gets them in its last random round and its polishing rounds.
     defer = rounds > 1 and build(jnp.arange(1), 1).defers
     # Several targets without deferred ones: a state that misses fewer targets is the better start.
-    partial = moves is not None and not defer
-    missed = (lambda ev: jnp.sum(~on_target(ev), axis=0)) if partial else None
+    several = moves is not None and not defer
+    missed = (lambda ev: jnp.sum(~on_target(ev), axis=0)) if several else None
 
     def run_from(idx, x, live=None, x_first=None, defer: bool = False, every: bool = False) -> Best:
         """Iterate the states ``x`` ``(copies, m, n_state)`` of the targets ``idx``; the best of each.
@@ -338,7 +343,7 @@ def search(
             reached = on_target(best.ev)[:, idx]
             keep = jnp.concatenate(
                 [
-                    ~redrawn(moves, reached, own=partial).T,
+                    ~redrawn(moves, reached, own=several).T,
                     jnp.broadcast_to(jnp.any(reached, axis=0)[:, None], (idx.shape[0], x.shape[-1] - dof)),
                 ],
                 axis=-1,
@@ -366,7 +371,7 @@ def search(
             near = best.x[:, idx].T  # (m, n_state)
             joints = near[:, :dof] + _JITTER * (fresh[1:, :, :dof] - near[:, :dof])
             nearby = jnp.concatenate([joints, jnp.broadcast_to(near[:, dof:], fresh[1:, :, dof:].shape)], axis=-1)
-            if partial:
+            if several:
                 some = jnp.any(on_target(best.ev)[:, idx], axis=0)  # (m,) unsolved: some targets, not all
                 nearby = jnp.where(some[:, None], fresh[1:], nearby)
             nearby = jnp.concatenate([near[None], nearby])
