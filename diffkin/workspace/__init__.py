@@ -22,7 +22,8 @@ orthogonal to the tool z axis (never degenerate, since that axis is at most 54.8
 ``phi``, so different planar angles land in different bins.
 
 The package: the front doors :func:`reachability` and :func:`capability` here; the loop they share
-(``_driver.py``); the map and its file format (``_map.py``), the capability map's (``_capability.py``),
+(``_driver.py``); the map and its file format (``_map.py``), the capability map's (``_capability.py``) and
+the cells around a pose that its look-up judges it by (``_cells.py``),
 what is sampled and the grid (``_sampling.py``), the per-sample bins and manipulability
 (``_bins.py``), the compiled sharded step and its reduction (``_step.py``), base placement
 (``_placement.py``) and what obstacles rule out of it (``_blocked.py``), the plots (``_plot.py``).
@@ -146,8 +147,9 @@ def capability(
     Sampled, sharded and chunked as :func:`reachability` (the same configurations for the same key,
     ``avoid`` alike, identical for any number of devices); each sample counts in the cell of its
     position voxel and orientation bin, and the cells reached are counted on the host (memory
-    ``O(chunk + grid + cells reached)``). :meth:`CapabilityMap.reaches` looks poses up;
-    :func:`base_placement` inverts the map to place the robot.
+    ``O(chunk + grid + cells reached)``). :meth:`CapabilityMap.reaches` looks poses up, judging each by
+    its cell and the cells beside it (the map's edge in the middle of its outermost cells, unsampled
+    cells between held ones filled); :func:`base_placement` inverts the map to place the robot.
 
     The orientation bins: the tool z axis picks a face of the cube (its largest component and that
     component's sign) and one of ``d x d`` cells of that face, equal in angle (``90 / d`` degrees:

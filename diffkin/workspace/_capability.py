@@ -7,12 +7,12 @@ from __future__ import annotations
 import dataclasses
 import functools
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffkin._checks import positive_int
 from diffkin._npz import read_dataclass_fields, save_dataclass
-from diffkin.workspace._bins import _orientation_bin
+from diffkin.workspace._cells import STEPS, axis_rule, neighbour_bins, pose_halves
 from diffkin.workspace._map import ReachabilityMap, grid_fields
 
 BIN_COUNTS = {24 * d**3: d for d in range(1, 13)}
@@ -63,17 +63,6 @@ def bin_rotations(orientation_bins: int) -> np.ndarray:
 def _bucket(n: int) -> int:
     """``n`` rounded up to a power of two (at least 64): the look-ups compile once per bucket, not per size."""
     return max(64, 1 << (n - 1).bit_length())
-
-
-@functools.partial(jax.jit, static_argnums=(1, 2))
-def pose_cells(T, n_dir: int, n_roll: int, origin, inv_voxel, shape_array):
-    """Voxel and orientation bin of poses ``T (M, 4, 4)``: ``(cell (M, 3) int32, bin (M,) int32, inside
-    (M,) bool)``, binned as the map's samples are (``cell`` 0 where not inside)."""
-    R = tuple(tuple(T[:, i, j] for j in range(3)) for i in range(3))
-    cell = jnp.floor((T[:, :3, 3] - origin) * inv_voxel)
-    inside = jnp.all((cell >= 0) & (cell < shape_array), axis=1)
-    cell = jnp.where(inside[:, None], cell, 0).astype(jnp.int32)
-    return cell, _orientation_bin(R, n_roll, n_dir), inside
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -154,6 +143,38 @@ class CapabilityMap:
             chain_name=self.chain_name,
         )
 
+    def _cells_of(self, T) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Flat cells ``(M,)`` int64 of poses ``T (..., 4, 4)``, whether inside the grid ``(M,)``, their voxel
+        ``(M, 3)`` int64 and halves ``(M, 6)`` bool (:func:`pose_halves`), binned in the default float dtype."""
+        dtype = jnp.result_type(float)
+        flat_T = np.asarray(T, dtype).reshape(-1, 4, 4)
+        pad = np.broadcast_to(np.eye(4, dtype=dtype), (_bucket(len(flat_T)) - len(flat_T), 4, 4))
+        n_dir, n_roll = split_bins(self.orientation_bins)
+        cell, bins, inside, upper = pose_halves(
+            jnp.asarray(np.concatenate([flat_T, pad])),
+            n_dir,
+            n_roll,
+            jnp.asarray(self.origin, dtype),
+            jnp.asarray(1 / self.voxel_size, dtype),
+            jnp.asarray(self.shape, dtype),
+        )
+        n = len(flat_T)
+        cell, bins = np.asarray(cell[:n], np.int64), np.asarray(bins[:n], np.int64)
+        flat = np.ravel_multi_index(tuple(cell.T), self.shape) * self.orientation_bins + bins
+        return flat, np.asarray(inside[:n]), cell, np.asarray(upper[:n])
+
+    def _counts_at(self, flat: np.ndarray, inside: np.ndarray) -> np.ndarray:
+        """The samples in flat cells ``flat`` (0 where not ``inside``)."""
+        at = np.minimum(np.searchsorted(self.cells, flat), self.cells.size - 1)
+        return np.where(inside & (self.cells[at] == flat), self.cell_counts[at], 0)
+
+    @staticmethod
+    def _checked(T) -> np.ndarray:
+        T = np.asarray(T)
+        if T.ndim < 2 or T.shape[-2:] != (4, 4):
+            raise ValueError(f"T: expected poses of shape (..., 4, 4), got {T.shape}")
+        return T
+
     def count(self, T) -> np.ndarray:
         """The samples in the cell of each pose (binned in the default float dtype, as the map's samples
         were unless ``capability`` was given another).
@@ -164,43 +185,67 @@ class CapabilityMap:
         Returns:
             ``(...,)`` int64, 0 for a pose outside the grid.
         """
-        dtype = jnp.result_type(float)
-        T = np.asarray(T, dtype)
-        if T.ndim < 2 or T.shape[-2:] != (4, 4):
-            raise ValueError(f"T: expected poses of shape (..., 4, 4), got {T.shape}")
+        T = self._checked(T)
         if self.cells.size == 0 or T.size == 0:
             return np.zeros(T.shape[:-2], np.int64)
-        n_dir, n_roll = split_bins(self.orientation_bins)
-        flat_T = T.reshape(-1, 4, 4)
-        pad = np.broadcast_to(np.eye(4, dtype=dtype), (_bucket(len(flat_T)) - len(flat_T), 4, 4))
-        padded = np.concatenate([flat_T, pad])
-        cell, bins, inside = pose_cells(
-            jnp.asarray(padded),
-            n_dir,
-            n_roll,
-            jnp.asarray(self.origin, dtype),
-            jnp.asarray(1 / self.voxel_size, dtype),
-            jnp.asarray(self.shape, dtype),
-        )
-        n = len(flat_T)
-        cell, bins, inside = np.asarray(cell[:n], np.int64), np.asarray(bins[:n], np.int64), np.asarray(inside[:n])
-        flat = np.ravel_multi_index(tuple(cell.T), self.shape) * self.orientation_bins + bins
-        at = np.minimum(np.searchsorted(self.cells, flat), self.cells.size - 1)
-        counts = np.where(inside & (self.cells[at] == flat), self.cell_counts[at], 0)
-        return counts.reshape(T.shape[:-2])
+        flat, inside, _, _ = self._cells_of(T)
+        return self._counts_at(flat, inside).reshape(T.shape[:-2])
 
-    def reaches(self, T, *, min_count: int = 1) -> np.ndarray:
-        """Whether the map holds each pose: its cell has at least ``min_count`` samples.
+    def reaches(self, T, *, min_count: int = 1, at_pose: bool = True) -> np.ndarray:
+        """Whether the map says the arm reaches each pose, judged at the pose, not only by its cell.
+
+        A cell is *held* when it has at least ``min_count`` samples. A cell on the edge of the held set
+        holds reachable and unreachable poses (the reachable part lies toward the held cells), so the
+        pose is judged by the cells around it along the six axes of the grid (the voxel's x, y, z; the
+        orientation bin's two direction angles and its roll, see :func:`neighbour_bins`). It is reached
+        when
+
+        - its cell is held, or is an unsampled cell between two held ones along some axis (a hole), and
+        - along every axis, the neighbour on the side of the half of the cell the pose lies in is held, or
+          the cell beyond it is (a hole), or the neighbour on the other side is not held either (the held
+          set is one cell thin there, as the planar poses of a planar arm are along z).
+
+        That is, the map's edge is moved from the faces of its outermost cells to their middles: the
+        poses of an edge cell that lie away from the held ones are not reached. (The other side must hold
+        two cells for the pose to be at an edge, so that a held set two cells thin is not cut either.)
+
+        This suits an arm whose reachable poses fill the space of poses around them (6 or more joints).
+        An arm with fewer joints reaches a thinner set of poses, oblique to the grid's axes, that the
+        test would cut into: ``at_pose=False`` judges a pose by its cell alone (held, no holes filled).
 
         Args:
             T: ``(..., 4, 4)`` poses of the tool in the map's base frame (metres).
-            min_count: samples needed (a higher count trades recall for precision at the workspace's
-                boundary, where a cell holds reachable and unreachable poses).
+            min_count: samples a cell needs to be held (a higher count trades recall for precision).
+            at_pose: judge the pose by the cells around it (default), or by its cell alone (``False``).
 
         Returns:
             ``(...,)`` bool.
         """
-        return self.count(T) >= min_count
+        T = self._checked(T)
+        min_count = positive_int(min_count, "min_count")
+        if self.cells.size == 0 or T.size == 0:
+            return np.zeros(T.shape[:-2], bool)
+        flat, inside, cell, upper = self._cells_of(T)
+        kept = self._counts_at(flat, inside) >= min_count
+        if not at_pose:
+            return kept.reshape(T.shape[:-2])
+        n_dir, n_roll = split_bins(self.orientation_bins)
+        neighbours, n_bins = neighbour_bins(n_dir, n_roll)[flat % self.orientation_bins], self.orientation_bins
+        edge = np.zeros_like(kept)
+        for axis in range(6):
+            near = np.zeros((len(flat), len(STEPS)), bool)
+            for i, step in enumerate(STEPS):
+                if axis < 3:  # the voxel's x, y, z
+                    moved = cell[:, axis] + step
+                    valid = inside & (moved >= 0) & (moved < self.shape[axis])
+                    to = flat + step * n_bins * int(np.prod(self.shape[axis + 1 :]))
+                else:
+                    valid, to = inside, flat - flat % n_bins + neighbours[:, axis - 3, i]
+                near[:, i] = self._counts_at(to, valid) >= min_count
+            hole, fails_down, fails_up = axis_rule(*near.T)
+            kept |= inside & hole
+            edge |= np.where(upper[:, axis], fails_up, fails_down)
+        return (kept & ~edge).reshape(T.shape[:-2])
 
     def save(self, path) -> None:
         """Write the map to ``path`` as a ``.npz`` archive (numpy appends ``.npz`` if missing)."""

@@ -16,6 +16,7 @@ from diffkin.models.robot import Robot
 from diffkin.workspace._bins import _orientation_bin
 from diffkin.workspace._blocked import blocked, checked
 from diffkin.workspace._capability import CapabilityMap, split_bins
+from diffkin.workspace._cells import orientation_halves, slice_codes, slices_around
 
 
 def planar_poses(x, y, yaw, height: float) -> np.ndarray:
@@ -130,29 +131,37 @@ class Placement:
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1))
-def _task_bins(n_dir: int, n_roll: int, R) -> jax.Array:
-    """Orientation bins of rotations ``R (M, 3, 3)``, as the map's."""
-    return _orientation_bin(tuple(tuple(R[:, i, j] for j in range(3)) for i in range(3)), n_roll, n_dir)
+def _task_bins(n_dir: int, n_roll: int, R) -> tuple[jax.Array, jax.Array]:
+    """Orientation bins of rotations ``R (M, 3, 3)``, as the map's, and the halves of them they lie in
+    along ``u``, ``v`` and the roll: ``(M,)``, ``(M, 3)`` bool."""
+    entries = tuple(tuple(R[:, i, j] for j in range(3)) for i in range(3))
+    bins = _orientation_bin(entries, n_roll, n_dir)
+    return bins, orientation_halves(entries, bins, n_roll, n_dir)
 
 
 @jax.jit
-def _scores(table, slices, c, d, origin_xy, inv_voxel):
-    """``(nx, ny, nyaw)`` mean over tasks of ``table[slice, cell x, cell y]`` of each task's position in
-    each base frame: ``c (nyaw, N, 2)`` the tasks' and ``d (nyaw, nx, ny, 2)`` the bases' xy turned by
-    ``-yaw``; ``slices (nyaw, N)`` the table slice of each task's (bin, z layer), ``-1`` for none."""
+def _scores(table, slices, edges, c, d, origin_xy, inv_voxel):
+    """``(nx, ny, nyaw)`` mean over tasks of whether the map reaches each task's pose in each base frame:
+    ``c (nyaw, N, 2)`` the tasks' and ``d (nyaw, nx, ny, 2)`` the bases' xy turned by ``-yaw``; ``slices
+    (nyaw, N)`` the table slice of each task's (bin, z layer), ``-1`` for none; ``table (S, mx, my)`` the
+    slices' codes (:func:`slice_codes`); ``edges (nyaw, N)`` the code bits of each task's halves along z,
+    ``u``, ``v`` and the roll (the x and y halves depend on the base)."""
     shape = table.shape[1:]
 
     def one_yaw(args):
-        c, d, slices = args
-        p = (c[:, None, None, :] - d[None]) - origin_xy  # (N, nx, ny, 2), the base frame
-        cell = jnp.floor(p * inv_voxel)
-        inside = (slices[:, None, None] >= 0) & jnp.all((cell >= 0) & (cell < jnp.asarray(shape, p.dtype)), axis=-1)
+        c, d, slices, edges = args
+        scaled = ((c[:, None, None, :] - d[None]) - origin_xy) * inv_voxel  # (N, nx, ny, 2), the base frame
+        cell = jnp.floor(scaled)
+        inside = (slices[:, None, None] >= 0) & jnp.all((cell >= 0) & (cell < jnp.asarray(shape, cell.dtype)), axis=-1)
+        upper = (scaled - cell >= 0.5).astype(jnp.uint16)
         cell = cell.astype(jnp.int32)
         flat = (jnp.maximum(slices, 0)[:, None, None] * shape[0] + cell[..., 0]) * shape[1] + cell[..., 1]
-        hit = jnp.take(table.reshape(-1), jnp.where(inside, flat, 0)) & inside  # one flat gather: XLA's fastest
+        code = jnp.take(table.reshape(-1), jnp.where(inside, flat, 0))  # one flat gather: XLA's fastest
+        edge = edges[:, None, None] | (jnp.uint16(2) << upper[..., 0]) | (jnp.uint16(8) << upper[..., 1])
+        hit = inside & ((code & 1) == 1) & ((code & edge) == 0)
         return jnp.sum(hit, axis=0, dtype=jnp.int32)
 
-    return jnp.moveaxis(jax.lax.map(one_yaw, (c, d, slices)), 0, -1) / slices.shape[1]
+    return jnp.moveaxis(jax.lax.map(one_yaw, (c, d, slices, edges)), 0, -1) / slices.shape[1]
 
 
 def _region(region) -> np.ndarray:
@@ -185,6 +194,7 @@ def base_placement(
     base_height: float = 0.0,
     cell: float | None = None,
     min_count: int = 1,
+    at_pose: bool = True,
     model=None,
     avoid=None,
 ) -> Placement:
@@ -194,8 +204,9 @@ def base_placement(
     task ``T_world_task`` is reached when the map holds ``inv(T_world_base) @ T_world_task``
     (:meth:`CapabilityMap.reaches`). The bases form a grid of ``cell``-wide squares over ``region``
     (their centres) times ``yaw_bins`` yaws ``2 pi k / yaw_bins``. A task's orientation bin and z
-    layer do not depend on the base's x and y: the map's ``(x, y)`` slices that the tasks need are
-    gathered once, and every base cell then costs one look-up per task.
+    layer do not depend on the base's x and y: the map's ``(x, y)`` slices that the tasks need (and those
+    beside them, which :meth:`CapabilityMap.reaches` judges a pose by) are gathered and coded once, and
+    every base cell then costs one look-up per task.
 
     With ``avoid`` (obstacles in the world), what collides at every solution is ruled out before any
     IK: a base whose robot's root body (the shapes no joint moves) is within the margin of an
@@ -211,7 +222,9 @@ def base_placement(
         yaw_bins: number of base yaws.
         base_height: the base's z in the world, metres.
         cell: edge of the base grid's squares, metres (default: the map's voxel size).
-        min_count: samples a map cell needs to count as reached (:meth:`CapabilityMap.reaches`).
+        min_count: samples a map cell needs to be held (:meth:`CapabilityMap.reaches`).
+        at_pose: judge each task's pose by the map's cells around it (default), or by its cell alone
+            (``False``: arms with fewer than 6 joints; :meth:`CapabilityMap.reaches`).
         model: with ``avoid``, the map's ``(robot, frame_name)`` pair.
         avoid: a :class:`~diffkin.ik.Avoid` of ``model``'s robot with obstacles (one world, in the world
             frame, metres): bases and tasks within its margin of them at every solution score 0 (above).
@@ -233,6 +246,8 @@ def base_placement(
     r = _region(region)
     yaw_bins = positive_int(yaw_bins, "yaw_bins")
     min_count = positive_int(min_count, "min_count")
+    if not isinstance(at_pose, (bool, np.bool_)):
+        raise TypeError(f"at_pose: expected a bool, got {type(at_pose).__name__}")
     base_height = _number(base_height, "base_height")
     if avoid is None and model is not None:
         raise ValueError("model: only needed with avoid (the robot whose shapes are checked)")
@@ -250,24 +265,37 @@ def base_placement(
     dtype = jnp.result_type(float)
     turn = planar_poses(0.0, 0.0, -yaws, 0.0)[:, :3, :3]  # Rz(-yaw), (nyaw, 3, 3)
     R = turn[:, None] @ T[None, :, :3, :3]
-    bins = np.asarray(_task_bins(n_dir, n_roll, jnp.asarray(R.reshape(-1, 3, 3), dtype)), np.int64)
+    bins, halves = _task_bins(n_dir, n_roll, jnp.asarray(R.reshape(-1, 3, 3), dtype))
+    bins, halves = np.asarray(bins, np.int64), np.asarray(halves).reshape(yaw_bins, -1, 3)
     z_base = T[:, 2, 3].astype(dtype) - np.asarray(base_height + cap.origin[2], dtype)  # the grid's z in the base
-    z = np.floor(z_base * dtype.type(1 / cap.voxel_size))
+    scaled = z_base * dtype.type(1 / cap.voxel_size)
+    z = np.floor(scaled)
     layer = np.where((z >= 0) & (z < mz), z, -1).astype(np.int64)
     keys = np.where(layer >= 0, bins.reshape(yaw_bins, -1) * mz + layer, -1)
     needed, slices = np.unique(keys, return_inverse=True)
     slices = slices.reshape(keys.shape) - (needed[0] < 0)  # -1: the task is outside the map's z range
     needed = needed[needed >= 0]
-    # The map's (x, y) slices of those (bin, layer) pairs: the ranges of the map's cells in that order.
-    flat_table = np.zeros((max(needed.size, 1), mx * my), bool)
+    # The code bits of each task's halves along z, u, v and the roll (axes 2-5, see slice_codes).
+    upper = np.concatenate([np.broadcast_to(scaled - z >= 0.5, (yaw_bins, T.shape[0]))[..., None], halves], axis=-1)
+    edges = np.sum(np.left_shift(1, 1 + 2 * np.arange(2, 6) + upper), axis=-1).astype(np.uint16)
+    # The map's (x, y) slices of those (bin, layer) pairs and of those around them: ranges of its cells.
     layers, xy, counts = cap.layers
-    first, last = np.searchsorted(layers, needed, "left"), np.searchsorted(layers, needed, "right")
-    sizes = last - first
-    if sizes.sum():
-        which = np.repeat(np.arange(needed.size), sizes)
-        at = np.arange(sizes.sum()) + np.repeat(first - np.cumsum(sizes) + sizes, sizes)
-        kept = counts[at] >= min_count
-        flat_table[which[kept], xy[at][kept]] = True
+    keys = needed
+    if at_pose:
+        keys = np.unique(np.concatenate([needed, slices_around(needed, n_dir, n_roll, mz).ravel()]))
+        keys = keys[keys >= 0]
+    first, last = np.searchsorted(layers, keys, "left"), np.searchsorted(layers, keys, "right")
+    ranges = [slice(a, b) for a, b in zip(first.tolist(), last.tolist(), strict=True)]
+    cells = np.concatenate([xy[r] for r in ranges] + [np.zeros(0, np.int64)])
+    cells += np.repeat(np.arange(keys.size) * (mx * my), last - first)
+    if min_count > 1:
+        cells = cells[np.concatenate([counts[r] for r in ranges] + [np.zeros(0, np.int64)]) >= min_count]
+    held = np.zeros((keys.size, mx, my), bool)
+    held.reshape(-1)[cells] = True
+    if not needed.size:
+        table = jnp.zeros((1, mx, my), jnp.uint16)
+    else:  # bit 0 alone: the cell is held, no edge
+        table = slice_codes(held, keys, needed, n_dir, n_roll, mz) if at_pose else jnp.asarray(held, jnp.uint16)
     # The tasks' and the bases' xy in each base frame's orientation.
     c = np.einsum("yij,nj->yni", turn[:, :2, :2], T[:, :2, 3])
     bx, by = np.meshgrid(xs, ys, indexing="ij")
@@ -280,8 +308,9 @@ def base_placement(
         blocked_bases = blocked_bases.reshape(nx, ny, yaw_bins)
         slices = np.where(blocked_tasks[None], -1, slices)  # reached from no base
     score = _scores(
-        jnp.asarray(flat_table.reshape(-1, mx, my)),
+        table,
         jnp.asarray(slices, jnp.int32),
+        jnp.asarray(edges),
         jnp.asarray(c, dtype),
         jnp.asarray(d, dtype),
         jnp.asarray(cap.origin[:2], dtype),

@@ -315,7 +315,8 @@ def test_placement_with_obstacles_against_ik_from_every_base():
     world = World(Box(post[None], np.array([[0.05, 0.05, 0.05]])), Sphere(tasks[1, None, :3, 3], np.array([0.03])))
     avoid = dk.ik.Avoid(geom, world, margin=0.02)
     cap = ws.capability(model, 100_000, key=KEY, voxel_size=0.1, orientation_bins=192)
-    kw = dict(region=[[-0.5, -0.5], [1.5, 0.5]], yaw_bins=2, cell=1.0)  # bases at x = 0 and 1, yaws 0 and 180 deg
+    # Bases at x = 0 and 1, yaws 0 and 180 deg; a 3-joint arm: its poses judged by their cells alone.
+    kw = dict(region=[[-0.5, -0.5], [1.5, 0.5]], yaw_bins=2, cell=1.0, at_pose=False)
     plain = ws.base_placement(cap, tasks, **kw)
     placement = ws.base_placement(cap, tasks, model=model, avoid=avoid, **kw)
     assert placement.score.shape == (2, 1, 2) and plain.blocked_bases is None
@@ -323,7 +324,7 @@ def test_placement_with_obstacles_against_ik_from_every_base():
     np.testing.assert_array_equal(placement.blocked_bases[:, 0], [[False, False], [True, True]])  # on the post
     # Everything else scores as without the obstacles, less the blocked task.
     cells = plain.best_cells(4)
-    said = cap.reaches(np.linalg.inv(plain.best(4))[:, None] @ tasks)  # (4, 3) the map's look-ups
+    said = cap.reaches(np.linalg.inv(plain.best(4))[:, None] @ tasks, at_pose=False)  # (4, 3) the map's look-ups
     blocked = placement.blocked_bases[tuple(cells.T)]
     expected = np.where(blocked, 0.0, (said & [True, False, True]).mean(axis=1))
     np.testing.assert_allclose(placement.score[tuple(cells.T)], expected, atol=1e-6)
