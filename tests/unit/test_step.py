@@ -20,7 +20,8 @@ from _shapes import planar_capsule_arm
 
 import diffkin as dk
 from diffkin.collision import Sphere, World
-from diffkin.ik import _qp
+from diffkin.ik import _qp, _step
+from diffkin.ik._linalg import cholesky
 
 URDF = planar_capsule_arm("2", tip=True)
 ROBOT = dk.load_robot(URDF)
@@ -137,6 +138,36 @@ def test_qp_float32():
     assert v.dtype == jnp.float32
     for p, (H, g, lo, hi, G, h) in enumerate(PROBLEMS[:8]):
         np.testing.assert_allclose(np.asarray(v[:, p], np.float64), _enumerated(H, g, lo, hi, G, h), atol=3e-3)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_qp_factor_is_linalg_s_cholesky(dtype):
+    # The QP factors column by column (each column materialised): the operations of _linalg.cholesky, so
+    # the same values to rounding (XLA may contract a product and a sum differently in the two kernels),
+    # and L L^T = M.
+    H = _stacked(PROBLEMS[:8], dtype).H
+    L, inv_diag = jax.jit(_qp._factor)(H)
+    L_ref, inv_ref = jax.jit(lambda M: cholesky([[M[i, j] for j in range(i + 1)] for i in range(M.shape[0])]))(H)
+    n, rtol = H.shape[0], 8 * np.finfo(dtype).eps
+    for j in range(n):
+        np.testing.assert_allclose(inv_diag[j], inv_ref[j], rtol=rtol)
+        for i in range(j + 1, n):
+            np.testing.assert_allclose(L[i][j], L_ref[i][j], rtol=rtol, atol=rtol)
+    full = np.zeros(H.shape, dtype)
+    for i in range(n):
+        full[i, i] = 1 / np.asarray(inv_diag[i])
+        for j in range(i):
+            full[i, j] = L[i][j]
+    np.testing.assert_allclose(np.einsum("ikp,jkp->ijp", full, full), H, rtol=1e-4 if dtype == np.float32 else 1e-12)
+
+
+def test_step_products_per_problem_are_einsum_s():
+    rng = np.random.default_rng(3)
+    J, v = rng.normal(size=(6, 7, 5)), rng.normal(size=(7, 5))
+    np.testing.assert_allclose(_step._gram(jnp.asarray(J)), np.einsum("mip,mjp->ijp", J, J), rtol=1e-13)
+    np.testing.assert_allclose(_step._times(jnp.asarray(J), jnp.asarray(v)), np.einsum("mip,ip->mp", J, v), rtol=1e-13)
+    assert _step._gram(jnp.zeros((0, 3, 5))).shape == (3, 3, 5)
+    assert _step._times(jnp.zeros((2, 0, 5)), jnp.zeros((0, 5))).shape == (2, 5)
 
 
 def test_least_violation_of_contradictory_rows():
