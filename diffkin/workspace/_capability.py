@@ -223,6 +223,8 @@ class CapabilityMap:
         """
         T = self._checked(T)
         min_count = positive_int(min_count, "min_count")
+        if not isinstance(at_pose, (bool, np.bool_)):
+            raise TypeError(f"at_pose: expected a bool, got {type(at_pose).__name__}")
         if self.cells.size == 0 or T.size == 0:
             return np.zeros(T.shape[:-2], bool)
         flat, inside, cell, upper = self._cells_of(T)

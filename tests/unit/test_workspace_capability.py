@@ -242,6 +242,10 @@ def test_look_ups_of_bad_poses_and_outside_the_grid(cap):
         cap.reaches(np.eye(3))
     far = planar_poses([5.0, 0.5], [0.0, 0.0], [0.0, 0.0], 0.0)
     np.testing.assert_array_equal(cap.reaches(far), [False, True])
+    with pytest.raises(TypeError, match="at_pose: expected a bool"):
+        cap.reaches(far, at_pose="no")
+    with pytest.raises(ValueError, match="min_count"):
+        cap.reaches(far, min_count=0)
     assert cap.reaches(np.zeros((0, 4, 4))).shape == (0,)
 
 
