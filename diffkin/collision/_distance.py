@@ -181,8 +181,9 @@ BOUNDED = frozenset({(Box, Box), (Capsule, Box), (Box, Capsule)}) | GENERAL
 
 def lower_bound(a, b) -> jax.Array:
     """A lower bound of :func:`distance` that is much cheaper for box-box and capsule-box (the face
-    axes' separation) and the general pairs (the distance of balls around the shapes); the
-    distance itself for the other pairs (already cheap)."""
+    axes' separation) and the general pairs (the larger of the distance of balls around the shapes
+    and the face axes' separation of boxes around them: a shelf's board is far from most of a link's
+    ball); the distance itself for the other pairs (already cheap)."""
     kinds = (type(a), type(b))
     if kinds == (Box, Box):
         return box_box_bound(a, b)
@@ -190,9 +191,11 @@ def lower_bound(a, b) -> jax.Array:
         return capsule_box_bound(a, b)
     if kinds == (Box, Capsule):
         return capsule_box_bound(b, a)
-    if kinds in GENERAL:  # the balls around them
+    if kinds in GENERAL:  # the balls around them, and the boxes around them
         gap = jnp.sqrt(jnp.sum((a.centre() - b.centre()) ** 2, axis=-1))
-        return gap - a.bounding_radius() - b.bounding_radius()
+        return jnp.maximum(
+            gap - a.bounding_radius() - b.bounding_radius(), box_box_bound(a.bounding_box(), b.bounding_box())
+        )
     return distance(a, b)
 
 

@@ -34,6 +34,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffkin.collision._shapes import taken
+
 #: GJK stops when its lower bound is within this share of its upper bound (float64; float32: FLOAT32_TOLERANCE)
 TOLERANCE = 1e-12
 FLOAT32_TOLERANCE = 1e-6
@@ -41,6 +43,8 @@ FLOAT32_TOLERANCE = 1e-6
 STEPS = 128
 #: projected-ascent steps refining an overlapping pair's direction
 ASCENT_STEPS = 24
+#: the overlap search runs on the overlapping pairs, 1 / OVERLAP_SHARE of a batch at a time
+OVERLAP_SHARE = 8
 
 #: directions spread over the sphere (a Fibonacci lattice of 2 * 24, both signs tried), starts of an overlap's search
 _SPREAD = np.array(
@@ -135,10 +139,27 @@ def _closest(Y: jax.Array, mask: jax.Array) -> tuple[jax.Array, jax.Array, jax.A
     return x, chosen, jnp.asarray(_SUBSET_MASKS)[best[..., 0, 0]]
 
 
-def _gjk(a, b, dtype) -> tuple[jax.Array, jax.Array, jax.Array]:
+def _kept_first(mask: jax.Array) -> jax.Array:
+    """``(..., 4, 4)`` bool: ``[j, i]`` where point ``i`` of a simplex goes to slot ``j`` when the points in
+    use (``mask`` ``(..., 4)``) come first, each group in its order (a stable sort of ``~mask``, without
+    a sort: XLA's CPU sort of many 4-element rows costs as much as a GJK step's supports)."""
+    used = mask.astype(jnp.int32)
+    before = jnp.cumsum(used, axis=-1) - used  # points in use before each
+    others = jnp.sum(used, axis=-1, keepdims=True) + jnp.arange(4) - before
+    rank = jnp.where(mask, before, others)
+    return rank[..., None, :] == jnp.arange(4)[:, None]
+
+
+def _picked(slot: jax.Array, Y: jax.Array) -> jax.Array:
+    """``(..., k, 3)``: the points ``Y`` ``(..., 4, 3)`` each slot of ``slot`` ``(..., k, 4)`` picks (exactly)."""
+    return jnp.sum(jnp.where(slot[..., None], Y[..., None, :, :], 0.0), axis=-2)
+
+
+def _gjk(a, b, dtype, beyond) -> tuple[jax.Array, jax.Array, jax.Array]:
     """GJK on the cores' Minkowski difference ``a - b``: ``(p_a, p_b, apart)``, the closest points of the cores
     (``p_a - p_b`` the difference's point nearest the origin) and whether the cores are apart (the origin
-    not enclosed)."""
+    not enclosed). A pair stops early once its lower bound ``s(n)`` (at ``n`` along ``p_b - p_a``) is at
+    least ``beyond`` ``(...,)``: then only that is certain, not the closest points."""
     tol = TOLERANCE if jnp.finfo(dtype).bits >= 64 else FLOAT32_TOLERANCE
     eps = jnp.finfo(dtype).eps
 
@@ -167,11 +188,12 @@ def _gjk(a, b, dtype) -> tuple[jax.Array, jax.Array, jax.Array]:
         size = jnp.max(jnp.abs(jnp.concatenate([Ya, Yb, wa[..., None, :], wb[..., None, :]], axis=-2)), axis=(-2, -1))
         rounding = 16 * eps * size * jnp.sqrt(_dot(w, w))
         done = done | (xx - _dot(x, w) <= tol * xx + rounding) | (xx <= (eps * 16) ** 2 * scale)
+        done = done | (_dot(x, w) >= beyond * jnp.sqrt(xx))  # s(-x / |x|) = x.w / |x|: far enough
         # the points in use first (at most 3), then the new point in front of them
-        order = jnp.argsort(~mask, axis=-1, stable=True)[..., :3, None]
-        Ya_new = jnp.concatenate([wa[..., None, :], jnp.take_along_axis(Ya, order, axis=-2)], axis=-2)
-        Yb_new = jnp.concatenate([wb[..., None, :], jnp.take_along_axis(Yb, order, axis=-2)], axis=-2)
-        used = jnp.concatenate([jnp.ones(batch + (1,), bool), jnp.take_along_axis(mask, order[..., 0], axis=-1)], -1)
+        slot = _kept_first(mask)[..., :3, :]  # (..., 3, 4)
+        Ya_new = jnp.concatenate([wa[..., None, :], _picked(slot, Ya)], axis=-2)
+        Yb_new = jnp.concatenate([wb[..., None, :], _picked(slot, Yb)], axis=-2)
+        used = jnp.concatenate([jnp.ones(batch + (1,), bool), jnp.any(slot & mask[..., None, :], axis=-1)], -1)
         x_new, lam_new, mask_new = _closest(Ya_new - Yb_new, used)
         # A simplex too thin to solve in floating point can drop the new point and stall: then restart
         # from the segment between the current point and the new one (both in the difference), whose
@@ -248,18 +270,35 @@ def _overlap_direction(a, b, hint: jax.Array, dtype) -> jax.Array:
     return n
 
 
-def witnesses(a, b) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+def _overlap_directions(a, b, n: jax.Array, overlap: jax.Array, dtype) -> jax.Array:
+    """``n`` ``batch + (3,)`` with the direction of every ``overlap``-ping pair found by
+    :func:`_overlap_direction`, for those pairs only, ``1 / OVERLAP_SHARE`` of the batch at a time
+    (gathered: no step when none overlaps, one when few do)."""
+    batch = overlap.shape
+    total = int(np.prod(batch))
+    budget = -(-total // OVERLAP_SHARE)
+
+    def step(state):
+        left, flat = state
+        idx = jnp.nonzero(left, size=budget, fill_value=total)[0]
+        safe = jnp.minimum(idx, total - 1)
+        found = _overlap_direction(taken(a, batch, safe), taken(b, batch, safe), flat[safe], dtype)
+        return left.at[idx].set(False, mode="drop"), flat.at[idx].set(found, mode="drop")
+
+    start = (overlap.reshape(total), n.reshape(total, 3))
+    return jax.lax.while_loop(lambda state: jnp.any(state[0]), step, start)[1].reshape(batch + (3,))
+
+
+def witnesses(a, b, reach=jnp.inf) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
     """``(n, p_a, p_b, s)`` without gradients: the unit direction from ``a`` to ``b`` whose separation is the
     signed distance, the cores' witness points (apart, their closest points; overlapping, their support
-    points along ``n`` (``a``) and ``-n`` (``b``)) and the cores' separation along ``n``."""
+    points along ``n`` (``a``) and ``-n`` (``b``)) and the cores' separation along ``n``. Where the
+    distance is at least ``reach`` (``(...,)``, rounding included), GJK may stop short: ``s`` less the
+    roundings is then a lower bound at least ``reach`` and ``n`` and the points are not the closest."""
     a, b = jax.lax.stop_gradient((a, b))
     dtype = jnp.result_type(*jax.tree.leaves((a, b)))
-    pa, pb, apart = _gjk(a, b, dtype)
-    fallback = jnp.array([1.0, 0.0, 0.0], dtype)
-    n_apart = _unit(pb - pa, fallback)
-    # the overlap search only where some pair overlaps (a clear batch, the common case, skips it)
-    overlap = jax.lax.cond(jnp.all(apart), lambda: n_apart, lambda: _overlap_direction(a, b, n_apart, dtype))
-    n = jnp.where(apart[..., None], n_apart, overlap)
+    pa, pb, apart = _gjk(a, b, dtype, reach + a.rounding() + b.rounding())
+    n = _overlap_directions(a, b, _unit(pb - pa, jnp.array([1.0, 0.0, 0.0], dtype)), ~apart, dtype)
     sa, sb = core_supports(a, b, n)
     return n, jnp.where(apart[..., None], pa, sa), jnp.where(apart[..., None], pb, sb), _dot(n, sb - sa)
 

@@ -26,26 +26,10 @@ import numpy as np
 from diffkin.collision import _gjk
 from diffkin.collision._distance import BOUNDED, GENERAL, lower_bound, motion
 from diffkin.collision._robot import batch_shape
-from diffkin.collision._shapes import unchecked
+from diffkin.collision._shapes import taken
 
 #: the exact motion of the near pairs is computed for 1 / NEAR_SHARE of the pairs at a time.
 NEAR_SHARE = 8
-
-
-def _taken(shape, batch: tuple[int, ...], idx: jax.Array):
-    """The entries ``idx`` (flat indices of the broadcast ``batch``) of every field of ``shape``, read
-    without broadcasting the fields first (a robot's polytope vertices are not copied per pair)."""
-    multi = jnp.unravel_index(idx, batch) if batch else ()
-    out = {}
-    for name, r in type(shape).TRAILING.items():
-        v = getattr(shape, name)
-        own = (1,) * (len(batch) - (jnp.ndim(v) - r)) + jnp.shape(v)[: jnp.ndim(v) - r]
-        flat = jnp.zeros_like(idx)
-        for m, size in zip(multi, own, strict=True):
-            flat = flat * size + (m if size > 1 else 0)
-        tail = jnp.shape(v)[jnp.ndim(v) - r :]
-        out[name] = jnp.reshape(v, (int(np.prod(own)),) + tail)[flat]
-    return unchecked(type(shape), **out)
 
 
 def _wrench(n: jax.Array, p: jax.Array) -> jax.Array:
@@ -54,8 +38,9 @@ def _wrench(n: jax.Array, p: jax.Array) -> jax.Array:
 
 
 def _gathered(bound: jax.Array, reach, measure) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """``(d, W_a, W_b)`` of ``M`` pairs, ``(M,)``, ``(M, 6)`` twice: ``measure(idx)`` (the exact distance and
-    wrenches of the pairs ``idx``) where ``bound < reach``, else the bound and zero wrenches."""
+    """``(d, W_a, W_b)`` of ``M`` pairs, ``(M,)``, ``(M, 6)`` twice: ``measure(idx)`` (the distance and wrenches
+    of the pairs ``idx``, exact below ``reach``, else a lower bound at least ``reach``) where
+    ``bound < reach``, else the bound; the wrenches zero where ``d >= reach``."""
     total = bound.shape[0]
     budget = -(-total // NEAR_SHARE)
 
@@ -68,7 +53,8 @@ def _gathered(bound: jax.Array, reach, measure) -> tuple[jax.Array, jax.Array, j
 
     zero = jnp.zeros((total, 6), bound.dtype)
     _, d, Wa, Wb = jax.lax.while_loop(lambda state: jnp.any(state[0]), step, (bound < reach, bound, zero, zero))
-    return d, Wa, Wb
+    near = (d < reach)[:, None]  # (a pair measured beyond the reach exerts nothing either)
+    return d, jnp.where(near, Wa, 0.0), jnp.where(near, Wb, 0.0)
 
 
 def _padded(solid, size: int):
@@ -93,19 +79,19 @@ def _general(pairs: list, batches: list, reach) -> list[tuple[jax.Array, jax.Arr
         sides = None
         for k, ((sa, sb), batch) in enumerate(zip(solids, batches, strict=True)):
             local = jnp.clip(idx - starts[k], 0, sizes[k] - 1)
-            taken = tuple(_padded(_taken(s, batch, local), width) for s in (sa, sb))
+            block_sides = tuple(_padded(taken(s, batch, local), width) for s in (sa, sb))
             if sides is None:
-                sides = taken
+                sides = block_sides
             else:
                 here = block == k
                 sides = jax.tree.map(
                     lambda new, old, here=here: jnp.where(here.reshape(here.shape + (1,) * (new.ndim - 1)), new, old),
-                    taken,
+                    block_sides,
                     sides,
                 )
         assert sides is not None  # (at least one block)
         a, b = sides
-        n, pa, pb, s = _gjk.witnesses(a, b)
+        n, pa, pb, s = _gjk.witnesses(a, b, reach)
         return s - a.radius - b.radius, _wrench(-n, pa), _wrench(n, pb)
 
     d, Wa, Wb = _gathered(bound, reach, measure)
@@ -141,7 +127,7 @@ def near_motions(pairs: list, reach) -> list[tuple[jax.Array, jax.Array, jax.Arr
             d, Wa, Wb = _gathered(
                 jnp.broadcast_to(lower_bound(a, b), batch).reshape(-1),
                 reach,
-                lambda idx, a=a, b=b, batch=batch: motion(_taken(a, batch, idx), _taken(b, batch, idx)),
+                lambda idx, a=a, b=b, batch=batch: motion(taken(a, batch, idx), taken(b, batch, idx)),
             )
             d, Wa, Wb = d.reshape(batch), Wa.reshape(batch + (6,)), Wb.reshape(batch + (6,))
         out[k] = (jnp.broadcast_to(d, batch), *(jnp.broadcast_to(W, batch + (6,)) for W in (Wa, Wb)))

@@ -137,6 +137,14 @@ class Sphere:
     def bounding_radius(self) -> jax.Array:
         return self.radius
 
+    def bounding_box(self) -> Box:
+        """A box that contains the shape (:func:`diffkin.collision._distance.lower_bound` of distances)."""
+        return unchecked(
+            Box,
+            pose=_translation(self.center),
+            half_extents=jnp.broadcast_to(self.radius[..., None], self.center.shape),
+        )
+
     def coords(self, p: jax.Array) -> jax.Array:
         """Coordinates of core points ``p`` that move with the shape (:meth:`point` inverts them)."""
         return jnp.zeros(p.shape[:-1], p.dtype)
@@ -191,6 +199,11 @@ class Capsule:
     def bounding_radius(self) -> jax.Array:
         return 0.5 * jnp.sqrt(jnp.sum((self.b - self.a) ** 2, axis=-1)) + self.radius
 
+    def bounding_box(self) -> Box:
+        return unchecked(
+            Box, pose=_translation(self.centre()), half_extents=0.5 * jnp.abs(self.b - self.a) + self.radius[..., None]
+        )
+
     def coords(self, p: jax.Array) -> jax.Array:
         axis = self.b - self.a
         return jnp.clip(_ratio(jnp.sum((p - self.a) * axis, axis=-1), jnp.sum(axis * axis, axis=-1)), 0.0, 1.0)
@@ -240,6 +253,9 @@ class Box:
 
     def bounding_radius(self) -> jax.Array:
         return jnp.sqrt(jnp.sum(self.half_extents**2, axis=-1))
+
+    def bounding_box(self) -> Box:
+        return self
 
     def coords(self, p: jax.Array) -> jax.Array:
         return _posed_coords(self.pose, p, self.half_extents)
@@ -302,6 +318,9 @@ class Cylinder:
     def _extents(self) -> jax.Array:
         return jnp.stack(jnp.broadcast_arrays(self.radius, self.radius, self.half_length), axis=-1)
 
+    def bounding_box(self) -> Box:
+        return unchecked(Box, pose=self.pose, half_extents=self._extents())
+
     def coords(self, p: jax.Array) -> jax.Array:
         return _posed_coords(self.pose, p, self._extents())
 
@@ -341,7 +360,7 @@ class Convex:
     def core_support(self, n: jax.Array) -> jax.Array:
         R = self.pose[..., :3, :3]
         m = jnp.einsum("...ji,...j->...i", R, n)
-        scores = jnp.einsum("...vi,...i->...v", self.vertices, m)
+        scores = _scores(self.vertices, m)
         pick = jax.nn.one_hot(jnp.argmax(scores, axis=-1), scores.shape[-1], dtype=self.vertices.dtype)
         local = jnp.einsum("...v,...vi->...i", pick, self.vertices)
         return jnp.einsum("...ij,...j->...i", R, local) + self.pose[..., :3, 3]
@@ -354,6 +373,11 @@ class Convex:
 
     def bounding_radius(self) -> jax.Array:
         return jnp.sqrt(jnp.max(jnp.sum(self.vertices**2, axis=-1), axis=-1))
+
+    def bounding_box(self) -> Box:
+        """The box of the vertices' extremes along the shape's own axes."""
+        low, high = jnp.min(self.vertices, axis=-2), jnp.max(self.vertices, axis=-2)
+        return unchecked(Box, pose=self.pose @ _translation(0.5 * (low + high)), half_extents=0.5 * (high - low))
 
     def coords(self, p: jax.Array) -> jax.Array:
         return jnp.einsum("...ji,...j->...i", self.pose[..., :3, :3], p - self.pose[..., :3, 3])
@@ -417,7 +441,7 @@ class Solid:
     def core_support(self, n: jax.Array) -> jax.Array:
         R = self.pose[..., :3, :3]
         m = jnp.einsum("...ji,...j->...i", R, n)
-        scores = jnp.einsum("...vi,...i->...v", self.vertices, m)
+        scores = _scores(self.vertices, m)
         points = jnp.broadcast_to(self.vertices, scores.shape + (3,))
         local = jnp.take_along_axis(points, jnp.argmax(scores, axis=-1)[..., None, None], axis=-2)[..., 0, :]
         rho_sq = m[..., 0] ** 2 + m[..., 1] ** 2
@@ -438,6 +462,12 @@ class Solid:
 
 #: the corners of the unit box ``[-1, 1]^3``
 _CORNERS = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)])
+
+
+def _scores(vertices: jax.Array, m: jax.Array) -> jax.Array:
+    """``(..., V)``: ``vertices (..., V, 3) . m (..., 3)``, written out (one fused loop with the argmax that
+    reads it, where an einsum is a batched dot of one tiny product per shape on the CPU)."""
+    return vertices[..., 0] * m[..., None, 0] + vertices[..., 1] * m[..., None, 1] + vertices[..., 2] * m[..., None, 2]
 
 
 def _translation(p: jax.Array) -> jax.Array:
@@ -474,6 +504,22 @@ def unchecked(cls: type[T], **fields) -> T:
     for name, value in fields.items():
         object.__setattr__(obj, name, value)
     return obj
+
+
+def taken(shape, batch: tuple[int, ...], idx: jax.Array):
+    """The entries ``idx`` (flat indices of the broadcast ``batch``) of every field of ``shape``, read
+    without broadcasting the fields first (a robot's polytope vertices are not copied per pair)."""
+    multi = jnp.unravel_index(idx, batch) if batch else ()
+    out = {}
+    for name, r in type(shape).TRAILING.items():
+        v = getattr(shape, name)
+        own = (1,) * (len(batch) - (jnp.ndim(v) - r)) + jnp.shape(v)[: jnp.ndim(v) - r]
+        flat = jnp.zeros_like(idx)
+        for m, size in zip(multi, own, strict=True):
+            flat = flat * size + (m if size > 1 else 0)
+        tail = jnp.shape(v)[jnp.ndim(v) - r :]
+        out[name] = jnp.reshape(v, (int(np.prod(own)),) + tail)[flat]
+    return unchecked(type(shape), **out)
 
 
 Shape = Sphere | Capsule | Box | Cylinder | Convex | Plane

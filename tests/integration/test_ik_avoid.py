@@ -370,8 +370,9 @@ def _rotation(w):
 
 def test_near_motion_is_exact_where_the_reach_is():
     """The term's broad phase (:func:`diffkin.collision._near.near_motions`): where the exact distance is
-    below the reach, the distance is :func:`motion`'s, elsewhere at least the reach; the wrenches are
-    :func:`motion`'s where the cheap bound is below the reach and zero elsewhere. Box-box and
+    below the reach, the distance and the wrenches are :func:`motion`'s; elsewhere the distance is at
+    least the reach and the wrenches are zero (a pair whose cheap bound is below the reach but GJK's
+    bound is not stops early). Box-box and
     capsule-box alone (their closed forms, gathered per kind), and joined with the general pairs
     capsule-cylinder and polytope-box in one GJK batch (apart: exact to GJK's tolerance; overlapping:
     never shallower than exact), with no pair near (no step), few (one step) and most (several)."""
@@ -408,9 +409,9 @@ def test_near_motion_is_exact_where_the_reach_is():
                 np.testing.assert_allclose(d[close & apart], d_exact[close & apart], rtol=0, atol=tol)
                 assert np.all(d[close & ~apart] <= d_exact[close & ~apart] + tol) and np.all(d[~close] >= reach)
                 # (an overlapping GJK pair's witnesses are support points, which may tie: apart ones only)
-                same = measured & apart if joined else measured
+                same = close & apart if joined else close
                 for W, exact in ((Wa, Wa_exact), (Wb, Wb_exact)):
                     np.testing.assert_allclose(
                         np.asarray(W)[same], exact[same], rtol=1e-12, atol=1e-5 if joined else 1e-12
                     )
-                    assert np.all(np.asarray(W)[~measured] == 0)
+                    assert np.all(np.asarray(W)[d >= reach] == 0)
