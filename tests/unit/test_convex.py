@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _shapes import random_cylinders, random_fields, shape
+from _shapes import random_cylinders, random_fields, rotations, shape
 
 import diffkin as dk
 from diffkin.collision import Convex, _sources, distance
@@ -138,3 +138,39 @@ def test_bad_convex_input():
         Convex(jnp.eye(4), jnp.zeros((0, 3)))
     with pytest.raises(ValueError, match=r"meshes: expected 'hulls' or 'capsules'"):
         dk.collision.load(MJCF.format(corners="0 0 0", name="m", geom='type="box" size=".1 .1 .1"'), None, meshes="x")
+
+
+def test_bounding_boxes_contain_their_shapes_and_bound_distances():
+    """Each solid's ``bounding_box`` (the broad phase of IK's clearance) holds the shape: its support
+    points along 200 random directions lie in the box; and the cheap ``lower_bound`` of the general
+    (GJK) pairs never exceeds their distance, on random placements of every such pair of kinds."""
+    from diffkin.collision._distance import GENERAL, lower_bound
+
+    rng = np.random.default_rng(11)
+    n = 64
+    T = np.tile(np.eye(4), (n, 1, 1))
+    T[:, :3, :3] = rotations(rng, n)
+    T[:, :3, 3] = rng.uniform(-0.5, 0.5, (n, 3))
+    shapes = {
+        kind: shape(kind, random_cylinders(rng, n) if kind == "cylinder" else random_fields(kind, rng, n))
+        for kind in ("sphere", "capsule", "box", "cylinder")
+    }
+    shapes["convex"] = Convex(
+        jnp.asarray(T), jnp.asarray(rng.normal(0, 0.15, (n, 12, 3)) + rng.uniform(-0.1, 0.1, (n, 1, 3)))
+    )
+    directions = rng.normal(size=(200, 1, 3))
+    directions /= np.linalg.norm(directions, axis=-1, keepdims=True)
+    for kind, s in shapes.items():
+        box = s.bounding_box()
+        points = np.asarray(s.core_support(jnp.asarray(directions))) + np.asarray(s.rounding())[..., None] * directions
+        R, c = np.asarray(box.pose)[:, :3, :3], np.asarray(box.pose)[:, :3, 3]
+        local = np.einsum("nji,dnj->dni", R, points - c)
+        assert np.all(np.abs(local) <= np.asarray(box.half_extents) + 1e-12), kind
+    by_type = {type(s): s for s in shapes.values()}
+    pairs = {(a, b) for a, b in GENERAL if a in by_type and b in by_type}
+    assert len(pairs) >= 8  # every general pair of these kinds, both orders
+    for a, b in sorted(pairs, key=lambda p: (p[0].__name__, p[1].__name__)):
+        other = jax.tree.map(lambda x: jnp.roll(x, 1, axis=0), by_type[b])  # (another shape where a is b)
+        bound, exact = (np.asarray(f(by_type[a], other)) for f in (lower_bound, distance))
+        assert np.all(bound <= exact + 1e-9), (a.__name__, b.__name__, float(np.max(bound - exact)))
+        assert np.mean(bound > 0) > 0.2, (a.__name__, b.__name__)  # not a vacuous bound
