@@ -4,16 +4,19 @@ the gradients of a Jacobian with respect to a chain's parameters."""
 
 from __future__ import annotations
 
+import functools
 import os
 from importlib import metadata
 
 import jax
 import numpy as np
 import pytest
+from _mjcf import mjcf
 from _paths import DATA
 
 import diffkin as dk
 from diffkin import se3
+from diffkin.models._scanned import LONG
 
 # URDF robots of the validation: (name, path, end link); built once per session (``urdf_chains``).
 URDF_ROBOTS = {
@@ -59,16 +62,50 @@ _TREE = """<robot name="tree"><link name="root"/><link name="upper"/><link name=
     <origin xyz="0.2 -0.1 0" rpy="0 0 -0.4"/><axis xyz="1 0 0"/><limit lower="0" upper="0.5"/></joint>
 </robot>"""
 
+# A ball shoulder (a 60 degree cone about a centre off the body's origin), a hinge elbow and a site at the hand.
+_BALL_ARM = mjcf(
+    '<body name="upper" pos="0 0 1" euler="10 20 30"><joint name="shoulder" type="ball" pos="0 0 .1" range="0 60"/>'
+    '<geom size=".05" mass="1"/><body name="fore" pos="0 .1 -.5"><joint name="elbow" axis="0 1 0" range="-150 0"/>'
+    '<geom size=".05" mass="1"/><site name="hand" pos=".05 0 -.4"/></body></body>'
+)
+# A Grashof crank-rocker (the crank turns fully: every crank angle closes the loop), the crank driven, the
+# coupler and the rocker solved; a site on the coupler off the pin.
+_FOUR_BAR = mjcf(
+    '<body name="crank"><joint name="crank" axis="0 0 1"/><geom size=".01" mass=".1"/>'
+    '<body name="coupler" pos=".1 0 0"><joint name="coupler" axis="0 0 1"/><geom size=".01" mass=".1"/>'
+    '<site name="point" pos=".15 .25 .05"/></body></body>'
+    '<body name="rocker" pos=".25 0 0"><joint name="rocker" axis="0 0 1"/><geom size=".01" mass=".1"/></body>',
+    tail='<equality><connect body1="coupler" body2="rocker" anchor=".1 .2 0"/></equality>'
+    '<actuator><motor joint="crank"/></actuator>',
+)
+
 MODEL_KINDS = {
     "standard DH": lambda: dk.robots.iiwa14(),
     "modified DH": lambda: dk.robots.panda(),
     "PoE": lambda: dk.load_urdf(*URDF_ROBOTS["ur5"]),
     "tree": lambda: dk.load_robot(_TREE),
+    "ball joints": lambda: dk.load_robot(_BALL_ARM),
+    "closed loop": lambda: dk.load_robot(_FOUR_BAR),
+    "long chain": lambda: snake_robot(LONG + 1),
+    "floating base": lambda: dk.load_robot(_TREE, floating=True),
 }
 """Builders of one model of every kind: a standard-DH and a modified-DH chain, a product-of-exponentials
-chain (a URDF), and a small tree (a ``Robot``: two branches, one prismatic joint; its functions name
-frames)."""
+chain (a URDF), and ``Robot``s (their functions name frames): a small tree (two branches, one prismatic
+joint), an arm with a ball joint (three entries of ``q``), a four-bar linkage (a closed loop: two of its
+three hinges solved from the crank), a snake one joint longer than the unrolled pass takes (the scanned
+pass) and the tree on a floating base (its root pose an argument)."""
 CHAIN_KINDS = ("standard DH", "modified DH", "PoE")
+UNROLLED_KINDS = tuple(kind for kind in MODEL_KINDS if kind != "long chain")
+"""Every kind but the long chain: forward passes unrolled joint by joint. The scanned pass's autodiff Jacobian
+is one forward-mode scan per joint, each compiled (14 s eager and 14 s jitted for the 33-joint snake on the
+2-core host, 90 s for the four calls of the test under load; docs/models.md: "use the analytic one")."""
+
+
+@functools.cache
+def model_of_kind(kind: str):
+    """The model of ``kind`` (a key of :data:`MODEL_KINDS`), built once per process, not once per decorated
+    test: every test of a kind gets the same object."""
+    return MODEL_KINDS[kind]()
 
 
 def every_model_kind(*kinds: str):
@@ -82,7 +119,7 @@ def every_model_kind(*kinds: str):
     if unknown:
         raise ValueError(f"kinds: expected some of {list(MODEL_KINDS)}, got {sorted(unknown)}")
     chosen = kinds or tuple(MODEL_KINDS)
-    return pytest.mark.parametrize("model", [MODEL_KINDS[k]() for k in chosen], ids=list(chosen))
+    return pytest.mark.parametrize("model", [model_of_kind(k) for k in chosen], ids=list(chosen))
 
 
 def frames_of(model) -> tuple[str, ...]:

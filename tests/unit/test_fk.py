@@ -5,7 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _models import BUILTIN, CHAIN_KINDS, URDF_ROBOTS, every_model_kind, frames_of, random_q
+from _models import BUILTIN, CHAIN_KINDS, UNROLLED_KINDS, URDF_ROBOTS, every_model_kind, frames_of, random_q
 from _reference import dh_fk, poe_fk
 
 import diffkin as dk
@@ -195,21 +195,51 @@ def test_float32_close_to_float64(model):
     np.testing.assert_allclose(np.asarray(T32, np.float64), dk.fk(chain, q), atol=1e-5)
 
 
+T_WORLD_ROOT = np.array([[0.0, -1.0, 0.0, 0.3], [0.6, 0.0, -0.8, -0.2], [0.8, 0.0, 0.6, 1.1], [0.0, 0.0, 0.0, 1.0]])
+"""Where the floating kind's root is placed (a rotation about x then z, and a shift)."""
+
+
+T_WORLD_ROOT = np.array([[0.0, -1.0, 0.0, 0.3], [0.6, 0.0, -0.8, -0.2], [0.8, 0.0, 0.6, 1.1], [0.0, 0.0, 0.0, 1.0]])
+"""Where a floating robot's root is placed (a rotation about x, then one about z, and a shift)."""
+
+
+def _placed(model) -> tuple[dict, dict]:
+    """The root keywords of a model's functions: a floating robot at ``T_WORLD_ROOT`` (``base``), its Jacobians
+    with the root's six columns (``include_base``); none for the other kinds."""
+    if not (isinstance(model, dk.Robot) and model.floating):
+        return {}, {}
+    return {"base": T_WORLD_ROOT}, {"base": T_WORLD_ROOT, "include_base": True}
+
+
 @every_model_kind()
 def test_every_kind_compiled_equals_eager(model):
-    """fk, link_poses and the Jacobian by both methods, of every model kind (a tree at its last frame):
-    compiled equals eager, and the two Jacobians agree."""
-    frames = frames_of(model)
+    """fk, link_poses and the analytic Jacobian of every model kind (a tree at its last frame, a floating robot
+    placed by ``_placed``): compiled equals eager."""
+    frames, (base, root) = frames_of(model), _placed(model)
     q = random_q(model, 4, seed=16)
 
     def kinematics(q):
-        jacobians = tuple(dk.jacobian(model, q, *frames, method=m) for m in ("analytic", "autodiff"))
-        return dk.fk(model, q, *frames), dk.link_poses(model, q), *jacobians
+        return dk.fk(model, q, *frames, **base), dk.link_poses(model, q, **base), dk.jacobian(model, q, *frames, **root)
 
     eager, compiled = kinematics(q), jax.jit(kinematics)(q)
     for a, b in zip(eager, compiled, strict=True):
         np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=0, atol=1e-13)
-    np.testing.assert_allclose(eager[2], eager[3], rtol=0, atol=1e-13)
+    assert eager[2].shape == q.shape[:-1] + (6, 6 * bool(root) + model.dof)
+
+
+@every_model_kind(*UNROLLED_KINDS)
+def test_every_kind_autodiff_jacobian_equals_analytic(model):
+    """The autodiff Jacobian, eager and compiled, equals the analytic one (of every kind but the long chain:
+    ``UNROLLED_KINDS``)."""
+    frames, (_, root) = frames_of(model), _placed(model)
+    q = random_q(model, 4, seed=16)
+
+    def jacobians(q):
+        return tuple(dk.jacobian(model, q, *frames, method=m, **root) for m in ("analytic", "autodiff"))
+
+    (analytic, autodiff), compiled = jacobians(q), jax.jit(jacobians)(q)[1]
+    np.testing.assert_allclose(np.asarray(autodiff), np.asarray(analytic), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(np.asarray(compiled), np.asarray(autodiff), rtol=0, atol=1e-13)
 
 
 def test_fk_at_zero_angle_is_exact_and_gradient_finite():
