@@ -687,8 +687,8 @@ def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
     free = [(name, part, part.free) for name, part in reader.parts.items() if part.free is not None]
     if len(free) > 1:
         raise ValueError(
-            f"{_describe(free[1][2])}: several bodies have free joints ({[n for n, _, _ in free]}); "
-            "a robot has one floating root"
+            f"{_describe(free[1][2])}: body {free[1][0]!r} is a second free body (free joints on "
+            f"{[n for n, _, _ in free]}); one floating root is supported (a single top-level body with a free joint)"
         )
     parts = list(reader.parts.values())
     if free:

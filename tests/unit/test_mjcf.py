@@ -156,7 +156,12 @@ BODY = '<body name="a"><joint name="j"/><body name="b"><joint name="k"/></body><
         (mjcf('<body><attach model="m"/></body>'), r"MJCF <attach>: <attach> is not supported"),
         (
             mjcf('<body name="a"><freejoint name="f1"/></body><body name="b"><freejoint name="f2"/></body>'),
-            r"MJCF <freejoint name='f2'>: several bodies have free joints \(\['a', 'b'\]\)",
+            r"^MJCF <freejoint name='f2'>: body 'b' is a second free body \(free joints on \['a', 'b'\]\); one "
+            r"floating root is supported \(a single top-level body with a free joint\)$",
+        ),
+        (
+            mjcf('<body name="a"><freejoint/></body><body name="b"><joint type="free"/></body>'),
+            r"^MJCF <joint type='free'>: body 'b' is a second free body \(free joints on \['a', 'b'\]\)",
         ),
         (
             mjcf('<body name="a"><body><freejoint name="f"/></body></body>'),
@@ -199,6 +204,7 @@ BODY = '<body name="a"><joint name="j"/><body name="b"><joint name="k"/></body><
         "replicate",
         "attach",
         "two_free",
+        "two_free_unnamed",
         "nested_free",
         "free_and_hinge",
         "second_tree",
