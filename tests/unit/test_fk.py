@@ -142,18 +142,20 @@ def test_base_and_tool_transforms_apply():
     np.testing.assert_allclose(dk.fk(moved, q), base @ np.asarray(dk.fk(chain, q)) @ tool, atol=1e-14)
 
 
-# --- batching, transformations, dtypes: every kind of chain (standard and modified DH, PoE) ----------
+# --- batching, transformations, dtypes: every model kind, or every kind of chain (standard and modified DH, PoE) ---
 
 
-@every_model_kind(*CHAIN_KINDS)
+@every_model_kind()
 @pytest.mark.parametrize("shape", [(), (5,), (2, 3)])
 def test_batch_shapes(model, shape):
-    chain = model
-    q = random_q(chain, int(np.prod(shape)), seed=13).reshape(shape + (chain.dof,))
-    T = dk.fk(chain, q)
+    """Every kind (a robot at its last frame): leading batch dimensions of ``q``, each row its own pose."""
+    frames = frames_of(model)
+    q = random_q(model, int(np.prod(shape)), seed=13).reshape(shape + (model.dof,))
+    T = dk.fk(model, q, *frames)
     assert T.shape == shape + (4, 4)
-    assert dk.link_poses(chain, q).shape == shape + (chain.dof + 1, 4, 4)
-    flat = np.stack([np.asarray(dk.fk(chain, qi)) for qi in q.reshape(-1, chain.dof)])
+    poses = len(model.frame_names) if isinstance(model, dk.Robot) else model.dof + 1
+    assert dk.link_poses(model, q).shape == shape + (poses, 4, 4)
+    flat = np.stack([np.asarray(dk.fk(model, qi, *frames)) for qi in q.reshape(-1, model.dof)])
     np.testing.assert_allclose(np.asarray(T).reshape(-1, 4, 4), flat, atol=1e-15)
 
 
@@ -186,13 +188,14 @@ def test_jit_vmap_grad_match_eager(model):
     assert jf.shape == (4, 4, chain.dof) and np.all(np.isfinite(jf))
 
 
-@every_model_kind(*CHAIN_KINDS)
+@every_model_kind()
 def test_float32_close_to_float64(model):
-    chain = model
-    q = random_q(chain, 100, seed=15)
-    T32 = jax.jit(lambda x: dk.fk(chain, x))(jnp.asarray(q, jnp.float32))
+    """Every kind (a robot at its last frame), float32 against float64."""
+    frames = frames_of(model)
+    q = random_q(model, 100, seed=15)
+    T32 = jax.jit(lambda x: dk.fk(model, x, *frames))(jnp.asarray(q, jnp.float32))
     assert T32.dtype == jnp.float32
-    np.testing.assert_allclose(np.asarray(T32, np.float64), dk.fk(chain, q), atol=1e-5)
+    np.testing.assert_allclose(np.asarray(T32, np.float64), dk.fk(model, q, *frames), atol=1e-5)
 
 
 T_WORLD_ROOT = np.array([[0.0, -1.0, 0.0, 0.3], [0.6, 0.0, -0.8, -0.2], [0.8, 0.0, 0.6, 1.1], [0.0, 0.0, 0.0, 1.0]])
