@@ -357,6 +357,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--yaw-bins", type=_positive_int, default=36, metavar="K", help="base yaws (default 36)")
     p.add_argument("--base-height", type=_finite, default=0.0, metavar="H", help="base z in the world, m (default 0)")
     p.add_argument("--cell", type=_positive_float, metavar="C", help="base grid cell, m (default: the map's voxel)")
+    p.add_argument(
+        "--cell-only",
+        action="store_true",
+        help="judge each task by its map cell alone, not by the cells around its pose (arms of fewer than 6 joints)",
+    )
     p.add_argument("--best", type=_positive_int, default=5, metavar="K", help="bases to print (default 5)")
     p.add_argument("--verify", type=int, default=0, metavar="K", help="re-solve the K best bases by IK (default 0)")
     p.add_argument("--plot", metavar="PLACE.png", help="plot the score over (x, y) at the best yaw, tasks drawn")

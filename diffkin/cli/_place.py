@@ -164,6 +164,7 @@ def cmd_place(args) -> int:
         yaw_bins=args.yaw_bins,
         base_height=args.base_height,
         cell=args.cell,
+        at_pose=not args.cell_only,
         model=model,
         avoid=avoid,
     )

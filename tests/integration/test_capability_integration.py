@@ -77,6 +77,13 @@ def test_cli_capability_map_then_place(capsys, tmp_path):
     np.testing.assert_array_equal(saved["score"], expected.score)
     np.testing.assert_allclose(saved["best"], expected.best(3))
     assert (tmp_path / "place.png").stat().st_size > 10_000
+    code, out, err = run(
+        capsys, "place", "panda", "--tasks", tmp_path / "tasks.json", "--region", -1, -1, 1, 1, "--map",
+        tmp_path / "cap.npz", "--yaw-bins", 8, "--cell", 0.25, "--cell-only", "--out", tmp_path / "cells.npz",
+    )  # fmt: skip
+    assert code == 0, err
+    cell_only = ws.base_placement(cap, tasks, region=[[-1, -1], [1, 1]], yaw_bins=8, cell=0.25, at_pose=False)
+    np.testing.assert_array_equal(np.load(tmp_path / "cells.npz")["score"], cell_only.score)
 
 
 # the capsule arm (without a base body), a pose and a map of nothing: the errors come before any placement
