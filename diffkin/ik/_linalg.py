@@ -19,18 +19,25 @@ def _cholesky_solve(A: list[list], b: list) -> list:
     return cholesky_substitute(*cholesky(A), b)
 
 
-def cholesky(A: list[list]) -> tuple[list[list], list]:
+def cholesky(A: list[list], settle=None) -> tuple[list[list], list]:
     """The lower Cholesky factor ``L`` of a symmetric positive definite ``A`` (``n x n`` nested lists,
-    read from its lower triangle) and ``1 / L[j][j]``: its entries below the diagonal and the inverses."""
+    read from its lower triangle) and ``1 / L[j][j]``: its entries below the diagonal and the inverses.
+
+    ``settle``, where given, takes each column ``[1 / L[j][j], L[j + 1][j], ...]`` once computed and
+    returns the values later columns read instead (:func:`diffkin._xla.materialize`: each column
+    computed once, not again inside every later entry's kernel)."""
     n = len(A)
     L: list[list[rg.Entry]] = [[0.0] * n for _ in range(n)]
     inv_diag = []
     for j in range(n):
         d = rg.add(A[j][j], *(-rg.mul(L[j][k], L[j][k]) for k in range(j)))
         inv = inverse_sqrt(jnp.maximum(d, jnp.finfo(jnp.result_type(d)).tiny))
+        column = [rg.mul(rg.add(A[i][j], *(-rg.mul(L[i][k], L[j][k]) for k in range(j))), inv) for i in range(j + 1, n)]
+        if settle is not None:
+            inv, *column = settle([inv, *column])
         inv_diag.append(inv)
-        for i in range(j + 1, n):
-            L[i][j] = rg.mul(rg.add(A[i][j], *(-rg.mul(L[i][k], L[j][k]) for k in range(j))), inv)
+        for i, entry in zip(range(j + 1, n), column, strict=True):
+            L[i][j] = entry
     return L, inv_diag
 
 

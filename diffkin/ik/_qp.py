@@ -32,9 +32,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from diffkin import _rigid as rg
-from diffkin._xla import inverse_sqrt, materialize
-from diffkin.ik._linalg import back_substitute, forward_substitute
+from diffkin._xla import materialize
+from diffkin.ik._linalg import back_substitute, cholesky, forward_substitute
 
 #: Iterations at most (float64 converges in 10-20 on the problems of ``dk.ik.step``).
 MAX_ITERS = 40
@@ -90,8 +89,8 @@ def _factor(M: jax.Array):
     """The Cholesky factorisation of each ``M`` ``(n, n, P)``, for :func:`_substitute`: the lower factor
     ``L`` (nested lists of ``(P,)`` arrays, below the diagonal) and ``1 / L[j][j]``.
 
-    Up to :data:`_UNROLL_MAX`, entry by entry over the batch (the operations of
-    :func:`diffkin.ik._linalg.cholesky`, every one elementwise along ``P``): LAPACK on a tiny matrix,
+    Up to :data:`_UNROLL_MAX`, entry by entry over the batch (:func:`diffkin.ik._linalg.cholesky`,
+    every operation elementwise along ``P``): LAPACK on a tiny matrix,
     one call per problem, made the QP of ``dk.ik.step`` slow. Each column is computed once
     (:func:`diffkin._xla.materialize`) before the next reads it: materialised all at the end, each
     entry was a kernel that recomputed every column before its own (the Panda's QP at 4,096: 15-25 %
@@ -100,17 +99,7 @@ def _factor(M: jax.Array):
     n = M.shape[0]
     if n > _UNROLL_MAX:
         return jax.scipy.linalg.cho_factor(jnp.moveaxis(M, -1, 0), lower=True)
-    L: list[list] = [[0.0] * n for _ in range(n)]
-    inv_diag: list[jax.Array] = []
-    for j in range(n):
-        d = rg.add(M[j, j], *(-rg.mul(L[j][k], L[j][k]) for k in range(j)))
-        inv = inverse_sqrt(jnp.maximum(d, jnp.finfo(M.dtype).tiny))
-        column = [rg.mul(rg.add(M[i, j], *(-rg.mul(L[i][k], L[j][k]) for k in range(j))), inv) for i in range(j + 1, n)]
-        computed = materialize([inv, *column])
-        inv_diag.append(computed[0])
-        for i in range(j + 1, n):
-            L[i][j] = computed[i - j]
-    return L, inv_diag
+    return cholesky([[M[i, j] for j in range(i + 1)] for i in range(n)], settle=materialize)
 
 
 def _substitute(factor, b: jax.Array) -> jax.Array:
