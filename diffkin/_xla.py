@@ -26,6 +26,10 @@ The measurements that justify them are in docs/performance.md, "XLA CPU tricks".
   concatenate would recompute the shared pass for each entry.
 - :func:`stacked_sincos` (with its derivative rule) and :func:`stacked_atan2`: many sines and
   cosines, or arctangents, through one call, whose ``lax.cond`` and kernels then come once.
+- :func:`summed_products`: ``sum(x * y, axis)`` over a short axis written out term by term, where an
+  ``einsum`` is a batched dot of one tiny product per entry on the CPU.
+- :func:`stable_partition`: the slots of a stable sort of short boolean rows, without XLA's sort,
+  which on the CPU is slow for many small rows.
 
 Elsewhere, as they are part of what those modules compute: the structure-of-arrays rigid
 transforms (:mod:`diffkin._rigid`), one stack of every entry for many poses
@@ -345,3 +349,43 @@ def _in_halves(fn: Callable[..., tuple[jax.Array, ...]], axis: int) -> Callable[
         return tuple(jnp.concatenate([a, b], axis=axis) for a, b in zip(first, second, strict=True))
 
     return halves
+
+
+def summed_products(x: jax.Array, y: jax.Array, axis: int) -> jax.Array:
+    """``sum(x * y, axis)`` of arrays of broadcastable shapes, written out term by term, ``x_0 y_0 + x_1 y_1 + ...``
+    in that order, along ``axis`` of their broadcast shape.
+
+    As an ``einsum`` of a short contraction per entry (GJK's support scores, the IK step's ``J^T J`` with
+    the problems last), XLA's CPU backend makes a batched dot of one tiny product per entry; written out,
+    every operation is elementwise, one fused loop that vectorises along the batch (with the QP's
+    materialised factor, the IK step at 4,096 problems 1.48x faster in float32: docs/performance.md).
+
+    Returns:
+        The broadcast shape of ``x`` and ``y`` without ``axis`` (zeros when that axis is empty).
+    """
+    shape = jnp.broadcast_shapes(jnp.shape(x), jnp.shape(y))
+    axis = axis % len(shape)
+    x, y = (jnp.reshape(a, (1,) * (len(shape) - jnp.ndim(a)) + jnp.shape(a)) for a in (x, y))
+    if not shape[axis]:
+        return jnp.zeros(shape[:axis] + shape[axis + 1 :], jnp.result_type(x, y))
+    terms = [
+        jax.lax.index_in_dim(x, min(j, x.shape[axis] - 1), axis, keepdims=False)
+        * jax.lax.index_in_dim(y, min(j, y.shape[axis] - 1), axis, keepdims=False)
+        for j in range(shape[axis])
+    ]
+    return functools.reduce(jnp.add, terms)
+
+
+def stable_partition(mask: jax.Array) -> jax.Array:
+    """``(..., n, n)`` bool, ``[..., j, i]``: whether entry ``i`` of a row of ``mask`` ``(..., n)`` goes to slot
+    ``j`` when the row's ``True`` entries come first, each group in its order (a stable sort of ``~mask``).
+
+    Ranks from cumulative sums, without a sort: XLA's CPU sort of many short rows is slow (GJK's simplex
+    reorder of 4 points cost as much as a GJK step's supports; commit 393961c).
+    """
+    n = mask.shape[-1]
+    used = mask.astype(jnp.int32)
+    before = jnp.cumsum(used, axis=-1) - used  # entries in use before each
+    others = jnp.sum(used, axis=-1, keepdims=True) + jnp.arange(n) - before
+    rank = jnp.where(mask, before, others)
+    return rank[..., None, :] == jnp.arange(n)[:, None]

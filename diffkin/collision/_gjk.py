@@ -34,6 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffkin._xla import stable_partition
 from diffkin.collision._shapes import taken
 
 #: GJK stops when its lower bound is within this share of its upper bound (float64; float32: FLOAT32_TOLERANCE)
@@ -139,17 +140,6 @@ def _closest(Y: jax.Array, mask: jax.Array) -> tuple[jax.Array, jax.Array, jax.A
     return x, chosen, jnp.asarray(_SUBSET_MASKS)[best[..., 0, 0]]
 
 
-def _kept_first(mask: jax.Array) -> jax.Array:
-    """``(..., 4, 4)`` bool: ``[j, i]`` where point ``i`` of a simplex goes to slot ``j`` when the points in
-    use (``mask`` ``(..., 4)``) come first, each group in its order (a stable sort of ``~mask``, without
-    a sort: XLA's CPU sort of many 4-element rows costs as much as a GJK step's supports)."""
-    used = mask.astype(jnp.int32)
-    before = jnp.cumsum(used, axis=-1) - used  # points in use before each
-    others = jnp.sum(used, axis=-1, keepdims=True) + jnp.arange(4) - before
-    rank = jnp.where(mask, before, others)
-    return rank[..., None, :] == jnp.arange(4)[:, None]
-
-
 def _picked(slot: jax.Array, Y: jax.Array) -> jax.Array:
     """``(..., k, 3)``: the points ``Y`` ``(..., 4, 3)`` each slot of ``slot`` ``(..., k, 4)`` picks (exactly)."""
     return jnp.sum(jnp.where(slot[..., None], Y[..., None, :, :], 0.0), axis=-2)
@@ -190,7 +180,7 @@ def _gjk(a, b, dtype, beyond) -> tuple[jax.Array, jax.Array, jax.Array]:
         done = done | (xx - _dot(x, w) <= tol * xx + rounding) | (xx <= (eps * 16) ** 2 * scale)
         done = done | (_dot(x, w) >= beyond * jnp.sqrt(xx))  # s(-x / |x|) = x.w / |x|: far enough
         # the points in use first (at most 3), then the new point in front of them
-        slot = _kept_first(mask)[..., :3, :]  # (..., 3, 4)
+        slot = stable_partition(mask)[..., :3, :]  # (..., 3, 4)
         Ya_new = jnp.concatenate([wa[..., None, :], _picked(slot, Ya)], axis=-2)
         Yb_new = jnp.concatenate([wb[..., None, :], _picked(slot, Yb)], axis=-2)
         used = jnp.concatenate([jnp.ones(batch + (1,), bool), jnp.any(slot & mask[..., None, :], axis=-1)], -1)

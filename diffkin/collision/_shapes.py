@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin._pytree import pytree_dataclass
+from diffkin._xla import summed_products
 
 T = TypeVar("T")
 
@@ -360,7 +361,7 @@ class Convex:
     def core_support(self, n: jax.Array) -> jax.Array:
         R = self.pose[..., :3, :3]
         m = jnp.einsum("...ji,...j->...i", R, n)
-        scores = _scores(self.vertices, m)
+        scores = summed_products(self.vertices, m[..., None, :], axis=-1)  # (..., V)
         pick = jax.nn.one_hot(jnp.argmax(scores, axis=-1), scores.shape[-1], dtype=self.vertices.dtype)
         local = jnp.einsum("...v,...vi->...i", pick, self.vertices)
         return jnp.einsum("...ij,...j->...i", R, local) + self.pose[..., :3, 3]
@@ -441,7 +442,7 @@ class Solid:
     def core_support(self, n: jax.Array) -> jax.Array:
         R = self.pose[..., :3, :3]
         m = jnp.einsum("...ji,...j->...i", R, n)
-        scores = _scores(self.vertices, m)
+        scores = summed_products(self.vertices, m[..., None, :], axis=-1)  # (..., V)
         points = jnp.broadcast_to(self.vertices, scores.shape + (3,))
         local = jnp.take_along_axis(points, jnp.argmax(scores, axis=-1)[..., None, None], axis=-2)[..., 0, :]
         rho_sq = m[..., 0] ** 2 + m[..., 1] ** 2
@@ -462,12 +463,6 @@ class Solid:
 
 #: the corners of the unit box ``[-1, 1]^3``
 _CORNERS = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)])
-
-
-def _scores(vertices: jax.Array, m: jax.Array) -> jax.Array:
-    """``(..., V)``: ``vertices (..., V, 3) . m (..., 3)``, written out (one fused loop with the argmax that
-    reads it, where an einsum is a batched dot of one tiny product per shape on the CPU)."""
-    return vertices[..., 0] * m[..., None, 0] + vertices[..., 1] * m[..., None, 1] + vertices[..., 2] * m[..., None, 2]
 
 
 def _translation(p: jax.Array) -> jax.Array:

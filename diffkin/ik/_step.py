@@ -31,7 +31,7 @@ import numpy as np
 from diffkin import _rigid as rg
 from diffkin._checks import instance, real_array
 from diffkin._static import ModelKey, is_concrete, partition
-from diffkin._xla import solver_jit
+from diffkin._xla import solver_jit, summed_products
 from diffkin.ik import _qp
 from diffkin.ik._prepare import prepare
 from diffkin.ik._problem import Kinematics
@@ -273,8 +273,9 @@ def _step(
     )
     ev = problem.evaluate(state)  # r (m, P), J = de/d(-x) (m, nv, P)
     u = gain * ev.r / dt
-    H = _gram(ev.J) + damping * jnp.eye(nv, dtype=dtype)[:, :, None]
-    g = -_times(jnp.swapaxes(ev.J, 0, 1), u)
+    H = summed_products(ev.J[:, :, None], ev.J[:, None, :], axis=0)  # J^T J (nv, nv, P)
+    H = H + damping * jnp.eye(nv, dtype=dtype)[:, :, None]
+    g = -summed_products(ev.J, u[:, None], axis=0)  # J^T u
     free = jnp.asarray(~locked)[:, None]
     if s.rest is not None:
         w2 = rest_weight**2
@@ -299,7 +300,7 @@ def _step(
     fixed_v = _pad(jnp.broadcast_to(fixed, (dof, n)), nb, False)  # (nv, P): the root is never fixed
     # Fixed joints eliminated: their rows of H the identity, v_i = value_i exactly.
     both = fixed_v[:, None, :] | fixed_v[None, :, :]
-    g = g + _times(jnp.where(fixed_v[None, :, :], H, 0.0), value)
+    g = g + summed_products(jnp.where(fixed_v[None, :, :], H, 0.0), value[None], axis=1)
     eye = jnp.eye(nv, dtype=dtype)[:, :, None]
     H = jnp.where(both, eye, H)
     g = jnp.where(fixed_v, -value, g)
@@ -312,7 +313,7 @@ def _step(
         avoid = s.data[0]
         d, Jd = term.distances(Kinematics(problem, state), avoid, avoid.margin + AVOID_REACH)
         Jd = jnp.where(fixed_v[None], 0.0, Jd)
-        h = avoid.margin - d - _times(Jd, value) * dt
+        h = avoid.margin - d - summed_products(Jd, value[None], axis=1) * dt
         G = Jd * dt
         on = (d < avoid.margin + AVOID_REACH) & jnp.isfinite(d)
         norm = jnp.sqrt(jnp.sum(G**2, axis=1))
@@ -337,9 +338,9 @@ def _step(
     q_new = jnp.where(free & in_box, jnp.clip(q_new, s.lower[:, None], s.upper[:, None]), q_new)
     q_new = jnp.where(fixed & ~conflict, x, q_new)  # locked joints exactly where they were
     if spec.constraints:
-        violation = jnp.max(jnp.where(on, h - _times(G, v), 0.0), axis=0, initial=0.0)
+        violation = jnp.max(jnp.where(on, h - summed_products(G, v[None], axis=1), 0.0), axis=0, initial=0.0)
         rows_ok = rows_ok & (violation <= tol)
-    err = jnp.sqrt(jnp.sum((ev.r - dt * _times(ev.J, v)) ** 2, axis=0))
+    err = jnp.sqrt(jnp.sum((ev.r - dt * summed_products(ev.J, v[None], axis=1)) ** 2, axis=0))
     big = jnp.finfo(dtype).max
     shaped = lambda a, *tail: a.reshape(batch + tail)  # noqa: E731
     moved, v_out = None, v
@@ -355,26 +356,6 @@ def _step(
         task_err=shaped(jnp.where(ok, jnp.minimum(err, big), big)),
         base=moved,
     )
-
-
-def _times(A: jax.Array, v: jax.Array) -> jax.Array:
-    """``A v`` per problem: ``A`` ``(k, n, P)``, ``v`` ``(n, P)`` -> ``(k, P)``, summed column by column.
-
-    Every operation is elementwise along the problems (one fused loop that vectorises along ``P``):
-    an ``einsum`` here is a dot with the batch axis last, which XLA's CPU backend transposes and
-    runs as one tiny product per problem (the Panda step's ``J^T J`` took 3-11 ms of ~40 at 4,096).
-    """
-    if not A.shape[1]:
-        return jnp.zeros(A.shape[:1] + v.shape[1:], A.dtype)
-    return functools.reduce(jnp.add, [A[:, j] * v[j] for j in range(A.shape[1])])
-
-
-def _gram(J: jax.Array) -> jax.Array:
-    """``J^T J`` per problem: ``J`` ``(m, n, P)`` -> ``(n, n, P)``, row by row (elementwise along ``P``,
-    as :func:`_times`)."""
-    if not J.shape[0]:
-        return jnp.zeros(J.shape[1:2] * 2 + J.shape[2:], J.dtype)
-    return functools.reduce(jnp.add, [J[k][:, None] * J[k][None, :] for k in range(J.shape[0])])
 
 
 def _pad(a: jax.Array, rows: int, fill) -> jax.Array:

@@ -20,7 +20,7 @@ from _shapes import planar_capsule_arm
 
 import diffkin as dk
 from diffkin.collision import Sphere, World
-from diffkin.ik import _qp, _step
+from diffkin.ik import _qp
 from diffkin.ik._linalg import cholesky
 
 URDF = planar_capsule_arm("2", tip=True)
@@ -159,15 +159,6 @@ def test_qp_factor_is_linalg_s_cholesky(dtype):
         for j in range(i):
             full[i, j] = L[i][j]
     np.testing.assert_allclose(np.einsum("ikp,jkp->ijp", full, full), H, rtol=1e-4 if dtype == np.float32 else 1e-12)
-
-
-def test_step_products_per_problem_are_einsum_s():
-    rng = np.random.default_rng(3)
-    J, v = rng.normal(size=(6, 7, 5)), rng.normal(size=(7, 5))
-    np.testing.assert_allclose(_step._gram(jnp.asarray(J)), np.einsum("mip,mjp->ijp", J, J), rtol=1e-13)
-    np.testing.assert_allclose(_step._times(jnp.asarray(J), jnp.asarray(v)), np.einsum("mip,ip->mp", J, v), rtol=1e-13)
-    assert _step._gram(jnp.zeros((0, 3, 5))).shape == (3, 3, 5)
-    assert _step._times(jnp.zeros((2, 0, 5)), jnp.zeros((0, 5))).shape == (2, 5)
 
 
 def test_least_violation_of_contradictory_rows():

@@ -1,10 +1,13 @@
 """A model closed over by ``jit`` (its numbers folded as constants, :mod:`diffkin._static`)
 and the same model passed as a ``jit`` argument (traced: the general path) give the same numbers, in
-every public function. One compiled function per path and model kind, small batches."""
+every public function. One compiled function per path and model kind, small batches. Each trick of
+:mod:`diffkin._xla` keeps the values of its plain formulation."""
 
+import itertools
 import os
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from _models import random_q
@@ -143,6 +146,40 @@ def test_configurations_last_in_steps_keep_values(n):
     fn = jax.jit(lambda q, b: configurations_in_steps(scaled, q, b, 1024, last=True))
     np.testing.assert_array_equal(np.asarray(fn(q, base)), (q * np.arange(1, n + 1)[:, None])[:, None, :])
     assert ("while" in fn.lower(q, base).as_text()) == (n >= LAST_STEPPED)
+
+
+def test_summed_products_are_einsum_s():
+    """Per-problem products (problems last) and support scores (batch first), empty axes too, against
+    ``np.einsum`` in float64."""
+    from diffkin._xla import summed_products
+
+    rng = np.random.default_rng(3)
+    J, v = rng.normal(size=(6, 7, 5)), rng.normal(size=(7, 5))
+    V, m = rng.normal(size=(4, 9, 3)), rng.normal(size=(4, 3))
+    gram, times, scores = jax.jit(
+        lambda J, v, V, m: (
+            summed_products(J[:, :, None], J[:, None, :], axis=0),
+            summed_products(J, v[None], axis=1),
+            summed_products(V, m[..., None, :], axis=-1),
+        )
+    )(J, v, V, m)
+    np.testing.assert_allclose(gram, np.einsum("mip,mjp->ijp", J, J), rtol=1e-12)
+    np.testing.assert_allclose(times, np.einsum("mip,ip->mp", J, v), rtol=1e-12)
+    np.testing.assert_allclose(scores, np.einsum("bvi,bi->bv", V, m), rtol=1e-12)
+    empty = np.zeros((0, 3, 5))
+    assert summed_products(empty[:, :, None], empty[:, None, :], axis=0).shape == (3, 3, 5)
+    assert summed_products(np.zeros((2, 0, 5)), np.zeros((1, 0, 5)), axis=1).shape == (2, 5)
+
+
+def test_stable_partition_is_a_stable_sort():
+    """Every row of 1 to 5 booleans: the slots are those of a stable sort that puts the ``True`` entries first."""
+    from diffkin._xla import stable_partition
+
+    for n in range(1, 6):
+        masks = np.array(list(itertools.product((False, True), repeat=n)))
+        slots = np.asarray(stable_partition(jnp.asarray(masks)))
+        order = np.argsort(~masks, axis=-1, kind="stable")
+        np.testing.assert_array_equal(slots, order[..., :, None] == np.arange(n))
 
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
