@@ -68,12 +68,15 @@ _BALL_ARM = mjcf(
     '<geom size=".05" mass="1"/><body name="fore" pos="0 .1 -.5"><joint name="elbow" axis="0 1 0" range="-150 0"/>'
     '<geom size=".05" mass="1"/><site name="hand" pos=".05 0 -.4"/></body></body>'
 )
-# A Grashof crank-rocker (the crank turns fully: every crank angle closes the loop), the crank driven, the
-# coupler and the rocker solved; a site on the coupler off the pin.
-_FOUR_BAR = mjcf(
+# A crank-rocker (the closed loop of every_model_kind and of tests/unit/test_loops.py): ground pivots at (0, 0)
+# and (0.25, 0); crank 0.1, driven; the coupler's point (0.1, 0.2) (in the coupler, from the crank's tip) pinned
+# to the rocker, whose length is that point's distance from its pivot at the reference configuration; the coupler
+# and the rocker solved. Grashof (0.1 + 0.25 < 0.2236 + 0.2062): the crank turns fully, every crank angle closes
+# the loop. A site on the coupler off the pin.
+FOUR_BAR = mjcf(
     '<body name="crank"><joint name="crank" axis="0 0 1"/><geom size=".01" mass=".1"/>'
     '<body name="coupler" pos=".1 0 0"><joint name="coupler" axis="0 0 1"/><geom size=".01" mass=".1"/>'
-    '<site name="point" pos=".15 .25 .05"/></body></body>'
+    '<site name="tip" pos=".3 .1 0"/></body></body>'
     '<body name="rocker" pos=".25 0 0"><joint name="rocker" axis="0 0 1"/><geom size=".01" mass=".1"/></body>',
     tail='<equality><connect body1="coupler" body2="rocker" anchor=".1 .2 0"/></equality>'
     '<actuator><motor joint="crank"/></actuator>',
@@ -85,7 +88,7 @@ MODEL_KINDS = {
     "PoE": lambda: dk.load_urdf(*URDF_ROBOTS["ur5"]),
     "tree": lambda: dk.load_robot(_TREE),
     "ball joints": lambda: dk.load_robot(_BALL_ARM),
-    "closed loop": lambda: dk.load_robot(_FOUR_BAR),
+    "closed loop": lambda: dk.load_robot(FOUR_BAR),
     "long chain": lambda: snake_robot(LONG + 1),
     "floating base": lambda: dk.load_robot(_TREE, floating=True),
 }

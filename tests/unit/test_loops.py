@@ -12,7 +12,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from _fuzzing import FUZZ, finite_floats
-from _mjcf import WELDED_ARMS, mjcf
+from _mjcf import WELDED_ARMS
+from _models import FOUR_BAR
 from _paths import DATA
 from hypothesis import example, given
 from hypothesis import strategies as st
@@ -21,17 +22,7 @@ import diffkin as dk
 from diffkin._static import is_concrete
 from diffkin.models import _loops
 
-# A crank-rocker: ground pivots at (0, 0) and (0.25, 0); crank 0.1; the coupler's point (0.1, 0.2) (in the
-# coupler, from the crank's tip) pinned to the rocker, whose length is that point's distance from its pivot at
-# the reference configuration. Grashof (0.1 + 0.25 < 0.2236 + 0.2062): the crank turns fully.
-FOUR_BAR = mjcf(
-    '<body name="crank"><joint name="crank" axis="0 0 1"/><geom size=".01" mass=".1"/>'
-    '<body name="coupler" pos=".1 0 0"><joint name="coupler" axis="0 0 1"/><geom size=".01" mass=".1"/>'
-    '<site name="tip" pos=".3 .1 0"/></body></body>'
-    '<body name="rocker" pos=".25 0 0"><joint name="rocker" axis="0 0 1"/><geom size=".01" mass=".1"/></body>',
-    tail='<equality><connect body1="coupler" body2="rocker" anchor=".1 .2 0"/></equality>'
-    '<actuator><motor joint="crank"/></actuator>',
-)
+# The four-bar's dimensions (tests/_models.py: FOUR_BAR)
 GROUND, CRANK = np.array([0.25, 0.0]), 0.1
 COUPLER, ROCKER = np.hypot(0.1, 0.2), np.hypot(-0.05, 0.2)
 
