@@ -279,10 +279,9 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
         The specs; the ``<contact><exclude>`` body pairs; whether MuJoCo's parent filter is on
         (``<option><flag filterparent>``, default enabled).
     """
-    from diffkin.models import mjcf  # the model reader's default classes, orientations, frames and includes
+    from diffkin.models import mjcf  # the model reader's walk of the bodies, its default classes and orientations
 
-    mjcf.expand_includes(root, os.path.dirname(path) if path else os.getcwd())
-    reader = mjcf.Attributes(root)
+    reader, body_geoms = mjcf.body_geoms(root, path)
     compiler = root.find("compiler")
     base_dir = os.path.dirname(path) if path else None
     meshdir = compiler.get("meshdir", compiler.get("assetdir", "")) if compiler is not None else ""
@@ -302,13 +301,11 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
             )
             assets[name] = (resolve_mesh(file, mesh_dir) if file else None, file or name, scale, inline)
     specs: list[Spec] = []
-    counter = {"body": 1, "geom": 0}
 
-    def geom(el: ET.Element, T_body_container: np.ndarray, cls: str, body: str) -> None:
-        gid = counter["geom"]
-        counter["geom"] += 1
-        cls = reader.class_of(el, cls)
-        name = el.get("name") or f"geom{gid}"
+    def geom(g: mjcf.BodyGeom) -> None:
+        el, body = g.element, g.body
+        cls = reader.class_of(el, g.cls)
+        name = el.get("name") or f"geom{g.id}"
         where = f"MJCF <geom name={name!r}> on body {body!r}"
         contype = int(reader.attribute(el, "contype", cls, "1") or 1)
         conaffinity = int(reader.attribute(el, "conaffinity", cls, "1") or 1)
@@ -336,7 +333,7 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
         else:
             T[:3, :3] = reader.rotation(el, cls)
             T[:3, 3] = _numbers(None, "pos", 3, reader.attribute(el, "pos", cls, "0 0 0") or "0 0 0", where)
-        T = T_body_container @ T
+        T = g.T_body_container @ T
         kw: dict = {"contype": contype, "conaffinity": conaffinity, "body": body}
         if kind == "mesh":
             mesh_name = reader.attribute(el, "mesh", cls) or ""
@@ -351,27 +348,8 @@ def mjcf_specs(root: ET.Element, path: str | None, fit: str) -> tuple[list[Spec]
             spec = _primitive(name, body, kind, T, size, fit, **kw)
         specs.append(_fix_volume(spec))
 
-    todo: list[tuple[ET.Element, str, str]] = []
-    for worldbody in root.findall("worldbody"):
-        for child, _, cls in reader.contents(worldbody, "main", ("geom", "body")):
-            if child.tag == "body":
-                todo.append((child, cls, ""))
-            else:  # a world geom: the environment, but it takes a MuJoCo geom id
-                counter["geom"] += 1
-    todo.reverse()
-    while todo:  # bodies depth first in document order: MuJoCo's ids, as the model reader names them
-        el, cls, _ = todo.pop()
-        bid = counter["body"]
-        counter["body"] += 1
-        body = el.get("name") or f"body{bid}"
-        inner = reader.class_of(el, cls, "childclass")
-        later = []
-        for child, T, c in reader.contents(el, inner, ("geom", "body")):
-            if child.tag == "geom":
-                geom(child, T, c, body)
-            else:
-                later.append((child, c, body))
-        todo.extend(reversed(later))
+    for g in body_geoms:
+        geom(g)
     excludes = set()
     for contact in root.findall("contact"):
         for ex in contact.findall("exclude"):

@@ -141,11 +141,33 @@ class _Part:
     free: ET.Element | None = None
 
 
+@dataclasses.dataclass(frozen=True)
+class BodyGeom:
+    """A ``<geom>`` of a body as the model reader walks the body tree, for the readers of its collision
+    geometry (:func:`diffkin.collision.load`): the element with where it sits (its attributes are read with
+    the :class:`Attributes` the walk returns, :func:`body_geoms`).
+
+    Attributes:
+        element: the ``<geom>``.
+        body: the name of its body, as the :class:`Robot` names the body's frame (``body{id}`` if unnamed).
+        T_body_container: ``(4, 4)`` pose of the geom's container (the body, or a ``<frame>`` in it) in
+            the body frame; the geom's own ``pos`` and orientation are in the container.
+        cls: the container's default class (the geom's own ``class`` not yet applied).
+        id: MuJoCo's geom id (the world body's geoms, left out, first): unnamed geoms are ``geom{id}``.
+    """
+
+    element: ET.Element
+    body: str
+    T_body_container: np.ndarray
+    cls: str
+    id: int
+
+
 class Attributes:
     """The compiler settings and ``<default>`` classes of a ``<mujoco>`` element (includes already expanded:
     :func:`expand_includes`): an element's attributes, class, orientation and pose as MuJoCo resolves them.
-    The model reader builds on it; it is also the interface of the other readers of an MJCF (the collision
-    geoms of :func:`diffkin.collision.load`)."""
+    The model reader builds on it; with :func:`body_geoms` it is also the interface of the other readers of an
+    MJCF (the collision geoms of :func:`diffkin.collision.load`)."""
 
     def __init__(self, root: ET.Element):
         self.degrees, self.eulerseq, self.autolimits = True, "xyz", True
@@ -301,6 +323,8 @@ class _Reader(Attributes):
         self.stiff: set[str] = set()  # joints with stiffness (springs): the last chosen to close a loop
         self.parts: dict[str, _Part] = {"world": _Part(links=["world"])}
         self.mass_rules = _mjcf_mass.Compiler(root, self)
+        self.world_geoms = 0  # the world body's geoms (they come first in MuJoCo's geom ids)
+        self.geoms: list[tuple[ET.Element, str, np.ndarray, str]] = []  # each body's, in body order
 
     # -- the body tree
 
@@ -395,6 +419,8 @@ class _Reader(Attributes):
         else:
             part.inertials[name] = inertial
         for child, T, c in contents:
+            if child.tag == "geom":
+                self.geoms.append((child, name, T, c))
             if child.tag in ("joint", "freejoint"):
                 specs, free = self._joint(child, T, c, name)
                 if free and (parent != "world" or part.free is not None):
@@ -424,6 +450,8 @@ class _Reader(Attributes):
         for child, T, cls in self.contents(el, "main"):
             if child.tag in ("joint", "freejoint"):
                 raise ValueError(f"{_describe(child)}: the world body cannot have joints")
+            if child.tag == "geom":
+                self.world_geoms += 1
             if child.tag == "site" and child.get("name"):
                 T_world_site = T @ self.pose(child, self.class_of(child, cls))
                 self.parts["world"].sites.append((child.get("name", ""), "world", T_world_site))
@@ -673,6 +701,29 @@ def expand_includes(root: ET.Element, folder: str) -> None:
         el[:] = children
 
 
+def _read(root: ET.Element, path: str | None) -> _Reader:
+    """The body tree of a parsed ``<mujoco>`` element, walked once (its includes expanded in place first)."""
+    expand_includes(root, os.path.dirname(path) if path else os.getcwd())
+    reader = _Reader(root)
+    for el in root.findall("worldbody"):
+        reader.worldbody(el)
+    return reader
+
+
+def body_geoms(root: ET.Element, path: str | None = None) -> tuple[Attributes, list[BodyGeom]]:
+    """The geoms of the bodies of a parsed ``<mujoco>`` element, in MuJoCo's geom id order, from the model
+    reader's own walk of the body tree (the bodies named as :func:`robot_from_mjcf` names their frames);
+    the world body's geoms (the environment) are left out. With the :class:`Attributes` to read them by.
+
+    Args:
+        root: the ``<mujoco>`` element (modified: its includes are expanded in place).
+        path: the file it was read from (includes are relative to its folder), or ``None``.
+    """
+    reader = _read(root, path)
+    first = reader.world_geoms
+    return reader, [BodyGeom(el, body, T, cls, first + k) for k, (el, body, T, cls) in enumerate(reader.geoms)]
+
+
 def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
     """The :class:`Robot` of a parsed ``<mujoco>`` element (see the module docstring and :func:`diffkin.load_robot`).
 
@@ -680,10 +731,7 @@ def robot_from_mjcf(root: ET.Element, path: str | None = None) -> Robot:
         root: the ``<mujoco>`` element (modified: its includes are expanded in place).
         path: the file it was read from (includes are relative to its folder), or ``None``.
     """
-    expand_includes(root, os.path.dirname(path) if path else os.getcwd())
-    reader = _Reader(root)
-    for el in root.findall("worldbody"):
-        reader.worldbody(el)
+    reader = _read(root, path)
     free = [(name, part, part.free) for name, part in reader.parts.items() if part.free is not None]
     if len(free) > 1:
         raise ValueError(

@@ -26,6 +26,31 @@ def test_degrees_vs_radians_give_the_same_robot():
     assert np.all(np.isposinf(np.asarray(deg.velocity)))  # MJCF has no joint velocity limits: none
 
 
+def test_body_geoms_are_the_model_reader_s_bodies_in_mujoco_s_geom_order():
+    """The geoms the collision loader reads (``mjcf.body_geoms``): each on its body as the robot names it
+    (unnamed: ``body{id}``), through ``<frame>``s (the frame's pose), numbered as MuJoCo's geom ids, the world
+    body's geoms (the environment) counted first and left out."""
+    import xml.etree.ElementTree as ET
+
+    from diffkin.models import mjcf as reader
+
+    text = (
+        '<mujoco><worldbody><geom size="1"/><body pos="0 0 1"><joint/><frame pos=".1 0 0"><geom name="g" size=".1"/>'
+        '</frame><body name="b"><joint/><geom size=".2"/></body><geom size=".3"/></body>'
+        '<frame><geom size="2"/></frame><body pos="1 0 0"><geom size=".4"/></body></worldbody></mujoco>'
+    )
+    robot = dk.load_robot(text)
+    _, geoms = reader.body_geoms(ET.fromstring(text))
+    assert [(g.element.get("size"), g.body, g.id) for g in geoms] == [
+        (".1", "body1", 2),
+        (".3", "body1", 3),
+        (".2", "b", 4),
+        (".4", "body3", 5),
+    ]
+    assert {g.body for g in geoms} <= set(robot.frame_names)
+    np.testing.assert_array_equal(geoms[0].T_body_container[:3, 3], [0.1, 0.0, 0.0])
+
+
 def test_a_mesh_geom_without_inertial_has_an_unknown_mass():
     body = '<body name="b"><joint name="j"/><geom type="mesh" mesh="m"/></body>'
     robot = dk.load_robot(
