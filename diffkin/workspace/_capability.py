@@ -12,7 +12,7 @@ import numpy as np
 
 from diffkin._checks import positive_int
 from diffkin._npz import read_dataclass_fields, save_dataclass
-from diffkin.workspace._cells import STEPS, axis_rule, neighbour_bins, pose_halves
+from diffkin.workspace._cells import STEPS, cell_codes, edge_bits, neighbour_bins, pose_halves, reached
 from diffkin.workspace._map import ReachabilityMap, grid_fields
 
 BIN_COUNTS = {24 * d**3: d for d in range(1, 13)}
@@ -228,14 +228,14 @@ class CapabilityMap:
         if self.cells.size == 0 or T.size == 0:
             return np.zeros(T.shape[:-2], bool)
         flat, inside, cell, upper = self._cells_of(T)
-        kept = self._counts_at(flat, inside) >= min_count
+        held = self._counts_at(flat, inside) >= min_count
         if not at_pose:
-            return kept.reshape(T.shape[:-2])
+            return held.reshape(T.shape[:-2])
         n_dir, n_roll = split_bins(self.orientation_bins)
         neighbours, n_bins = neighbour_bins(n_dir, n_roll)[flat % self.orientation_bins], self.orientation_bins
-        edge = np.zeros_like(kept)
+        near: list[list[np.ndarray]] = []  # per axis, the cells STEPS away held
         for axis in range(6):
-            near = np.zeros((len(flat), len(STEPS)), bool)
+            near.append([])
             for i, step in enumerate(STEPS):
                 if axis < 3:  # the voxel's x, y, z
                     moved = cell[:, axis] + step
@@ -243,11 +243,9 @@ class CapabilityMap:
                     to = flat + step * n_bins * int(np.prod(self.shape[axis + 1 :]))
                 else:
                     valid, to = inside, flat - flat % n_bins + neighbours[:, axis - 3, i]
-                near[:, i] = self._counts_at(to, valid) >= min_count
-            hole, fails_down, fails_up = axis_rule(*near.T)
-            kept |= inside & hole
-            edge |= np.where(upper[:, axis], fails_up, fails_down)
-        return (kept & ~edge).reshape(T.shape[:-2])
+                near[axis].append(self._counts_at(to, valid) >= min_count)
+        code = cell_codes(held, near)  # nothing held around a pose outside the grid: not reached
+        return reached(code, edge_bits(upper.T, range(6))).reshape(T.shape[:-2])
 
     def save(self, path) -> None:
         """Write the map to ``path`` as a ``.npz`` archive (numpy appends ``.npz`` if missing)."""

@@ -130,19 +130,44 @@ def pose_halves(T, n_dir: int, n_roll: int, origin, inv_voxel, shape_array):
     return cell, bins, inside, upper
 
 
-def axis_rule(down2, down, up, up2):
-    """What the cells along one axis say of a cell between them (see :meth:`CapabilityMap.reaches`).
+def cell_codes(held, near):
+    """The rule of :meth:`CapabilityMap.reaches` applied to cells, as bits (the one implementation of it:
+    ``reaches`` gathers the cells around poses, :func:`base_placement` around every cell of its slices).
 
     Args:
-        down2, down, up, up2: bool arrays (numpy or JAX, one shape): whether the map holds the cells
-            ``STEPS`` (-2, -1, +1, +2) away.
+        held: bool array (numpy or JAX): whether the map holds each cell.
+        near: for each of the six axes (the voxel's x, y, z; the bin's ``u``, ``v``, roll), four bool
+            arrays of ``held``'s shape: whether the map holds the cells ``STEPS`` (-2, -1, +1, +2) away.
 
     Returns:
-        ``(hole, fails_down, fails_up)``, each of that shape, bool: both neighbours held (an unsampled
-        cell between held ones); a pose in the lower (upper) half of the cell is at the held set's edge
-        along the axis: the neighbour on its side and the one beyond are not held, the other side's is.
+        uint16 of ``held``'s shape. Bit 0: the cell is held, or is a hole (both neighbours along some axis
+        held); bits ``1 + 2 axis`` and ``2 + 2 axis``: a pose in the cell's lower (upper) half along
+        ``axis`` is at the held set's edge (the neighbour on its side and the one beyond are not held, the
+        two on the other side are). A pose is reached when bit 0 is set and its halves' bits are not
+        (:func:`edge_bits`, :func:`reached`).
     """
-    return down & up, ~down & ~down2 & up & up2, ~up & ~up2 & down & down2
+    code = held.astype(np.uint16)
+    for axis, (down2, down, up, up2) in enumerate(near):
+        code = code | (down & up).astype(np.uint16)
+        code = code | ((~down & ~down2 & up & up2).astype(np.uint16) << (1 + 2 * axis))
+        code = code | ((~up & ~up2 & down & down2).astype(np.uint16) << (2 + 2 * axis))
+    return code
+
+
+def edge_bits(upper, axes):
+    """The bits of :func:`cell_codes` that rule out poses lying in the halves ``upper`` of their cells:
+    ``upper`` one bool array (numpy or JAX) per axis of ``axes`` (0-5), whether the pose lies in the upper
+    half along it; uint16 of their shape."""
+    bits = 0
+    for up, axis in zip(upper, axes, strict=True):
+        bits = bits | ((2 << 2 * axis) << up.astype(np.uint16))
+    return bits
+
+
+def reached(code, edge):
+    """Whether poses are reached (bool): ``code`` their cells' :func:`cell_codes`, ``edge`` their
+    :func:`edge_bits`."""
+    return ((code & 1) == 1) & ((code & edge) == 0)
 
 
 def _bucket(n: int) -> int:
@@ -151,13 +176,8 @@ def _bucket(n: int) -> int:
 
 
 def slice_codes(held: np.ndarray, keys: np.ndarray, needed: np.ndarray, n_dir: int, n_roll: int, nz: int):
-    """What :meth:`CapabilityMap.reaches` needs of each voxel of the map's ``(x, y)`` slices ``needed``, as
-    bits: ``(len(needed), nx, ny)`` uint16 (a JAX array).
-
-    Bit 0: the cell is held or a hole; bits ``1 + 2 axis`` and ``2 + 2 axis``: a pose in its lower
-    (upper) half along ``axis`` (0-5: x, y, z, ``u``, ``v``, roll) is at the edge (:func:`axis_rule`).
-    A pose of slice ``s`` at voxel ``(i, j)`` is reached when bit 0 is set and, for each axis, its half's
-    bit is not.
+    """The :func:`cell_codes` of every voxel of the map's ``(x, y)`` slices ``needed``: ``(len(needed), nx,
+    ny)`` uint16 (a JAX array).
 
     Args:
         held: ``(K, nx, ny)`` bool, the held cells of the slices ``keys``.
@@ -191,18 +211,10 @@ def _codes(held, own, around):
     ``held[around] (S, 4, 4, nx, ny)``."""
     own_held = held[own]
     nx, ny = own_held.shape[1:]
-    padded = jnp.pad(own_held, ((0, 0), (2, 2), (2, 2)))
-    kept, codes = own_held, jnp.zeros(own_held.shape, jnp.uint16)
-    for axis in range(6):
-        if axis < 2:  # shifted within the slice (nothing held off the grid)
-            near = [
-                padded[:, 2 + s : 2 + s + nx, 2 : 2 + ny] if axis == 0 else padded[:, 2 : 2 + nx, 2 + s : 2 + s + ny]
-                for s in STEPS
-            ]
-        else:
-            near = [held[around[:, axis - 2, i]] for i in range(len(STEPS))]
-        hole, fails_down, fails_up = axis_rule(*near)
-        kept = kept | hole
-        bits = (fails_down.astype(jnp.uint16) << (1 + 2 * axis)) | (fails_up.astype(jnp.uint16) << (2 + 2 * axis))
-        codes = codes | bits
-    return codes | kept
+    padded = jnp.pad(own_held, ((0, 0), (2, 2), (2, 2)))  # nothing held off the grid
+    near = [
+        [padded[:, 2 + s : 2 + s + nx, 2 : 2 + ny] for s in STEPS],
+        [padded[:, 2 : 2 + nx, 2 + s : 2 + s + ny] for s in STEPS],
+    ]
+    near += [[held[around[:, axis, i]] for i in range(len(STEPS))] for axis in range(4)]
+    return cell_codes(own_held, near)

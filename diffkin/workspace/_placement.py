@@ -16,7 +16,7 @@ from diffkin.models.robot import Robot
 from diffkin.workspace._bins import _orientation_bin
 from diffkin.workspace._blocked import blocked, checked
 from diffkin.workspace._capability import CapabilityMap, split_bins
-from diffkin.workspace._cells import orientation_halves, slice_codes, slices_around
+from diffkin.workspace._cells import edge_bits, orientation_halves, reached, slice_codes, slices_around
 
 
 def planar_poses(x, y, yaw, height: float) -> np.ndarray:
@@ -139,29 +139,49 @@ def _task_bins(n_dir: int, n_roll: int, R) -> tuple[jax.Array, jax.Array]:
     return bins, orientation_halves(entries, bins, n_roll, n_dir)
 
 
-@jax.jit
-def _scores(table, slices, edges, c, d, origin_xy, inv_voxel):
-    """``(nx, ny, nyaw)`` mean over tasks of whether the map reaches each task's pose in each base frame:
-    ``c (nyaw, N, 2)`` the tasks' and ``d (nyaw, nx, ny, 2)`` the bases' xy turned by ``-yaw``; ``slices
-    (nyaw, N)`` the table slice of each task's (bin, z layer), ``-1`` for none; ``table (S, mx, my)`` the
-    slices' codes (:func:`slice_codes`); ``edges (nyaw, N)`` the code bits of each task's halves along z,
-    ``u``, ``v`` and the roll (the x and y halves depend on the base)."""
-    shape = table.shape[1:]
+LOOK_UPS_PER_GROUP = 1 << 18
+"""About how many (task, base) look-ups :func:`_scores` makes at once: the tasks go in groups small enough
+for a group's look-ups to stay in the CPU's cache (all the tasks of a large placement at once run several
+times slower)."""
+
+
+def _task_groups(n_tasks: int, n_bases: int) -> tuple[int, int]:
+    """``(groups, size)``: the fewest groups of at most ``LOOK_UPS_PER_GROUP // n_bases`` tasks (at least
+    one) that hold ``n_tasks``, all of one size (the last padded)."""
+    groups = -(-n_tasks // max(1, LOOK_UPS_PER_GROUP // n_bases))
+    return groups, -(-n_tasks // groups)
+
+
+@functools.partial(jax.jit, static_argnames="n_tasks")
+def _scores(table, slices, edges, c, d, origin_xy, inv_voxel, *, n_tasks: int):
+    """``(nx, ny, nyaw)`` mean over the ``n_tasks`` tasks of whether the map reaches each task's pose in
+    each base frame: ``c (nyaw, G, n, 2)`` the tasks' and ``d (nyaw, nx, ny, 2)`` the bases' xy turned by
+    ``-yaw``; ``slices (nyaw, G, n)`` the table slice of each task's (bin, z layer), ``-1`` for none (and
+    for the padding of the last of the ``G`` groups of ``n`` tasks, :func:`_task_groups`); ``table (S,
+    mx, my)`` the slices' codes (:func:`slice_codes`); ``edges (nyaw, G, n)`` the code bits of each task's
+    halves along z, ``u``, ``v`` and the roll (the x and y halves depend on the base)."""
+    mx, my = table.shape[1:]
+    codes = table.reshape(-1)
+
+    def one_group(count, group, d):
+        # x and y apart (not on a last axis of 2): XLA vectorizes the look-ups then.
+        c, slices, edges = group
+        sx = ((c[:, 0, None, None] - d[None, ..., 0]) - origin_xy[0]) * inv_voxel  # (n, nx, ny), the base frame
+        sy = ((c[:, 1, None, None] - d[None, ..., 1]) - origin_xy[1]) * inv_voxel
+        ix, iy = jnp.floor(sx), jnp.floor(sy)
+        inside = (slices[:, None, None] >= 0) & (ix >= 0) & (ix < mx) & (iy >= 0) & (iy < my)
+        flat = (jnp.maximum(slices, 0)[:, None, None] * mx + ix.astype(jnp.int32)) * my + iy.astype(jnp.int32)
+        code = jnp.take(codes, jnp.where(inside, flat, 0))  # one flat gather: XLA's fastest
+        edge = edges[:, None, None] | edge_bits((sx - ix >= 0.5, sy - iy >= 0.5), (0, 1))
+        hit = inside & reached(code, edge)
+        return count + jnp.sum(hit, axis=0, dtype=jnp.int32), None
 
     def one_yaw(args):
         c, d, slices, edges = args
-        scaled = ((c[:, None, None, :] - d[None]) - origin_xy) * inv_voxel  # (N, nx, ny, 2), the base frame
-        cell = jnp.floor(scaled)
-        inside = (slices[:, None, None] >= 0) & jnp.all((cell >= 0) & (cell < jnp.asarray(shape, cell.dtype)), axis=-1)
-        upper = (scaled - cell >= 0.5).astype(jnp.uint16)
-        cell = cell.astype(jnp.int32)
-        flat = (jnp.maximum(slices, 0)[:, None, None] * shape[0] + cell[..., 0]) * shape[1] + cell[..., 1]
-        code = jnp.take(table.reshape(-1), jnp.where(inside, flat, 0))  # one flat gather: XLA's fastest
-        edge = edges[:, None, None] | (jnp.uint16(2) << upper[..., 0]) | (jnp.uint16(8) << upper[..., 1])
-        hit = inside & ((code & 1) == 1) & ((code & edge) == 0)
-        return jnp.sum(hit, axis=0, dtype=jnp.int32)
+        count = jnp.zeros(d.shape[:2], jnp.int32)
+        return jax.lax.scan(functools.partial(one_group, d=d), count, (c, slices, edges))[0]
 
-    return jnp.moveaxis(jax.lax.map(one_yaw, (c, d, slices, edges)), 0, -1) / slices.shape[1]
+    return jnp.moveaxis(jax.lax.map(one_yaw, (c, d, slices, edges)), 0, -1) / n_tasks
 
 
 def _region(region) -> np.ndarray:
@@ -275,21 +295,21 @@ def base_placement(
     needed, slices = np.unique(keys, return_inverse=True)
     slices = slices.reshape(keys.shape) - (needed[0] < 0)  # -1: the task is outside the map's z range
     needed = needed[needed >= 0]
-    # The code bits of each task's halves along z, u, v and the roll (axes 2-5, see slice_codes).
-    upper = np.concatenate([np.broadcast_to(scaled - z >= 0.5, (yaw_bins, T.shape[0]))[..., None], halves], axis=-1)
-    edges = np.sum(np.left_shift(1, 1 + 2 * np.arange(2, 6) + upper), axis=-1).astype(np.uint16)
+    # The code bits of each task's halves along z, u, v and the roll (axes 2-5, see cell_codes).
+    upper_z = np.broadcast_to(scaled - z >= 0.5, (yaw_bins, T.shape[0]))
+    edges = edge_bits((upper_z, *np.moveaxis(halves, -1, 0)), range(2, 6))
     # The map's (x, y) slices of those (bin, layer) pairs and of those around them: ranges of its cells.
     layers, xy, counts = cap.layers
     keys = needed
     if at_pose:
         keys = np.unique(np.concatenate([needed, slices_around(needed, n_dir, n_roll, mz).ravel()]))
         keys = keys[keys >= 0]
-    first, last = np.searchsorted(layers, keys, "left"), np.searchsorted(layers, keys, "right")
-    ranges = [slice(a, b) for a, b in zip(first.tolist(), last.tolist(), strict=True)]
-    cells = np.concatenate([xy[r] for r in ranges] + [np.zeros(0, np.int64)])
-    cells += np.repeat(np.arange(keys.size) * (mx * my), last - first)
+    first = np.searchsorted(layers, keys, "left")
+    n_cells = np.searchsorted(layers, keys, "right") - first
+    at = np.arange(n_cells.sum()) + np.repeat(first - (np.cumsum(n_cells) - n_cells), n_cells)  # ranges' cells
+    cells = xy[at] + np.repeat(np.arange(keys.size) * (mx * my), n_cells)
     if min_count > 1:
-        cells = cells[np.concatenate([counts[r] for r in ranges] + [np.zeros(0, np.int64)]) >= min_count]
+        cells = cells[counts[at] >= min_count]
     held = np.zeros((keys.size, mx, my), bool)
     held.reshape(-1)[cells] = True
     if not needed.size:
@@ -307,14 +327,22 @@ def base_placement(
         blocked_bases, blocked_tasks = blocked(*robot_frame, avoid, bases, T)
         blocked_bases = blocked_bases.reshape(nx, ny, yaw_bins)
         slices = np.where(blocked_tasks[None], -1, slices)  # reached from no base
+    n_groups, group_size = _task_groups(T.shape[0], nx * ny)
+    pad = n_groups * group_size - T.shape[0]  # tasks of slice -1: reached from no base
+
+    def grouped(a, fill=0):
+        a = np.pad(a, [(0, 0), (0, pad)] + [(0, 0)] * (a.ndim - 2), constant_values=fill)
+        return a.reshape(yaw_bins, n_groups, group_size, *a.shape[2:])
+
     score = _scores(
         table,
-        jnp.asarray(slices, jnp.int32),
-        jnp.asarray(edges),
-        jnp.asarray(c, dtype),
+        jnp.asarray(grouped(slices, -1), jnp.int32),
+        jnp.asarray(grouped(edges)),
+        jnp.asarray(grouped(c), dtype),
         jnp.asarray(d, dtype),
         jnp.asarray(cap.origin[:2], dtype),
         jnp.asarray(1 / cap.voxel_size, dtype),
+        n_tasks=T.shape[0],
     )
     score = np.asarray(score, np.float64)
     if blocked_bases is not None:

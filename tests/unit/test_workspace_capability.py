@@ -9,6 +9,7 @@ import pytest
 
 import diffkin as dk
 from diffkin import workspace as ws
+from diffkin.workspace import _placement
 from diffkin.workspace._cells import STEPS, neighbour_bins, pose_halves, split_bin
 from diffkin.workspace._placement import planar_poses
 
@@ -184,6 +185,26 @@ def test_base_placement_against_ik_from_every_base(chain, cap):
     assert np.all(np.diff(check.score) <= 0) and check.score[0] == placement.score.max()
     np.testing.assert_allclose(placement.best(3), check.bases[:3])
     assert check.verified[0] >= 0.95 * check.success.mean(axis=1).max()  # the top base is (nearly) the best
+
+
+@pytest.mark.parametrize("min_count, at_pose", [(1, True), (3, True), (3, False)])
+def test_placement_scores_are_reaches_averaged_in_any_task_groups(cap, monkeypatch, min_count, at_pose):
+    """Every base's score is the mean of ``reaches`` over the tasks in its frame (with ``min_count`` and
+    ``at_pose``), whether the look-ups take the tasks all at once or in groups of 3 (the last padded)."""
+    rng = np.random.default_rng(1)
+    xy, phi = rng.uniform(-0.4, 0.4, (8, 2)), rng.uniform(-np.pi, np.pi, 8)
+    tasks = planar_poses(xy[:, 0], xy[:, 1], phi, 0.0)
+    kwargs = dict(region=[[-0.6, -0.6], [0.6, 0.6]], yaw_bins=3, cell=0.3, min_count=min_count, at_pose=at_pose)
+    whole = ws.base_placement(cap, tasks, **kwargs)
+    assert _placement._task_groups(8, 16) == (1, 8)
+    monkeypatch.setattr(_placement, "LOOK_UPS_PER_GROUP", 3 * 16)  # 16 bases: 3 groups of 3 tasks
+    assert _placement._task_groups(8, 16) == (3, 3)
+    np.testing.assert_array_equal(ws.base_placement(cap, tasks, **kwargs).score, whole.score)
+    i, j, k = np.meshgrid(*map(np.arange, whole.score.shape), indexing="ij")
+    in_base = np.linalg.inv(whole.base(i, j, k))[..., None, :, :] @ tasks
+    said = cap.reaches(in_base, min_count=min_count, at_pose=at_pose)
+    np.testing.assert_allclose(whole.score, said.mean(axis=-1), atol=1e-6)
+    assert 0 < whole.score.max() and whole.score.min() < 1
 
 
 def test_save_load_round_trip_and_errors(cap, tmp_path):
