@@ -247,7 +247,13 @@ def jacobian(
     Returns:
         ``(..., 6, dof)`` Jacobian (``(..., 6, 6 + dof)`` with ``include_base``); column ``i``
         is the twist per unit ``q_i``. A mimic joint adds its motion (times its multiplier) to
-        the column of its source joint; joints off the frame's path give zero columns.
+        the column of its source joint; joints off the frame's path give zero columns. On a robot
+        with closed loops the dependent joints move as the loops' implicit function,
+        ``dq_dep/dq = -pinv(C_dep) C_q``: the derivative of :func:`fk` where the loops close. Where
+        one cannot (:func:`loop_closure`'s gap above 0), both methods give that same motion (the
+        loops' residual held to first order, in least squares) at the returned poses, but the
+        poses are the loop solve's last iterate, not a smooth function of ``q``: no Jacobian is
+        their derivative there.
     """
     forward.check(model)
     f, frame = _where(model, where, frame, frame_name)

@@ -16,13 +16,18 @@ reference configuration, MuJoCo's ``qpos0``). The robot keeps every joint in its
   and closes on its branch (a hinge the loops keep from turning fully whose range reaches more than half
   a turn from the reference on one side needs its limits given: a limited joint is followed along the
   straight path inside them);
-- one last step at ``q`` with gradients, so that the derivatives are those of the implicit function:
-  ``dq_dep/dq = -pinv(C_dep) C_q`` (``C`` the residual's Jacobian).
+- then, at ``q`` and the values found, the residual and its Jacobian with gradients, so that the derivatives
+  are those of the implicit function: ``dq_dep/dq = -pinv(C_dep) C_q`` (``C`` the residual's Jacobian;
+  damped as the steps), carried to autodiff by a step of value 0.
 
 The pass's Jacobian columns then fold each dependent column into the columns of ``q`` through that
-``dq_dep/dq``. Where a loop cannot close (a ``q`` out of the mechanism's range) the solve returns the
-least-squares nearest, and the pass's ``loop_gap`` (``dk.loop_closure``, IK's success) says by how much
-it stays open: measured (:func:`gap`) on the poses the pass returns, after that last step.
+``dq_dep/dq``, and autodiff of the pass gets the same. Where a loop cannot close (a ``q`` out of the
+mechanism's range) the solve returns its last Gauss-Newton iterate: with a large residual the steps need
+not converge (to the least-squares nearest or at all), so the returned values need not be a smooth, or
+even continuous, function of ``q``, and no Jacobian is their derivative. The pass's ``loop_gap``
+(``dk.loop_closure``, IK's success) says by how much it stays open: measured (:func:`gap`) on the poses
+the pass returns. The derivatives there are still ``-pinv(C_dep) C_q`` at those poses (analytic and
+autodiff alike): the motion that keeps the loops' residual unchanged to first order, in least squares.
 
 Which joints are dependent (:func:`close`): per robot, among the joints on the loops' paths (from
 each body up to their common ancestor) that no actuator drives (directly or through a fixed tendon)
@@ -104,8 +109,9 @@ def _array(rows: list[list], shape, dtype) -> jax.Array:
     return jnp.stack([jnp.stack([jnp.broadcast_to(jnp.asarray(e, dtype), shape) for e in row], -1) for row in rows], -2)
 
 
-def _step(robot, q: list, dep: jax.Array, shape, dtype):
-    """One Gauss-Newton step from ``dep`` ``(..., nd)``: the new values, and the pass and points at ``dep``."""
+def _normal_equations(robot, q: list, dep: jax.Array, shape, dtype):
+    """At ``q`` and the dependent values ``dep`` ``(..., nd)``: the pass, the loops' points, the residual ``r``
+    ``(..., 3 loops)``, its Jacobian ``J`` ``(..., 3 loops, nd)`` in ``dep`` and the damped ``A = J^T J``."""
     dof, nd = robot.dof, len(robot.dependent_names)
     kin, world = _points(robot, list(q) + [dep[..., d] for d in range(nd)])
     r = _array([[e] for pa, pb in world for e in rg.vadd(pa, rg.scale(-1.0, pb))], shape, dtype)[..., 0]
@@ -114,7 +120,18 @@ def _step(robot, q: list, dep: jax.Array, shape, dtype):
     A = A + (DAMPING * jnp.trace(A, axis1=-2, axis2=-1)[..., None, None] + jnp.finfo(dtype).tiny) * jnp.eye(
         nd, dtype=dtype
     )
-    return dep - jnp.linalg.solve(A, jnp.einsum("...ki,...k->...i", J, r)[..., None])[..., 0], kin, world, J, A
+    return kin, world, r, J, A
+
+
+def _least_squares(A: jax.Array, J: jax.Array, r: jax.Array) -> jax.Array:
+    """``A^-1 J^T r`` ``(..., nd)``: the damped least-squares step that cancels ``r``."""
+    return jnp.linalg.solve(A, jnp.einsum("...ki,...k->...i", J, r)[..., None])[..., 0]
+
+
+def _step(robot, q: list, dep: jax.Array, shape, dtype) -> jax.Array:
+    """One Gauss-Newton step from ``dep`` ``(..., nd)``: the new values."""
+    _, _, r, J, A = _normal_equations(robot, q, dep, shape, dtype)
+    return dep - _least_squares(A, J, r)
 
 
 def _distance(g: rg.Vec3) -> jax.Array:
@@ -168,11 +185,15 @@ def _solve(robot, q: list) -> tuple[list, list[list[rg.Entry]]]:
     def stage(k, x):  # Newton steps along q_ref -> goal: the branch of the reference configuration, followed
         t = jnp.minimum((k // STEPS_PER_STAGE + 1) / STAGES, 1.0)
         q_t = [rg.add(r_i, rg.mul(t, rg.add(e, rg.mul(-1.0, r_i)))) for r_i, e in zip(ref, goal, strict=True)]
-        return _step(frozen_robot, q_t, x, shape, dtype)[0]
+        return _step(frozen_robot, q_t, x, shape, dtype)
 
-    dep = jax.lax.fori_loop(0, (STAGES + 1) * STEPS_PER_STAGE, stage, home)  # (a last stage at the goal itself)
+    dep = jax.lax.fori_loop(0, (STAGES + 1) * STEPS_PER_STAGE + 1, stage, home)  # (a last stage at the goal itself)
     dep = jax.lax.stop_gradient(dep)
-    dep, kin, world, J_dep, A = _step(robot, q, dep, shape, dtype)  # the last step: at q, with gradients
+    # At q and these values, with gradients: a step of value 0 (r - r) whose derivative, -A^-1 J^T dr, is the
+    # implicit function's, the same as G's below, whether the loops close or not (a Gauss-Newton step's would
+    # add d(A^-1 J^T) r, which is not 0 where they stay open).
+    kin, world, r, J_dep, A = _normal_equations(robot, q, dep, shape, dtype)
+    dep = dep - _least_squares(A, J_dep, r - jax.lax.stop_gradient(r))
     C_q = _array(_jacobian(robot, kin, world, range(dof)), shape, dtype)
     G = -jnp.linalg.solve(A, jnp.einsum("...ki,...kj->...ij", J_dep, C_q))  # (..., nd, dof)
     return [dep[..., d] for d in range(nd)], [[G[..., d, i] for i in range(dof)] for d in range(nd)]

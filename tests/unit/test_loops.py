@@ -201,6 +201,52 @@ def test_derivatives_are_the_implicit_functions(four_bar, solved):
     np.testing.assert_allclose(J_com[..., 0], (com_plus - com_minus) / (2 * step), atol=1e-9)
 
 
+def test_both_jacobians_are_the_linearised_closure_where_a_loop_stays_open():
+    """The welded arms at random ``q``: where the weld closes, the analytic and autodiff Jacobians are the
+    derivative of ``fk`` (central differences); where it cannot close, ``fk`` returns the solve's last
+    Gauss-Newton iterate, not a smooth function of ``q`` (its differences run to 1e5), the gap says it is
+    open, and both Jacobians are the same motion: the loop held closed to first order, in least squares
+    (``J_q + J_dep G``, ``G = -pinv(C_dep) C_q`` of the weld's points on the arms as a tree). The autodiff one
+    differed by up to 14 there (the derivative of the last step's matrix times the open residual; issue 56)."""
+    robot = dk.load_robot(WELDED_ARMS.format(relpose=""))
+    tree = dk.load_robot(WELDED_ARMS.format(relpose="").split("<equality>")[0] + "</mujoco>")  # every joint in q
+    q = np.random.default_rng(1).uniform(-0.6, 0.6, (24, 2))
+    order = [tree.joint_names.index(n) for n in robot.joint_names + robot.dependent_names]
+    (a, b), points = robot.loop_bodies[0], np.asarray(robot.loop_points)  # the weld's three points on a3 and b2
+    assert [robot.frame_bodies[robot.frame_index(n)] for n in ("a3", "b2")] == [a, b] and len(robot.loop_bodies) == 3
+
+    def residual(x):  # (9,): the weld's points on a3 less those on b2, the tree at x (robot's q, then dependent)
+        T = dk.fk(tree, jnp.zeros(tree.dof).at[jnp.asarray(order)].set(x), ["a3", "b2"])
+        ends = [T[k, :3, :3] @ points[:, k].T + T[k, :3, 3:] for k in (0, 1)]
+        return (ends[0] - ends[1]).T.reshape(-1)
+
+    @jax.jit
+    def derivatives(q):
+        dependent, gap = dk.loop_closure(robot, q)
+        x = jnp.concatenate([q, dependent], -1)
+        C = jax.vmap(jax.jacfwd(residual))(x)
+        J_tree = dk.jacobian(tree, jnp.zeros((len(q), tree.dof)).at[:, jnp.asarray(order)].set(x), "a3")
+        analytic, autodiff = dk.jacobian(robot, q, "a3"), dk.jacobian(robot, q, "a3", method="autodiff")
+        return gap, C, J_tree[..., jnp.asarray(order)], analytic, autodiff
+
+    gap, C, J_tree, analytic, autodiff = (np.asarray(x) for x in derivatives(jnp.asarray(q)))
+    closed, open_ = gap < 1e-12, gap > 1e-3
+    assert closed.sum() >= 8 and open_.sum() >= 4 and np.all(closed | open_)
+    np.testing.assert_allclose(autodiff, analytic, rtol=0, atol=1e-12)
+    C_dep, C_q = C[..., 2:], C[..., :2]  # d dependent / d q holding the weld in least squares, damped as the solve
+    A = np.swapaxes(C_dep, -1, -2) @ C_dep
+    A += _loops.DAMPING * np.trace(A, axis1=-2, axis2=-1)[:, None, None] * np.eye(3)
+    G = -np.linalg.solve(A, np.swapaxes(C_dep, -1, -2) @ C_q)  # (n, 3, 2)
+    np.testing.assert_allclose(analytic, J_tree[..., :2] + J_tree[..., 2:] @ G, rtol=0, atol=1e-11)
+    step, T = 1e-6, np.asarray(dk.fk(robot, q, "a3"))
+    for i in range(robot.dof):
+        dT = [np.asarray(dk.fk(robot, q + s * np.eye(robot.dof)[i], "a3")) for s in (step, -step)]
+        dT = (dT[0] - dT[1]) / (2 * step)
+        W = dT[:, :3, :3] @ np.swapaxes(T[:, :3, :3], -1, -2)  # [w] = dR R^T
+        fd = np.concatenate([dT[:, :3, 3], W[:, [2, 0, 1], [1, 2, 0]]], -1)
+        np.testing.assert_allclose(analytic[closed, :, i], fd[closed], rtol=1e-6, atol=1e-8)
+
+
 def test_a_loop_that_cannot_close_says_so():
     """A crank longer than the rest allows: the loop opens for some crank angles; finite values and a gap."""
     xml = FOUR_BAR.replace('pos=".1 0 0"', 'pos=".3 0 0"', 1)  # crank 0.3: out of reach half a turn away
@@ -249,9 +295,11 @@ def test_a_closed_over_robot_folds_into_the_solve(four_bar, monkeypatch):
     constants, folded (its frozen copy for the steps without gradients was traced: Cassie's loop solve of 81
     configurations ran 8 s jitted, 21 ms folded) (issue 56)."""
     concrete = []
-    step = _loops._step
+    normal_equations = _loops._normal_equations
     monkeypatch.setattr(
-        _loops, "_step", lambda robot, *args: concrete.append(is_concrete(robot.joint_poses)) or step(robot, *args)
+        _loops,
+        "_normal_equations",
+        lambda robot, *args: concrete.append(is_concrete(robot.joint_poses)) or normal_equations(robot, *args),
     )
     jax.make_jaxpr(lambda q: dk.loop_closure(four_bar, q))(jnp.zeros((2, 1)))
     assert len(concrete) == 2 and all(concrete)  # the staged steps' and the last one's
