@@ -290,6 +290,10 @@ def search(
     # problem without them costs, and of a target's random rounds; a target whose states break them
     # gets them in its last random round and its polishing rounds.
     defer = rounds > 1 and build(jnp.arange(1), 1).defers
+    # A target that reached its pose, but only where it breaks the deferred terms, gets as many random
+    # rounds again without them before those with them: its pose is reachable, and a narrow clear
+    # branch is found by more cheap seeds.
+    escalate = random_rounds if defer else 0
     # Several targets without deferred ones: a state that misses fewer targets is the better start.
     several = moves is not None and not defer
     missed = (lambda ev: jnp.sum(~on_target(ev), axis=0)) if several else None
@@ -375,11 +379,13 @@ def search(
                 some = jnp.any(on_target(best.ev)[:, idx], axis=0)  # (m,) unsolved: some targets, not all
                 nearby = jnp.where(some[:, None], fresh[1:], nearby)
             nearby = jnp.concatenate([near[None], nearby])
-            polishing = round_index > random_rounds
+            polishing = round_index > random_rounds + jnp.where(best.slack[idx] > -jnp.inf, escalate, 0)
             found = run_from(idx, jnp.where(polishing[:, None], nearby, fresh), live, defer=defer, every=defer)
             return found._replace(iters=found.iters + jnp.where(polishing, best.iters[idx], 0))
 
-        best = _retry_unsolved(attempt, best, rounds, chunk, defer, whole_from=max(1, random_rounds), missed=missed)
+        best = _retry_unsolved(
+            attempt, best, rounds, chunk, defer, whole_from=max(1, random_rounds), escalate=escalate, missed=missed
+        )
     return best
 
 
@@ -390,7 +396,14 @@ def follow(problem, x: jax.Array, method, settings: Settings) -> Best:
 
 
 def _retry_unsolved(
-    attempt, best: Best, rounds: int, chunk: int, defer: bool = False, whole_from: int = 1, missed=None
+    attempt,
+    best: Best,
+    rounds: int,
+    chunk: int,
+    defer: bool = False,
+    whole_from: int = 1,
+    escalate: int = 0,
+    missed=None,
 ) -> Best:
     """Rounds ``1 .. rounds - 1`` for every unsolved target, ``chunk`` targets at a time.
 
@@ -405,12 +418,18 @@ def _retry_unsolved(
     its rounds from ``whole_from`` on include them (another random round without them often finds a
     clear branch: docs/performance.md, "Collision-aware IK"). The passes without them go first, with
     ``_DEFERRED_GROUP`` seeds per target (so ``chunk * GROUP / _DEFERRED_GROUP`` targets at a time);
-    the others take ``_WHOLE`` targets at a time (their iterations cost far more).
+    the others take ``_WHOLE`` targets at a time (their iterations cost far more). A target whose
+    best state is on its pose but breaks them (its ``slack`` measured, ``> -inf``) has ``escalate``
+    more rounds without them before those with them (``rounds + escalate`` in all; ``attempt`` numbers
+    its polishing rounds accordingly).
     """
     n = best.success.shape[0]
 
+    def extra(best):  # (n,) the rounds a target has beyond ``rounds``
+        return jnp.where(best.slack > -jnp.inf, escalate, 0)
+
     def pending(best, done):
-        return ~best.success & (done < rounds)
+        return ~best.success & (done < rounds + extra(best))
 
     def passes(state, due, size: int, attempt):
         def body(state):
@@ -438,7 +457,7 @@ def _retry_unsolved(
     if defer:  # (each of these rounds has _DEFERRED_GROUP seeds per target: a pass as many seeds as another)
         state = passes(
             state,
-            lambda b, d, broke: pending(b, d) & (~broke | (d < whole_from)),
+            lambda b, d, broke: pending(b, d) & (~broke | (d < whole_from + extra(b))),
             max(1, chunk * GROUP // _DEFERRED_GROUP),
             partial(attempt, defer=True),
         )

@@ -123,8 +123,9 @@ def solve(
             other by one-sided residuals (:mod:`diffkin.ik._terms.avoid`). Those rows are
             deferred (they cost ~30x the pose's): seeds iterate without them (later rounds with 4x
             the seeds) and every seed that reaches the pose is checked for clearance; a target whose
-            states are on target but not clear gets them in its last random round and its polishing
-            rounds, from its clearest state on the pose (seeds screened for clearance).
+            states are on target but not clear gets as many random rounds again without them, then
+            them in its last random round and its polishing rounds, from its clearest state on the
+            pose (seeds screened for clearance).
             Success also needs the exact clearance ``>= margin`` (``IKResult.clearance``),
             which a solution may meet without the ``0.01`` m band above it. The implicit derivative
             of ``q`` is that of the targets alone: exact where no distance is within

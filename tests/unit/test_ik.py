@@ -260,6 +260,49 @@ def test_without_a_success_the_seed_that_misses_fewest_targets_is_kept():
     assert float(_best(seeds, 1, None, missed=missed).x[0, 0]) == 1.0
 
 
+def test_a_target_on_its_pose_only_in_contact_gets_more_rounds_without_the_clearance():
+    """diffkin.ik._search._retry_unsolved with deferred terms, on a scripted ``attempt``: a target whose
+    best state reached its pose but broke the clearance (slack measured, cost inf) gets ``escalate``
+    more rounds without it before its rounds with it (``rounds + escalate`` in all); a target that never
+    reached its pose keeps ``rounds``; a solved one stops."""
+    from diffkin.ik._problem import Eval
+    from diffkin.ik._search import Best, _retry_unsolved
+
+    calls = []
+
+    def attempt(idx, round_index, live, best, defer=False):
+        def record(idx, round_index, live):
+            calls.extend((int(i), int(r), defer) for i, r, ok in zip(idx, round_index, live, strict=True) if ok)
+
+        jax.debug.callback(record, idx, round_index, live)
+        solved = (idx == 2) & (round_index >= 2)  # target 2 succeeds in its second round
+        on_pose_in_contact = (idx == 1) & defer  # target 1: on its pose, in contact, in every round without it
+        slack = jnp.where(solved, 0.0, jnp.where(on_pose_in_contact, -1e-3, -jnp.inf))
+        cost = jnp.where(solved, 0.0, jnp.where(on_pose_in_contact, jnp.inf, 1.0))
+        ev = Eval(jnp.zeros((1,) + idx.shape), jnp.zeros((1, 1) + idx.shape), cost, *(jnp.zeros((1,) + idx.shape),) * 2)
+        return Best(jnp.zeros((1,) + idx.shape), ev, solved, jnp.zeros(idx.shape, jnp.int32), slack)
+
+    n, rounds, whole_from, escalate = 3, 5, 3, 4
+    no = jnp.zeros(n, bool)
+    first = Best(
+        jnp.zeros((1, n)),
+        Eval(jnp.zeros((1, n)), jnp.zeros((1, 1, n)), jnp.ones(n), jnp.zeros((1, n)), jnp.zeros((1, n))),
+        no,
+        jnp.zeros(n, jnp.int32),
+        jnp.full(n, -jnp.inf),
+    )
+    best = _retry_unsolved(attempt, first, rounds, 2, defer=True, whole_from=whole_from, escalate=escalate)
+    jax.effects_barrier()
+    rounds_of = {k: sorted((r, d) for i, r, d in calls if i == k) for k in range(n)}
+    assert rounds_of[0] == [(r, True) for r in range(1, rounds)]  # never on its pose: the usual rounds
+    assert rounds_of[1] == [(r, True) for r in range(1, whole_from + escalate)] + [
+        (r, False) for r in range(whole_from + escalate, rounds + escalate)
+    ]
+    assert rounds_of[2] == [(1, True), (2, True)]
+    np.testing.assert_array_equal(best.success, [False, False, True])
+    assert float(best.slack[1]) == np.float32(-1e-3)  # the clearest state on the pose is kept
+
+
 STATIC = (
     '<robot name="r"><link name="a"><inertial><mass value="1"/></inertial></link><link name="b"/>'
     '<joint name="j" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>'
