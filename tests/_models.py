@@ -98,10 +98,6 @@ joint), an arm with a ball joint (three entries of ``q``), a four-bar linkage (a
 three hinges solved from the crank), a snake one joint longer than the unrolled pass takes (the scanned
 pass) and the tree on a floating base (its root pose an argument)."""
 CHAIN_KINDS = ("standard DH", "modified DH", "PoE")
-UNROLLED_KINDS = tuple(kind for kind in MODEL_KINDS if kind != "long chain")
-"""Every kind but the long chain: forward passes unrolled joint by joint. The scanned pass's autodiff Jacobian
-is one forward-mode scan per joint, each compiled (14 s eager and 14 s jitted for the 33-joint snake on the
-2-core host, 90 s for the four calls of the test under load; docs/models.md: "use the analytic one")."""
 
 
 @functools.cache

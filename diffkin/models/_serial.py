@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin import _validate as check
+from diffkin.models import _scanned
 
 
 class SerialChain:
@@ -41,6 +42,11 @@ class SerialChain:
     def actuated_types(self) -> str:
         """``"R"``/``"P"`` of each entry of ``q`` (:attr:`joint_types`)."""
         return self.joint_types
+
+    @property
+    def scanned(self) -> bool:
+        """Whether :meth:`forward` is the scanned pass (more than :data:`~diffkin.models._scanned.LONG` joints)."""
+        return self.dof > _scanned.LONG
 
     def _check(self, concrete: bool) -> None:
         dof = check.chain_statics(self)

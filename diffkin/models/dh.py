@@ -139,7 +139,7 @@ class DHChain(SerialChain):
     def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> Pass:
         """The forward pass (:mod:`diffkin.models.forward`): the DH product, frame ``i`` after joint ``i`` (more than
         :data:`~diffkin.models._scanned.LONG` joints: scanned, :func:`~diffkin.models._scanned.chain_forward`)."""
-        if self.dof > _scanned.LONG:
+        if self.scanned:
             with jax.ensure_compile_time_eval():  # a concrete chain's PoE form is a constant
                 screws, home, link_homes = poe_arrays(self)
             return _scanned.chain_forward(screws, link_homes, home, q, base, first=self.base)

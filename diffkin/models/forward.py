@@ -21,8 +21,9 @@ effector (tool included) and ``i`` the link frame ``i`` (``0``: the base, ``1 ..
 moving links). Poses are :class:`diffkin._rigid.Rigid` (entries, so that constants fold: see
 :mod:`diffkin._static`).
 
-Besides ``forward``, a model has ``dof``, ``joint_names``, ``lower``, ``upper`` (of ``q``) and
-``actuated_types`` (``"R"``/``"P"`` per entry of ``q``).
+Besides ``forward``, a model has ``dof``, ``joint_names``, ``lower``, ``upper`` (of ``q``),
+``actuated_types`` (``"R"``/``"P"`` per entry of ``q``) and ``scanned`` (whether ``forward`` returns
+a :class:`StackedPass`: one scan over the joints).
 """
 
 from __future__ import annotations
@@ -81,6 +82,9 @@ class Model(Protocol):
 
     @property
     def actuated_types(self) -> str: ...
+
+    @property
+    def scanned(self) -> bool: ...
 
     def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> Pass: ...
 

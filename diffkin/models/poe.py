@@ -151,7 +151,7 @@ class PoEChain(SerialChain):
     def forward(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> Pass:
         """The forward pass (:mod:`diffkin.models.forward`): the product of exponentials (more than
         :data:`~diffkin.models._scanned.LONG` joints: scanned, :func:`~diffkin.models._scanned.chain_forward`)."""
-        if self.dof > _scanned.LONG:
+        if self.scanned:
             return _scanned.chain_forward(self.screws, self.link_homes, self.home, q, base)
         S, L = host(self.screws), host(self.link_homes)
         T = base

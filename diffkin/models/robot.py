@@ -177,6 +177,12 @@ class Robot:
         return "".join(kinds[name] for name in self.joint_names)
 
     @property
+    def scanned(self) -> bool:
+        """Whether :meth:`forward` is the scanned pass (a path of more than :data:`~diffkin.models._scanned.LONG`
+        joints)."""
+        return _scanned.longest_path(self.parents) > _scanned.LONG
+
+    @property
     def mimic(self) -> dict[str, tuple[str, float, float]]:
         """``{joint: (source, multiplier, offset)}`` of the joints that follow another (host values)."""
         m, o = np.asarray(self.multipliers, np.float64), np.asarray(self.offsets, np.float64)
@@ -231,7 +237,7 @@ class Robot:
     def tree_pass(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> RobotPass:
         """The pass of the tree at the values ``q`` of ``q``'s entries and then of the dependent joints
         (:attr:`dependent_names`, solved by :meth:`forward`)."""
-        if _scanned.longest_path(self.parents) > _scanned.LONG:
+        if self.scanned:
             if self.loop_bodies:
                 raise ValueError(
                     f"robot {self.name!r}: closed loops on a path of more than {_scanned.LONG} joints are not supported"
