@@ -1,8 +1,9 @@
 """What the packages built on collision use beyond its public names (internal: not in API.md).
 
 IK's clearance term (and the trajectories that reuse it) places the shapes by its own frames' poses and
-measures distances and their motions in its own layouts; every function that takes a ``dk.ik.Avoid``
-checks its geometry against the robot; the viewer draws a convex shape by its hull.
+measures distances and their motions in its own layouts, and checks an ``Avoid``'s geometry against the
+robot (``diffkin.ik.interface.check_avoid``, which every function taking ``avoid=`` calls); the viewer
+draws a convex shape by its hull.
 """
 
 from diffkin.collision._fit import hull

@@ -11,18 +11,15 @@ import dataclasses
 from collections.abc import Callable, Mapping
 from typing import Any, NamedTuple
 
-from diffkin._checks import instance
-from diffkin.collision.interface import check_geometry
 from diffkin.ik import _args
 from diffkin.ik._terms import Constraint, Target, com, pose, relative
-from diffkin.ik._terms.avoid import Avoid, AvoidTerm
+from diffkin.ik._terms.avoid import Avoid, AvoidTerm, check_avoid
 from diffkin.models.robot import Robot
 
 
 def _avoid(robot: Robot, avoid, weights: Mapping) -> list[tuple[AvoidTerm, Avoid, str]]:
     """The clearance term of ``avoid=dk.ik.Avoid(...)``: ``[(term, avoid, label)]``, checked on the host."""
-    instance(avoid, Avoid, "avoid", "a dk.ik.Avoid(geom, world, margin)")
-    check_geometry(robot, avoid.geom)
+    check_avoid(robot, avoid)
     return [(AvoidTerm.of(avoid), avoid, "'avoid'")]
 
 

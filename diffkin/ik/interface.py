@@ -2,12 +2,24 @@
 
 The trajectories (:mod:`diffkin.traj`) check and cast their arguments as ``dk.ik.solve`` does, and build
 their clearance rows from IK's problem and its clearance term (:class:`AvoidTerm`, whose ``measure``
-gives the distances per pair block).
+gives the distances per pair block). Every function that takes ``avoid=`` checks it with
+:func:`check_avoid`.
 """
 
 from diffkin.ik._args import check_batched, default_key, finite
 from diffkin.ik._prepare import cast, detach
 from diffkin.ik._problem import Kinematics, Problem, Spec
-from diffkin.ik._terms.avoid import AvoidTerm
+from diffkin.ik._terms.avoid import AvoidTerm, check_avoid
 
-__all__ = ["AvoidTerm", "Kinematics", "Problem", "Spec", "cast", "check_batched", "default_key", "detach", "finite"]
+__all__ = [
+    "AvoidTerm",
+    "Kinematics",
+    "Problem",
+    "Spec",
+    "cast",
+    "check_avoid",
+    "check_batched",
+    "default_key",
+    "detach",
+    "finite",
+]

@@ -205,15 +205,13 @@ def sample_self_motion(
 
 def _check_avoid(avoid) -> None:
     """``avoid`` is ``(robot, Avoid)``: a seven-joint robot and an ``Avoid`` of its geometry."""
-    from diffkin.collision.interface import check_geometry
-    from diffkin.ik import Avoid
+    from diffkin.ik.interface import check_avoid
     from diffkin.models.robot import Robot
 
     if not (isinstance(avoid, tuple) and len(avoid) == 2):
         raise TypeError(f"avoid: expected a pair (robot, dk.ik.Avoid(...)), got {type(avoid).__name__}")
     robot, clear_of = avoid
     instance(robot, Robot, "avoid[0]", "a diffkin.Robot whose joints are the arm's")
-    instance(clear_of, Avoid, "avoid[1]", "a dk.ik.Avoid(geom, world, margin)")
     if robot.dof != 7:
         raise ValueError(f"avoid[0]: expected a robot with the arm's 7 joints, got {robot.dof}")
-    check_geometry(robot, clear_of.geom)
+    check_avoid(robot, clear_of, "avoid[1]")

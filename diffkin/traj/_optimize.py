@@ -13,7 +13,7 @@ from diffkin._checks import positive_int, real_array
 from diffkin._static import combine, is_concrete, partition
 from diffkin._xla import solver_jit
 from diffkin.ik import Avoid
-from diffkin.ik.interface import cast, check_batched, default_key, detach, finite
+from diffkin.ik.interface import cast, check_avoid, check_batched, default_key, detach, finite
 from diffkin.models.robot import Robot
 from diffkin.traj import _limits, _reach, _spline
 from diffkin.traj._certify import certified
@@ -104,10 +104,10 @@ def optimize(
     num_seeds = positive_int(num_seeds, "num_seeds", "an int >= 1")
     if isinstance(max_iters, bool) or not isinstance(max_iters, (int, np.integer)) or max_iters < 0:
         raise ValueError(f"max_iters: expected an int >= 0, got {max_iters!r}")
-    if avoid is not None and not isinstance(avoid, Avoid):
-        raise TypeError(f"avoid: expected a diffkin.ik.Avoid or None, got {type(avoid).__name__}")
     if avoid is not None and not isinstance(model, Robot):
         raise TypeError(f"avoid: needs a diffkin.Robot with collision geometry, got a {type(model).__name__}")
+    if avoid is not None:
+        check_avoid(model, avoid)
     if limits is None:
         limits = _limits.default(model.velocity)
     if not isinstance(limits, _limits.Limits):

@@ -15,7 +15,7 @@ import viser.transforms as vtf
 import diffkin as dk
 from diffkin._checks import positive_int
 from diffkin._npz import read_npz
-from diffkin.collision.interface import check_geometry
+from diffkin.ik.interface import check_avoid
 from diffkin.viewer import _overlays, _visuals
 from diffkin.viewer._arm_panel import ArmPanel
 from diffkin.viewer._gui import Page, node, plain, shown
@@ -587,14 +587,11 @@ def _checked_avoid(avoid, model):
     """``avoid`` if it is ``None`` or a ``dk.ik.Avoid`` of ``model``'s geometry (a :class:`~diffkin.Robot`)."""
     if avoid is None:
         return None
-    if not isinstance(avoid, dk.ik.Avoid):
-        raise TypeError(f"avoid: expected a dk.ik.Avoid (geometry, obstacles, margin), got {type(avoid).__name__}")
     if not isinstance(model, dk.Robot):
         raise TypeError(
             f"avoid: collision-aware IK needs a dk.Robot (a URDF or MJCF file's robot), got {type(model).__name__}"
         )
-    check_geometry(model, avoid.geom)
-    return avoid
+    return check_avoid(model, avoid)
 
 
 class ViewerOptions(TypedDict, total=False):

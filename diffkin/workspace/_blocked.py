@@ -19,16 +19,15 @@ from diffkin.models.robot import Robot
 def checked(model, avoid) -> tuple[Robot, str]:
     """``model`` as the ``(robot, frame_name)`` pair that ``avoid`` (a :class:`~diffkin.ik.Avoid` with
     obstacles shared by every problem) is of."""
-    from diffkin import ik
     from diffkin.collision import World
+    from diffkin.ik.interface import check_avoid
 
-    if not isinstance(avoid, ik.Avoid):
-        raise TypeError(f"avoid: expected a dk.ik.Avoid (geometry, obstacles, margin), got {type(avoid).__name__}")
     if not (isinstance(model, tuple) and len(model) == 2 and isinstance(model[0], Robot)):
         raise ValueError("avoid: needs model=(robot, frame_name), the map's robot and tool frame")
     robot, frame = model
     if frame not in robot.frame_names:
         raise ValueError(f"model: no frame {frame!r} in the robot (frames: {', '.join(robot.frame_names)})")
+    check_avoid(robot, avoid)
     if not isinstance(avoid.world, World):
         raise ValueError("avoid: expected obstacles (a dk.ik.Avoid with a world)")
     if avoid.world.batch != ():

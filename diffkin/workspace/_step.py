@@ -13,7 +13,6 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from diffkin._checks import instance
 from diffkin._static import ModelKey, partition
 from diffkin._xla import opaque_index
 from diffkin.models.ranges import sampling_ranges, uniform
@@ -34,14 +33,12 @@ class _Collision(NamedTuple):
 
 def _collision_check(pair, avoid) -> _Collision:
     """The static collision check of a map of ``pair = (robot, frame_name)`` with ``avoid``, checked on the host."""
-    from diffkin.collision.interface import check_geometry
-    from diffkin.ik import Avoid
+    from diffkin.ik.interface import check_avoid
 
     if not (isinstance(pair, tuple) and len(pair) == 2 and isinstance(pair[0], Robot)):
         raise ValueError("avoid: needs a (robot, frame_name) pair as chain (collision geometry is a robot's)")
-    instance(avoid, Avoid, "avoid", "a dk.ik.Avoid(geom, world, margin)")
     robot, frame = pair
-    check_geometry(robot, avoid.geom)
+    check_avoid(robot, avoid)
     chain = robot.chain(frame)
     lo, hi = np.asarray(robot.lower, np.float64), np.asarray(robot.upper, np.float64)
     middle = np.where(np.isfinite(lo) & np.isfinite(hi), (lo + hi) / 2, np.where(np.isfinite(lo), lo, 0.0))

@@ -223,6 +223,37 @@ def test_bad_avoid_arguments(arm):
         dk.ik.solve(other, target, avoid=dk.ik.Avoid(dk.collision.load(ARM, robot).replace_pairs([]), world))
 
 
+_P = np.array([0.3, 0.0, 0.5])
+_GRID = {"voxel_size": 0.1, "key": jax.random.key(0)}
+#: Every function that takes ``avoid=dk.ik.Avoid(...)`` of a robot, called with ``(robot, avoid)``.
+_TAKING_AVOID = {
+    "ik.solve": lambda r, a: dk.ik.solve(r, {"hand": _P}, avoid=a),
+    "ik.solve_path": lambda r, a: dk.ik.solve_path(r, {"hand": np.stack([_P, _P])}, avoid=a),
+    "ik.step": lambda r, a: dk.ik.step(r, np.zeros(r.dof), {"hand": _P}, dt=0.1, avoid=a),
+    "traj.optimize": lambda r, a: dk.traj.optimize(r, np.zeros(r.dof), np.full(r.dof, 0.1), avoid=a),
+    "workspace.reachability": lambda r, a: dk.workspace.reachability((r, "hand"), 8, avoid=a, **_GRID),
+    "workspace.capability": lambda r, a: dk.workspace.capability((r, "hand"), 8, avoid=a, **_GRID),
+}
+
+
+@pytest.mark.parametrize("name", sorted(_TAKING_AVOID))
+def test_every_avoid_keyword_is_checked_alike(arm, name):
+    """One host-side check of ``avoid=`` (``diffkin.ik.interface.check_avoid``): IK, paths, velocity IK,
+    trajectories and the workspace maps raise the same errors for a value that is not an ``Avoid`` and for
+    the geometry of another robot, before anything is compiled."""
+    robot, geom, world = arm
+    other = dk.load_robot(
+        ARM.replace('name="l3"', 'name="l3x"')
+        .replace('<child link="l3"/>', '<child link="l3x"/>')
+        .replace('<parent link="l3"/>', '<parent link="l3x"/>')
+    )
+    call = _TAKING_AVOID[name]
+    with pytest.raises(TypeError, match=r"^avoid: expected a dk\.ik\.Avoid\(geom, world, margin\), got World$"):
+        call(robot, world)
+    with pytest.raises(ValueError, match="^geom: its shape on 'l3' is not on a frame of robot"):
+        call(other, dk.ik.Avoid(geom, world))
+
+
 def test_reachability_counts_only_clear_samples(arm):
     """A map with ``avoid`` against a brute-force count of the same samples (one chunk: key
     ``fold_in(key, 0)``) that clear the obstacles and the robot itself by the margin, float64."""

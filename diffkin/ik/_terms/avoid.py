@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin import _rigid as rg
+from diffkin._checks import instance
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._xla import blocks_joined
 from diffkin.collision import Geometry, World
@@ -119,6 +120,25 @@ class Avoid:
         when ``self_collision``, every shape to the world), ``inf`` if nothing is checked."""
         check_geometry(robot, self.geom)
         return smallest_distance(robot, self.geom, q, _obstacles(self), base, self.self_collision)
+
+
+def check_avoid(robot, avoid, name: str = "avoid") -> Avoid:
+    """``avoid`` if it is an :class:`Avoid` of ``robot``'s collision geometry: the one host-side check of
+    every ``avoid=`` (IK, the SRS self-motion, the workspace maps, base placement, trajectories, the viewer;
+    each checks its own model's form first).
+
+    Args:
+        robot: the :class:`diffkin.Robot` the geometry was loaded for.
+        avoid: the value given.
+        name: how the message names it (``"avoid"``; ``"avoid[1]"`` for the SRS arm's pair).
+
+    Raises:
+        TypeError: ``avoid`` is not an :class:`Avoid`, or ``robot`` not a Robot.
+        ValueError: ``avoid.geom`` was not loaded for ``robot``.
+    """
+    instance(avoid, Avoid, name, "a dk.ik.Avoid(geom, world, margin)")
+    check_geometry(robot, avoid.geom)
+    return avoid
 
 
 def _obstacles(avoid: Avoid) -> World | None:
