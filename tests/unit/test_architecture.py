@@ -12,7 +12,9 @@ from diffkin.models import _passes, forward
 
 PACKAGE = pathlib.Path(dk.__file__).parent
 MODEL_CLASSES = (dk.DHChain, dk.PoEChain, dk.Robot, forward.ChainPass, _passes.RobotPass, _passes.ScannedPass)
-HOOKS = {"_check"}  # diffkin._pytree's validation hook, which every model defines for it
+# diffkin._pytree's hooks, which the models define for it: validation (every model) and the defaults that
+# depend on other fields (read with getattr, as a model need not define it)
+HOOKS = {"_check", "_fill"}
 # Import cycles known and not yet untied, each as its sorted modules: none (a new one fails the test, and so
 # does an entry here that is no longer a cycle).
 KNOWN_CYCLES: set[tuple[str, ...]] = set()
@@ -154,7 +156,9 @@ def test_the_cycle_check_sees_a_cycle():
 # ``diffkin/ik/``), importing or reading an underscore name of another package's module (``from
 # diffkin._xla import _x``, ``mjcf._Reader``), and reading an underscore attribute that only other
 # packages define (``reader._get(...)`` on an object of another package's class; ``HOOKS`` aside).
-# Imports inside functions count.
+# Imports inside functions count, and so do the same uses spelled with a string constant
+# (``importlib.import_module("diffkin.collision._near")``, ``getattr(reader, "_get")``, ``hasattr``,
+# ``setattr``, ``delattr``).
 
 
 def _owner(module: str) -> str:
@@ -221,28 +225,57 @@ def _reaches(name: str, path: pathlib.Path, tree: ast.AST, modules, defined: dic
                     module(base, node)
                     if _underscore(alias.name) and _owner(base) != me:
                         use(node, f"imports {full}")
+        elif isinstance(node, ast.Call) and _named_import(node) and node.args[0].value.split(".")[0] == "diffkin":
+            module(node.args[0].value, node)  # importlib.import_module("diffkin.pkg._private")
     own = defined.get(me, set()) | HOOKS
     for node in ast.walk(tree):
-        if not isinstance(node, ast.Attribute):
+        if isinstance(node, ast.Attribute):
+            value, chain = _attributes(node)
+        elif isinstance(node, ast.Call) and _named_attribute(node):  # getattr(x, "_name"): x._name
+            value, chain = _attributes(node.args[0])
+            chain.append(node.args[1].value)
+        else:
             continue
-        chain, value = [], node
-        while isinstance(value, ast.Attribute):
-            chain.append(value.attr)
-            value = value.value
         if isinstance(value, ast.Name) and value.id in bound:  # a module of diffkin: follow it down the attributes
             target = bound[value.id]
-            for attr in reversed(chain):
+            for attr in chain:
                 if f"{target}.{attr}" not in modules:
                     if _underscore(attr) and _owner(target) != me:
                         use(node, f"reads {target}.{attr}")
                     break
                 target = f"{target}.{attr}"
                 module(target, node)
-        elif _underscore(node.attr) and node.attr not in own:
-            others = sorted(p for p, names in defined.items() if node.attr in names)
+        elif _underscore(chain[-1]) and chain[-1] not in own:
+            others = sorted(p for p, names in defined.items() if chain[-1] in names)
             if others:
-                use(node, f"reads .{node.attr} of {', '.join(others)}")
+                use(node, f"reads .{chain[-1]} of {', '.join(others)}")
     return found
+
+
+def _attributes(node: ast.expr) -> tuple[ast.expr, list[str]]:
+    """The base of a chain of attributes and the attributes, innermost first: ``a.b.c`` is ``(a, [b, c])``."""
+    chain = []
+    while isinstance(node, ast.Attribute):
+        chain.append(node.attr)
+        node = node.value
+    return node, chain[::-1]
+
+
+def _constant_string(node: ast.Call, i: int) -> bool:
+    return len(node.args) > i and isinstance(node.args[i], ast.Constant) and isinstance(node.args[i].value, str)
+
+
+def _named_attribute(node: ast.Call) -> bool:
+    """``getattr``/``hasattr``/``setattr``/``delattr`` of an attribute named by a string constant."""
+    builtin = isinstance(node.func, ast.Name) and node.func.id in {"getattr", "hasattr", "setattr", "delattr"}
+    return builtin and _constant_string(node, 1)
+
+
+def _named_import(node: ast.Call) -> bool:
+    """``importlib.import_module`` (or ``import_module``) of a module named by a string constant."""
+    func = node.func
+    name = func.attr if isinstance(func, ast.Attribute) else func.id if isinstance(func, ast.Name) else ""
+    return name == "import_module" and _constant_string(node, 0)
 
 
 def _all_reaches() -> set[str]:
@@ -261,8 +294,8 @@ def test_no_package_reaches_into_another():
 
 def test_the_reach_check_sees_a_violation():
     """Planted uses of each kind are found (top level, in a function, relative, through an alias, down a
-    chain of attributes), and a package's own privates, the toolkit's modules, public names of other
-    packages and their interface modules are not."""
+    chain of attributes, named by a string constant), and a package's own privates, the toolkit's modules,
+    public names of other packages and their interface modules are not."""
     modules = {
         "diffkin": PACKAGE / "__init__.py",
         "diffkin._xla": PACKAGE / "_xla.py",
@@ -287,6 +320,12 @@ def f(reader, self):
     _xla._in_halves(interface.moved, dk.collision._near.near_motions, dk.ik._solve._plan)
     self._check(True)
     return reader._get(_solve._own, reader._fields, interface._hidden)
+
+def g(reader, name):
+    import importlib
+    importlib.import_module("diffkin.collision._near"), importlib.import_module("diffkin.collision.interface")
+    getattr(reader, "_get"), hasattr(interface, "_hidden"), setattr(dk.collision, "_near", None)
+    getattr(reader, "_own", None), getattr(reader, "_fields"), getattr(reader, name), getattr(dk, "_xla").solver_jit
 """
     defined = {"diffkin.models": {"_get", "_check"}, "diffkin.ik": {"_own"}, "diffkin.collision": {"_hidden"}}
     found = _reaches("diffkin.ik._terms.avoid", modules["diffkin.ik._terms.avoid"], ast.parse(code), modules, defined)
@@ -295,6 +334,10 @@ def f(reader, self):
         "ik/_terms/avoid.py:11: reads diffkin._xla._in_halves",
         "ik/_terms/avoid.py:13: reads ._get of diffkin.models",
         "ik/_terms/avoid.py:13: reads diffkin.collision.interface._hidden",
+        "ik/_terms/avoid.py:17: imports diffkin.collision._near",
+        "ik/_terms/avoid.py:18: imports diffkin.collision._near",
+        "ik/_terms/avoid.py:18: reads ._get of diffkin.models",
+        "ik/_terms/avoid.py:18: reads diffkin.collision.interface._hidden",
         "ik/_terms/avoid.py:2: imports diffkin._xla._in_halves",
         "ik/_terms/avoid.py:3: imports diffkin.collision._private_name",
         "ik/_terms/avoid.py:9: imports diffkin.collision._near",
