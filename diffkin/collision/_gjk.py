@@ -42,6 +42,8 @@ TOLERANCE = 1e-12
 FLOAT32_TOLERANCE = 1e-6
 #: the most GJK steps (polytope cores converge in a few; the curved rim of a cylinder linearly)
 STEPS = 128
+#: GJK stops a pair whose point nearest the origin has not got nearer in this many steps
+IDLE = 4
 #: projected-ascent steps refining an overlapping pair's direction
 ASCENT_STEPS = 24
 #: the overlap search runs on the overlapping pairs, 1 / OVERLAP_SHARE of a batch at a time
@@ -164,11 +166,17 @@ def _gjk(a, b, dtype, beyond) -> tuple[jax.Array, jax.Array, jax.Array]:
     lam = jnp.zeros(batch + (4,), dtype).at[..., 0].set(1.0)
 
     def step(state):
-        k, Ya, Yb, mask, lam, done = state
+        k, Ya, Yb, mask, lam, done, nearest, idle = state
         x = jnp.sum(lam[..., None] * (Ya - Yb), axis=-2)
         wa, wb = core_supports(a, b, -x)
         w = wa - wb
         xx = _dot(x, x)
+        # no longer getting nearer in floating point (in float32 a pair can cycle a few roundings short
+        # of FLOAT32_TOLERANCE, and the batch would take every step of STEPS for it): done after IDLE
+        # steps; s(n) is a lower bound all the same
+        nearer = xx < nearest * (1 - 4 * eps)
+        nearest, idle = jnp.where(nearer, xx, nearest), jnp.where(nearer, 0, idle + 1)
+        done = done | (idle > IDLE)
         Y = Ya - Yb
         scale = jnp.maximum(jnp.max(jnp.where(mask, _dot(Y, Y), 0.0), axis=-1), _dot(w, w))
         # converged: the gap between the upper bound |x|^2 and x.w within the tolerance, or within its
@@ -206,10 +214,12 @@ def _gjk(a, b, dtype, beyond) -> tuple[jax.Array, jax.Array, jax.Array]:
             jnp.where(keep, mask, mask_new),
             jnp.where(keep, lam, lam_new),
             done,
+            nearest,
+            idle,
         )
 
-    state = (0, Ya, Yb, mask, lam, jnp.zeros(batch, bool))
-    _, Ya, Yb, mask, lam, _ = jax.lax.while_loop(lambda s: (s[0] < STEPS) & ~jnp.all(s[5]), step, state)
+    state = (0, Ya, Yb, mask, lam, jnp.zeros(batch, bool), jnp.full(batch, jnp.inf, dtype), jnp.zeros(batch, jnp.int32))
+    _, Ya, Yb, mask, lam, *_ = jax.lax.while_loop(lambda s: (s[0] < STEPS) & ~jnp.all(s[5]), step, state)
     pa, pb = jnp.sum(lam[..., None] * Ya, axis=-2), jnp.sum(lam[..., None] * Yb, axis=-2)
     x = pa - pb
     centres = a.centre() - b.centre()
