@@ -100,7 +100,8 @@ def solve(
         q0: optional ``(..., dof)`` warm start broadcastable to the targets' batch; it is an extra
             seed and, among successful seeds, the solution nearest to ``q0`` is returned.
         num_seeds: most random seeds per target (static, >= 1), in rounds of 4; only unsolved
-            targets use more than the first round.
+            targets use more than the first round. Where a joint moves two targets (a relative
+            target; grippers on a torso), an unsolved target gets twice the later random rounds.
         method: ``"lm"`` (default) or ``"optax"``.
         max_iters: iterations per seed (static); default 10 for LM, 1000 for optax. Each
             iteration is one forward pass.
@@ -401,7 +402,7 @@ def _solve(
         first,
         facts.steps(optimizer),
         settings,
-        moves=jnp.asarray(moves) if len(spec.terms) > 1 else None,
+        moves=moves if len(spec.terms) > 1 else None,
     )
     x, ev = best.x, best.ev
     if spec.secondary:

@@ -37,7 +37,8 @@ def test_two_hands_hold_a_box_while_one_reaches():
         )
     )
     res = solve(jnp.asarray(T[:, 0], jnp.float32), jnp.asarray(T_l_r, jnp.float32))
-    assert res.pos_err.shape == (N, 2) and _rate(res.success) >= 0.95
+    # 64 of 64 (63 before unsolved coupled targets got twice the random rounds, issue 56)
+    assert res.pos_err.shape == (N, 2) and _rate(res.success) >= 0.98
     ok = np.asarray(res.success)
     got = _pin_poses(BAXTER, baxter, res.q, HANDS)
     pos, rot = _errors(got[:, 0], T[:, 0])
