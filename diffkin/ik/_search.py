@@ -301,9 +301,9 @@ def search(
     missed = (lambda ev: jnp.sum(~on_target(ev), axis=0)) if several else None
     if several and np.any(np.sum(moves, axis=1) > 1):
         # Targets that share joints (a relative target, which both arms move; a humanoid's grippers on
-        # its torso): a seed's steps settle between them, each a few mm off (20 of 21 unsolved relative
-        # problems on Baxter reached neither hand), so fewer seeds reach one and let `redrawn` search
-        # for the other alone: a target still unsolved there gets twice the random rounds.
+        # its torso): a seed's steps settle between them, each a few mm off (nearly every unsolved
+        # relative problem on Baxter reached neither hand), so fewer seeds reach one and let `redrawn`
+        # search for the other alone: a target still unsolved there gets twice the random rounds.
         random_rounds *= 2
         rounds = 1 + random_rounds + settings.polish
     moves = None if moves is None else jnp.asarray(moves)
