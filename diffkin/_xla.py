@@ -357,8 +357,8 @@ def summed_products(x: jax.Array, y: jax.Array, axis: int) -> jax.Array:
 
     As an ``einsum`` of a short contraction per entry (GJK's support scores, the IK step's ``J^T J`` with
     the problems last), XLA's CPU backend makes a batched dot of one tiny product per entry; written out,
-    every operation is elementwise, one fused loop that vectorises along the batch (with the QP's
-    materialised factor, the IK step at 4,096 problems 1.48x faster in float32: docs/performance.md).
+    every operation is elementwise, one fused loop that vectorises along the batch (measured with the IK
+    step: docs/performance.md).
 
     Returns:
         The broadcast shape of ``x`` and ``y`` without ``axis`` (zeros when that axis is empty).
