@@ -42,7 +42,7 @@ TOLERANCE = 1e-12
 FLOAT32_TOLERANCE = 1e-6
 #: the most GJK steps (polytope cores converge in a few; the curved rim of a cylinder linearly)
 STEPS = 128
-#: GJK stops a pair whose point nearest the origin has not got nearer in this many steps
+#: GJK stops a pair whose point nearest the origin has not got nearer in more than this many steps
 IDLE = 4
 #: projected-ascent steps refining an overlapping pair's direction
 ASCENT_STEPS = 24

@@ -389,7 +389,7 @@ def search(
                 some = jnp.any(on_target(best.ev)[:, idx], axis=0)  # (m,) unsolved: some targets, not all
                 nearby = jnp.where(some[:, None], fresh[1:], nearby)
             nearby = jnp.concatenate([near[None], nearby])
-            polishing = round_index > random_rounds + jnp.where(best.slack[idx] > -jnp.inf, escalate, 0)
+            polishing = round_index > random_rounds + _extra_rounds(best.slack[idx], escalate)
             found = run_from(idx, jnp.where(polishing[:, None], nearby, fresh), live, defer=defer, every=defer)
             return found._replace(iters=found.iters + jnp.where(polishing, best.iters[idx], 0))
 
@@ -403,6 +403,12 @@ def follow(problem, x: jax.Array, method, settings: Settings) -> Best:
     """Iterate one state per problem from ``x`` ``(n_state, P)`` (a warm start, no random seeds)."""
     s = _iterate(problem, problem.project(x), None, method, x.shape[1], False, settings)
     return Best(s.x, s.ev, s.success, s.iters, _unmeasured(s))
+
+
+def _extra_rounds(slack: jax.Array, escalate: int) -> jax.Array:
+    """The rounds a target has beyond the usual: ``escalate`` where its best state reached the pose but broke
+    the deferred terms (``slack`` measured, ``> -inf``: :class:`Best`), else 0."""
+    return jnp.where(slack > -jnp.inf, escalate, 0)
 
 
 def _retry_unsolved(
@@ -435,11 +441,8 @@ def _retry_unsolved(
     """
     n = best.success.shape[0]
 
-    def extra(best):  # (n,) the rounds a target has beyond ``rounds``
-        return jnp.where(best.slack > -jnp.inf, escalate, 0)
-
     def pending(best, done):
-        return ~best.success & (done < rounds + extra(best))
+        return ~best.success & (done < rounds + _extra_rounds(best.slack, escalate))
 
     def passes(state, due, size: int, attempt):
         def body(state):
@@ -467,7 +470,7 @@ def _retry_unsolved(
     if defer:  # (each of these rounds has _DEFERRED_GROUP seeds per target: a pass as many seeds as another)
         state = passes(
             state,
-            lambda b, d, broke: pending(b, d) & (~broke | (d < whole_from + extra(b))),
+            lambda b, d, broke: pending(b, d) & (~broke | (d < whole_from + _extra_rounds(b.slack, escalate))),
             max(1, chunk * GROUP // _DEFERRED_GROUP),
             partial(attempt, defer=True),
         )
