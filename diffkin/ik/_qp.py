@@ -6,21 +6,30 @@
 variables and ``m`` up to a few dozen rows. Bounds may be infinite (that side is absent) and a row
 may be off; every problem of the batch is solved at once, problem axis last.
 
-Method: a primal-dual interior-point method with Mehrotra's predictor-corrector (Nocedal & Wright,
-*Numerical Optimization*, 2nd ed., section 16.6), started from the unconstrained minimiser and one
-affine step (their (16.60) heuristic), stopped when every problem of the batch has its residuals
-and complementarity below ``TOL_EPS`` machine epsilons relative to the problem's scale, or after
-``MAX_ITERS`` iterations. Each iteration factors the reduced ``n x n`` system ``H + A^T (Z/S) A``
-once and solves it twice; every operation is elementwise along the batch (the factorisation
-unrolled entry by entry: :func:`_factor`), so XLA vectorises each over the problems. The box is
-then enforced exactly by clipping ``v`` into ``[lo, hi]`` (a move of the order of the stopping
-tolerance).
+Method, without general rows (``m = 0``, a box): an active-set method (:func:`_active_set`). Each
+iteration holds a set of variables at their bounds and solves the equality-constrained problem of the
+others exactly (one ``n x n`` Cholesky factorisation); the first few change the set by the KKT
+conditions all at once (a primal-dual active-set step), the later ones one bound at a time (a primal
+active-set step, which cannot cycle). A problem is solved when its set no longer changes: its ``v`` is
+then the exact minimiser to rounding, within the box. Problems still unsettled after :data:`BOX_ITERS`
+iterations are solved by the interior point below instead; it runs only when there are some.
 
-Tolerance: on non-degenerate problems (strict complementarity) the solution matches an exact
-active-set enumeration to ~1e-10 relative in float64 (``tests/unit/test_step.py`` checks 1e-8
-absolute on random problems) and ~1e-5 in float32. The bounds hold exactly; the general rows to
-the same tolerance. The rows must be feasible together with the box (``dk.ik.step`` makes them so:
-:func:`least_violation`); the box must have ``lo <= hi``.
+With general rows: a primal-dual interior-point method with Mehrotra's predictor-corrector (Nocedal &
+Wright, *Numerical Optimization*, 2nd ed., section 16.6), started from the unconstrained minimiser
+and one affine step (their (16.60) heuristic), stopped when every problem of the batch has its
+residuals and complementarity below ``TOL_EPS`` machine epsilons relative to the problem's scale, or
+after ``MAX_ITERS`` iterations. Each iteration factors the reduced ``n x n`` system
+``H + A^T (Z/S) A`` once and solves it twice. In both methods every operation is elementwise along
+the batch (the factorisation unrolled entry by entry: :func:`_factor`), so XLA vectorises each over
+the problems. The interior point's ``v`` is then clipped into ``[lo, hi]`` (a move of the order of
+the stopping tolerance).
+
+Tolerance: the active-set method's solution is exact to rounding (its multipliers' signs to
+``TOL_EPS`` machine epsilons of the problem's scale). The interior point's, on non-degenerate problems
+(strict complementarity), matches an exact active-set enumeration to ~1e-10 relative in float64
+(``tests/unit/test_step.py`` checks 1e-8 absolute on random problems) and ~1e-5 in float32. The bounds
+hold exactly; the general rows to the same tolerance. The rows must be feasible together with the box
+(``dk.ik.step`` makes them so: :func:`least_violation`); the box must have ``lo <= hi``.
 """
 
 from __future__ import annotations
@@ -32,13 +41,18 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from diffkin._xla import materialize
+from diffkin._xla import materialize, summed_products
 from diffkin.ik._linalg import back_substitute, cholesky, forward_substitute
 
 #: Iterations at most (float64 converges in 10-20 on the problems of ``dk.ik.step``).
 MAX_ITERS = 40
 #: Stopping tolerance, in machine epsilons relative to the problem's scale.
 TOL_EPS = 64.0
+#: Active-set iterations at most on a box (the Panda's steps of ``experiments/bench_step.py`` settle well
+#: within it; problems still unsettled go to the interior point).
+BOX_ITERS = 24
+#: The active-set method's first iterations that jump (change every variable's status at once).
+BOX_JUMPS = 4
 _STEP_TO_BOUNDARY = 0.995
 
 
@@ -72,12 +86,111 @@ class Solution(NamedTuple):
 
 
 def solve(qp: QP, max_iters: int = MAX_ITERS) -> Solution:
-    """The minimiser of each problem of ``qp`` (see the module docstring for the method and its tolerance)."""
-    v, iters = _solve(*qp, max_iters=max_iters)
+    """The minimiser of each problem of ``qp`` (see the module docstring for the methods and their
+    tolerance): on a box (``m = 0``) the active-set method, the interior point (at most ``max_iters``
+    iterations) for the problems it leaves; with rows the interior point."""
     H, g, lo, hi, G, h, on = qp
+    if G.shape[0]:
+        v, iters = _interior(*qp, max_iters=max_iters)
+    else:
+        v, iters, settled = _active_set(H, g, lo, hi, max_iters=BOX_ITERS)
+        v, iters = _unless(settled, (v, iters), lambda: _interior(*qp, max_iters=max_iters))
     v = jnp.where(jnp.isfinite(v), v, jnp.clip(0.0, lo, hi))  # (never: a guard for infeasible rows)
     violation = jnp.max(jnp.where(on, h - jnp.sum(G * v[None], axis=1), 0.0), axis=0, initial=0.0)
     return Solution(v, iters, violation)
+
+
+def _unless(settled: jax.Array, value: tuple, fallback) -> tuple:
+    """``value`` (arrays ``(..., P)``), or ``fallback()``'s where not ``settled`` ``(P,)``, the fallback
+    computed only when some problem needs it (a ``lax.cond``: as a loop of at most one pass, XLA hoisted
+    the fallback's loop-invariant part out of the loop, and it always ran; under ``vmap`` a ``cond``
+    computes both)."""
+    fell_back = lambda: tuple(jnp.where(settled, a, b) for a, b in zip(value, fallback(), strict=True))  # noqa: E731
+    return jax.lax.cond(jnp.all(settled), lambda: value, fell_back)
+
+
+def _tolerance(g: jax.Array, b: jax.Array) -> jax.Array:
+    """``(P,)`` the stopping tolerance of problems with linear terms ``g`` ``(n, P)`` and finite bounds or
+    right-hand sides ``b`` ``(k, P)`` (0 where absent): :data:`TOL_EPS` epsilons of their scale."""
+    scale = 1.0 + jnp.max(jnp.abs(g), axis=0) + jnp.max(jnp.abs(b), axis=0, initial=0.0)
+    return TOL_EPS * jnp.finfo(g.dtype).eps * scale
+
+
+def _active_set(H, g, lo, hi, *, max_iters: int) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """The active-set method on the box (module docstring), every problem at once: ``H`` ``(n, n, P)``,
+    ``g``, ``lo``, ``hi`` ``(n, P)``. Returns ``v`` ``(n, P)``, the iterations ``(P,)`` (the unconstrained
+    solve counted) and whether each problem settled ``(P,)`` (where not, ``v`` is the last iterate: within
+    the box, not the minimiser).
+
+    The start is the unconstrained minimiser clipped into the box, holding the clipped variables. Each
+    iteration solves, for the held set ``A`` (at ``lo`` or ``hi``: values ``w``), the system whose rows and
+    columns of ``A`` are those of the identity: ``v_A = w_A`` and ``H_FF v_F = -g_F - H_FA w_A``; the
+    multipliers there are ``grad = H v + g`` on ``A`` (``>= 0`` at a lower bound, ``<= 0`` at an upper).
+
+    - The first :data:`BOX_JUMPS` iterations jump (Hintermüller, Ito & Kunisch, *SIAM J. Optim.* 13(3),
+      2002): every free variable beyond a bound is held, every held one with a wrong-signed multiplier let
+      go, all at once. Usually few sets are tried, but the sets may cycle.
+    - Then they move (Nocedal & Wright, *Numerical Optimization*, 2nd ed., algorithm 16.3): towards the
+      solution as far as the box allows, holding the variables that stop the move; at the solution, the
+      most wrong-signed multiplier's variable is let go. The objective decreases at every move, so no
+      set comes back.
+
+    A problem is solved when its set stays: no free variable beyond its bounds, no multiplier wrong by
+    more than the tolerance."""
+    dtype, n = g.dtype, g.shape[0]
+    bounded = jnp.concatenate([jnp.where(jnp.isfinite(lo), lo, 0.0), jnp.where(jnp.isfinite(hi), hi, 0.0)])
+    tol = _tolerance(g, bounded)
+    eye = jnp.eye(n, dtype=dtype)[:, :, None]
+
+    def body(state):
+        k, iters, at_lo, at_hi, v, settled = state
+        held = at_lo | at_hi
+        w = jnp.where(at_lo, lo, jnp.where(at_hi, hi, 0.0))
+        M = jnp.where(held[:, None] | held[None, :], eye, H)
+        goal = _substitute(_factor(M), jnp.where(held, w, -g - summed_products(H, w[None], axis=1)))
+        # As far towards the goal as the box allows: the first bounds met are held.
+        d = jnp.where(held, 0.0, goal - v)
+        down, up = d < 0, d > 0
+        ratio = jnp.where(
+            down, (lo - v) / jnp.where(down, d, -1.0), jnp.where(up, (hi - v) / jnp.where(up, d, 1.0), jnp.inf)
+        )
+        alpha = jnp.minimum(jnp.min(ratio, axis=0), 1.0)
+        reached = alpha >= 1.0
+        stops = ~reached & (ratio <= alpha)
+        moved = jnp.where(stops & down, lo, jnp.where(stops & up, hi, jnp.clip(v + alpha * d, lo, hi)))
+        # At the goal: the held variable whose multiplier is the most wrong-signed is let go.
+        grad = summed_products(H, goal[None], axis=1) + g
+        wrong = jnp.where(at_lo, -grad, jnp.where(at_hi, grad, -jnp.inf))
+        worst = jnp.max(wrong, axis=0)
+        go = reached & (worst > tol)
+        dropped = go & (wrong >= worst)
+        moving = (
+            jnp.where(reached, at_lo & ~dropped, at_lo | (stops & down)),
+            jnp.where(reached, at_hi & ~dropped, at_hi | (stops & up)),
+            jnp.where(reached, jnp.clip(goal, lo, hi), moved),
+        )
+        # Or, in the first iterations, jump: every variable beyond a bound and every wrong multiplier at once.
+        jump_lo = (~held & (goal < lo)) | (at_lo & (grad >= -tol))
+        jump_hi = (~held & (goal > hi)) | (at_hi & (grad <= tol))
+        jumping = k < BOX_JUMPS
+        jumped = (jump_lo, jump_hi, jnp.clip(goal, lo, hi))
+        new = tuple(jnp.where(jumping, a, b) for a, b in zip(jumped, moving, strict=True))
+        stays = jnp.all((jump_lo == at_lo) & (jump_hi == at_hi), axis=0)
+        done = jnp.where(jumping, stays, reached & ~go)
+        keep = lambda a, b: jnp.where(settled, b, a)  # noqa: E731
+        at_lo, at_hi, v = (keep(a, b) for a, b in zip(new, (at_lo, at_hi, v), strict=True))
+        return k + 1, iters + (~settled).astype(iters.dtype), at_lo, at_hi, v, settled | done
+
+    def cond(state):
+        k, *_, settled = state
+        return (k < max_iters) & ~jnp.all(settled)
+
+    free = _substitute(_factor(H), -g)
+    at_lo, at_hi = free < lo, free > hi
+    settled = ~jnp.any(at_lo | at_hi, axis=0)
+    start = (jnp.zeros((), jnp.int32), jnp.ones(g.shape[1:], jnp.int32), at_lo, at_hi, jnp.clip(free, lo, hi), settled)
+    _, iters, _, _, v, settled = jax.lax.while_loop(cond, body, start)
+    return v, iters, settled
 
 
 #: Largest ``n`` factored entry by entry (:func:`_factor`); above it, a batched LAPACK Cholesky
@@ -120,20 +233,18 @@ def _computed(*arrays: jax.Array) -> tuple[jax.Array, ...]:
     return tuple(jnp.split(joined, list(itertools.accumulate(sizes))[:-1]))
 
 
-def _solve(H, g, lo, hi, G, h, on, *, max_iters: int) -> tuple[jax.Array, jax.Array]:
-    """Every problem at once, problem axis last: ``H`` ``(n, n, P)``, ``g``, ``lo``, ``hi`` ``(n, P)``, ``G``
-    ``(m, n, P)``, ``h``, ``on`` ``(m, P)``; returns ``v`` ``(n, P)`` (clipped into the box) and the
-    iterations ``(P,)``. Each problem's iterates are those of the problem alone: it stops when it
-    converges, the others go on (the loop runs while any has not)."""
+def _interior(H, g, lo, hi, G, h, on, *, max_iters: int) -> tuple[jax.Array, jax.Array]:
+    """The interior point (module docstring), every problem at once, problem axis last: ``H``
+    ``(n, n, P)``, ``g``, ``lo``, ``hi`` ``(n, P)``, ``G`` ``(m, n, P)``, ``h``, ``on`` ``(m, P)``; returns ``v``
+    ``(n, P)`` (clipped into the box) and the iterations ``(P,)``. Each problem's iterates are those of the
+    problem alone: it stops when it converges, the others go on (the loop runs while any has not)."""
     dtype, n = g.dtype, g.shape[0]
-    eps = jnp.finfo(dtype).eps
     # The constraints a^T v - b >= 0: the lower bounds (a = e_i), the upper (a = -e_i), the rows.
     has_lo, has_hi = jnp.isfinite(lo), jnp.isfinite(hi)
     mask = jnp.concatenate([has_lo, has_hi, on])  # (2n + m, P)
     b = jnp.where(mask, jnp.concatenate([lo, -hi, h]), 0.0)
     count = jnp.maximum(jnp.sum(mask, axis=0), 1)
-    scale = 1.0 + jnp.max(jnp.abs(g), axis=0) + jnp.max(jnp.abs(b), axis=0)
-    tol = TOL_EPS * eps * scale
+    tol = _tolerance(g, b)
     rows = G.shape[0] > 0
     eye = jnp.eye(n, dtype=dtype)[:, :, None]
 

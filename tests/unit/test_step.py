@@ -161,6 +161,105 @@ def test_qp_factor_is_linalg_s_cholesky(dtype):
     np.testing.assert_allclose(np.einsum("ikp,jkp->ijp", full, full), H, rtol=1e-4 if dtype == np.float32 else 1e-12)
 
 
+def _random_boxes(P, n, seed):
+    """``P`` box problems (no rows), problem axis last, of every kind the active-set method meets: bounds
+    inactive, some infinite, every bound active, ``lo == hi``, a minimiser exactly on a bound (zero
+    multiplier), and ``H`` that is not an M-matrix."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for p in range(P):
+        J = rng.normal(size=(n + 1, n))
+        H = J.T @ J + 1e-3 * np.eye(n)
+        lo, hi = -rng.uniform(0.1, 1, n), rng.uniform(0.1, 1, n)
+        g = (0.3 if p % 6 == 0 else 30.0 if p % 6 == 1 else 3.0) * rng.normal(size=n)  # inside; every bound active
+        if p % 6 == 2:
+            lo[1] = hi[1] = rng.uniform(-0.5, 0.5)  # a variable held by its bounds
+        if p % 6 == 3:  # the minimiser: v0 on its bound with a zero multiplier, v1 inside, the rest held at hi
+            g = -H @ np.r_[lo[0], 0.5 * (lo[1] + hi[1]), hi[2:]]
+            g[2:] -= 1.0
+        if p % 4 == 0:
+            lo[0] = -np.inf
+        if p % 5 == 0:
+            hi[-1] = np.inf
+        out.append((H, g, lo, hi, np.zeros((0, n)), np.zeros(0)))
+    return out
+
+
+BOXES = _random_boxes(48, 5, seed=3)
+
+
+def test_box_qp_matches_the_exact_active_set():
+    """Without rows the QP is solved by the active-set method: the exact minimiser (to rounding), the box
+    exactly, and the interior point's solution to its tolerance."""
+    qp = _stacked(BOXES)
+    v, iters, settled = jax.jit(lambda qp: _qp._active_set(qp.H, qp.g, qp.lo, qp.hi, max_iters=_qp.BOX_ITERS))(qp)
+    assert bool(jnp.all(settled)) and int(jnp.max(iters)) <= _qp.BOX_ITERS
+    solved = _solve_qp(qp)  # (compiled apart: the same to rounding)
+    np.testing.assert_array_equal(solved.iters, iters)  # the interior point did not run
+    np.testing.assert_allclose(solved.v, v, rtol=1e-13, atol=1e-15)
+    interior, _ = jax.jit(lambda qp: _qp._interior(*qp, max_iters=_qp.MAX_ITERS))(qp)
+    for p, (H, g, lo, hi, G, h) in enumerate(BOXES):
+        exact = _enumerated(H, g, lo, hi, G, h)
+        np.testing.assert_allclose(v[:, p], exact, atol=1e-12 * (1 + np.abs(exact).max()))
+        # (the interior point's accuracy is worse where a bound is active with a zero multiplier)
+        np.testing.assert_allclose(interior[:, p], exact, atol=1e-8 if p % 6 != 3 else 1e-6)
+        assert np.all(v[:, p] >= lo) and np.all(v[:, p] <= hi)
+    assert np.any(np.all((v == qp.lo) | (v == qp.hi), axis=0))  # some with every bound active
+
+
+def test_box_qp_nearly_singular_and_float32():
+    """``H`` of rank 2 in 5 variables plus 1e-10: the KKT conditions hold to the tolerance (the minimiser
+    itself is ill-determined along the null space); float32 as the exact minimiser to its rounding."""
+    rng = np.random.default_rng(4)
+    problems = []
+    for _ in range(16):
+        J = rng.normal(size=(2, 5))
+        H, g = J.T @ J + 1e-10 * np.eye(5), 3 * rng.normal(size=5)
+        problems.append((H, g, -np.ones(5), np.ones(5), np.zeros((0, 5)), np.zeros(0)))
+    qp = _stacked(problems)
+    v, _, settled = jax.jit(lambda qp: _qp._active_set(qp.H, qp.g, qp.lo, qp.hi, max_iters=_qp.BOX_ITERS))(qp)
+    assert bool(jnp.all(settled))
+    out = np.asarray(_solve_qp(qp).v)
+    np.testing.assert_allclose(out, v, rtol=1e-9, atol=1e-12)
+    grad = np.einsum("ijp,jp->ip", qp.H, out) + qp.g
+    at_lo, at_hi = out == -1.0, out == 1.0
+    tol = 1e-9 * (1 + np.abs(qp.g).max())
+    assert np.all(np.abs(grad[~at_lo & ~at_hi]) <= tol)
+    assert np.all(grad[at_lo] >= -tol) and np.all(grad[at_hi] <= tol)
+    assert np.all(np.abs(out) <= 1.0)
+    v32 = np.asarray(_solve_qp(_stacked(BOXES[:12], np.float32)).v, np.float64)
+    for p, (H, g, lo, hi, G, h) in enumerate(BOXES[:12]):
+        np.testing.assert_allclose(v32[:, p], _enumerated(H, g, lo, hi, G, h), atol=3e-3)
+        assert np.all(v32[:, p] >= lo.astype(np.float32)) and np.all(v32[:, p] <= hi.astype(np.float32))
+
+
+def test_box_qp_falls_back_to_the_interior_point(monkeypatch):
+    """Problems whose held set has not settled within ``BOX_ITERS`` are the interior point's: with one
+    iteration allowed, few settle; the others still get the minimiser (to the interior point's accuracy)."""
+    qp = _stacked(BOXES)
+    v, first, settled = jax.jit(lambda qp: _qp._active_set(qp.H, qp.g, qp.lo, qp.hi, max_iters=1))(qp)
+    assert np.any(settled) and not np.all(settled)
+    monkeypatch.setattr(_qp, "BOX_ITERS", 1)
+    out = jax.jit(lambda qp: _qp.solve(qp))(qp)  # (a new function: jit caches per function)
+    interior, iters = jax.jit(lambda qp: _qp._interior(*qp, max_iters=_qp.MAX_ITERS))(qp)
+    np.testing.assert_array_equal(out.iters, np.where(settled, first, iters))  # those not settled: the interior point's
+    for p, (H, g, lo, hi, G, h) in enumerate(BOXES):
+        np.testing.assert_allclose(out.v[:, p], v[:, p] if settled[p] else interior[:, p], rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(out.v[:, p], _enumerated(H, g, lo, hi, G, h), atol=1e-8 if p % 6 != 3 else 1e-6)
+
+
+def test_box_qp_non_finite_problems_stay_finite():
+    """A problem with NaN in ``H`` or an infinite ``g`` beside a plain one: every ``v`` finite, the plain
+    one solved."""
+    H = np.stack([np.eye(3), np.full((3, 3), np.nan), np.eye(3)], axis=-1)
+    g = np.stack([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [np.inf, 0.0, 0.0]], axis=-1)
+    lo, hi = np.full((3, 3), -0.5), np.full((3, 3), 0.5)
+    none = (jnp.zeros((0, 3, 3)), jnp.zeros((0, 3)), jnp.zeros((0, 3), bool))
+    out = _solve_qp(_qp.QP(*map(jnp.asarray, (H, g, lo, hi)), *none))
+    assert bool(jnp.all(jnp.isfinite(out.v)))
+    np.testing.assert_array_equal(out.v[:, 0], [-0.5, 0.0, 0.0])
+
+
 def test_least_violation_of_contradictory_rows():
     # v0 >= 1 and v0 <= -1 in the box [-5, 5]: the least largest violation is 1 (at v0 = 0).
     H = jnp.eye(2)[:, :, None]
@@ -231,6 +330,20 @@ def test_outside_the_limits():
     assert not bool(out.feasible[0]) and bool(out.feasible[1])
     assert float(out.v[0, 1]) == -VELOCITY[1]  # back towards the range at its velocity limit
     assert float(out.q[1, 1]) <= 2.0  # within one step: back inside, exactly
+
+
+def test_every_joint_outside_the_limits():
+    """Both joints further outside than a step can bring them back (a box with no point): every joint moves
+    back at its velocity limit, ``feasible=False``, nothing NaN; one joint so and the other free: the other
+    still tracks the target within its box."""
+    target = jnp.asarray([0.3, 0.0, 0.5])
+    q = jnp.asarray([[3.1, -2.1], [3.1, 0.5]])
+    out = _arm_step(q, target, jnp.asarray(VELOCITY))
+    assert not bool(jnp.any(out.feasible))
+    np.testing.assert_array_equal(out.v[0], [-VELOCITY[0], VELOCITY[1]])
+    assert float(out.v[1, 0]) == -VELOCITY[0] and abs(float(out.v[1, 1])) <= VELOCITY[1]
+    assert float(out.v[1, 1]) != 0.0
+    assert bool(jnp.all(jnp.isfinite(out.v))) and bool(jnp.all(jnp.isfinite(out.q)))
 
 
 def test_locked_joint_does_not_move():

@@ -163,9 +163,8 @@ def _g1_mink_v(robot, model, q, T, targets) -> np.ndarray:
 
 def test_floating_humanoid_matches_mink(g1):
     """The G1's root and 29 joints in one step (``solve_base``): mink's to 1e-8 of the largest velocity
-    (the issue's QP accuracy; they agree to 1.8e-9: diffkin's interior point is up to 6e-8 off the exact
-    KKT solution on the active set, with velocities up to 73, daqp 1e-12), the file's velocity limits
-    binding in several."""
+    (the issue's QP accuracy; they agree to 6e-14, velocities up to 73: both QPs are active-set methods,
+    exact to rounding), the file's velocity limits binding in several."""
     robot, model = g1
     rng = np.random.default_rng(0)
     lower, upper = np.asarray(robot.lower), np.asarray(robot.upper)
