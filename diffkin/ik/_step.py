@@ -34,7 +34,7 @@ from diffkin._static import ModelKey, is_concrete, partition
 from diffkin._xla import solver_jit, summed_products
 from diffkin.ik import _qp
 from diffkin.ik._prepare import prepare
-from diffkin.ik._problem import Kinematics
+from diffkin.ik._problem import Eval, Kinematics, Problem, settle
 from diffkin.ik._solve import plan
 from diffkin.models.dh import DHChain
 from diffkin.models.poe import PoEChain
@@ -271,7 +271,7 @@ def _step(
         None,
         None,
     )
-    ev = problem.evaluate(state)  # r (m, P), J = de/d(-x) (m, nv, P)
+    ev = _rows(problem, state)  # r (m, P), J = de/d(-x) (m, nv, P)
     u = gain * ev.r / dt
     H = summed_products(ev.J[:, :, None], ev.J[:, None, :], axis=0)  # J^T J (nv, nv, P)
     H = H + damping * jnp.eye(nv, dtype=dtype)[:, :, None]
@@ -356,6 +356,13 @@ def _step(
         task_err=shaped(jnp.where(ok, jnp.minimum(err, big), big)),
         base=moved,
     )
+
+
+def _rows(problem: Problem, state: jax.Array) -> Eval:
+    """The targets' rows ``r`` ``(m, P)`` and their Jacobian ``J`` ``(m, nv, P)`` at ``state``; the cost and the
+    errors are left out (zeros and empty): the step does not read them, and each is a kernel of its own that
+    recomputes a pose's rotation log."""
+    return settle(problem.residual(state)._replace(cost=0.0, pos_err=[], rot_err=[]))
 
 
 def _pad(a: jax.Array, rows: int, fill) -> jax.Array:
