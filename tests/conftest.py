@@ -12,6 +12,8 @@ random configurations), ``_reference`` (independent NumPy and Pinocchio referenc
 ``_mjcf`` and ``_fuzzing``."""
 
 import atexit
+import ctypes
+import gc
 import os
 import shutil
 import sys
@@ -121,3 +123,30 @@ def pytest_collection_modifyitems(config, items):
 @pytest.fixture(scope="session")
 def urdf_chains():
     return {name: dk.load_urdf(path, end) for name, (path, end) in URDF_ROBOTS.items()}
+
+
+# A worker keeps every program it compiled: run after run of modules, each holds 10 GB by the end of the
+# suite, and two of them on a 24 GB machine left XLA without memory (a segmentation fault while
+# compiling). Past this size a module's programs are dropped when it ends (the next module that needs
+# one reads it back from the run's persistent cache) and freed memory goes back to the system.
+RESIDENT_LIMIT_BYTES = 2 * 2**30
+
+
+def _resident_bytes() -> int:
+    """This process's resident memory (bytes) on Linux; elsewhere the limit itself (programs always dropped)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return RESIDENT_LIMIT_BYTES
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _bounded_memory():
+    yield
+    if _resident_bytes() >= RESIDENT_LIMIT_BYTES:
+        jax.clear_caches()
+        gc.collect()
+        trim = getattr(ctypes.CDLL(None), "malloc_trim", None)  # glibc's: return the freed arenas' pages
+        if trim is not None:
+            trim(0)
