@@ -4,22 +4,22 @@
 
 ``--quick``: one case, the first of the parts asked for (FK of the 7-joint arm by default).
 
-For FK, the world Jacobian (analytic, the default, and autodiff) and the default IK
-(``dk.ik.solve``, 1,000 targets) of synthetic DH chains of 7, 20 and 50 joints (IK: the iiwa14
-and chains of 20 and 50 joints), for FK and Jacobians of a whole tree (Talos from
-example-robot-data, 32 joints, 60 frames, where installed), and for whole-robot IK (``--only
-ik-robots``: Baxter's two grippers, Talos' two soles and two grippers with the root solved): ``jax.jit(f).trace(x)``,
-``.lower()`` and ``.compile()`` timed separately, float32 (the IK with the compiler options
-``dk.ik.solve`` gives its own ``jit``). Each case runs in a fresh subprocess (so nothing is
-cached between cases). Its memory is the subprocess's own: its resident memory just before tracing
-(JAX and the model loaded, ``VmRSS``) and its peak resident memory while tracing, lowering and
-compiling (``VmHWM`` of ``/proc/self/status``, reset to the current resident memory by writing
-``5`` to ``/proc/self/clear_refs`` just before tracing). Not ``getrusage``'s ``ru_maxrss``: on
-Linux a process started by ``subprocess`` starts with its parent's peak there, so every case
-would read at least the parent's memory. Where ``/proc`` is missing (not Linux) the table says
-``ru_maxrss`` and is an upper bound. A case is stopped after ``--timeout`` seconds or above
-``--max-gb`` GB of resident memory and reported as such. The batch (1,000 configurations) does not
-change what is compiled.
+For FK, the world Jacobian (analytic, the default, and autodiff) and the default IK (``dk.ik.solve``, 1,000
+targets) of synthetic DH chains of 7, 20 and 50 joints (IK: the iiwa14 and chains of 20 and 50 joints), for FK
+and Jacobians of a whole tree (Talos from example-robot-data, 32 joints, 60 frames, where installed), and for
+whole-robot IK (``--only ik-robots``: Baxter's two grippers, Talos' two soles and two grippers with the root
+solved): ``jax.jit(f).trace(x)``, ``.lower()`` and ``.compile()`` timed separately, float32 (the IK with the
+compiler options ``dk.ik.solve`` gives its own ``jit``), and the compiled program's kernels (XLA fusions: its
+CPU compile time follows their number). A ``PYTHONPATH`` given comes before this checkout, so that
+``PYTHONPATH=/path/to/other/checkout`` measures another commit's ``diffkin`` with this script. Each case runs
+in a fresh subprocess (so nothing is cached between cases). Its memory is the subprocess's own: its resident
+memory just before tracing (JAX and the model loaded, ``VmRSS``) and its peak resident memory while tracing,
+lowering and compiling (``VmHWM`` of ``/proc/self/status``, reset to the current resident memory by writing
+``5`` to ``/proc/self/clear_refs`` just before tracing). Not ``getrusage``'s ``ru_maxrss``: on Linux a process
+started by ``subprocess`` starts with its parent's peak there, so every case would read at least the parent's
+memory. Where ``/proc`` is missing (not Linux) the table says ``ru_maxrss`` and is an upper bound. A case is
+stopped after ``--timeout`` seconds or above ``--max-gb`` GB of resident memory and reported as such. The
+batch (1,000 configurations) does not change what is compiled.
 
 ``--cache``: what JAX's persistent cache (on by default for diffkin's users) saves a script's second run:
 each IK case (the iiwa14, Baxter, Talos' contacts, and the Panda with ``avoid``: capsules, a few
@@ -41,6 +41,7 @@ from pathlib import Path
 SIZES = (7, 20, 50)
 QUICK_SIZES = (7,)
 BATCH = 1000
+ROOT = Path(__file__).resolve().parents[1]  # this checkout
 
 
 def chain(dof: int):
@@ -226,7 +227,7 @@ def run_case(work: str, model: str) -> dict:
     t1 = time.perf_counter()
     lowered = traced.lower()
     t2 = time.perf_counter()
-    lowered.compile()
+    compiled = lowered.compile()
     t3 = time.perf_counter()
     if own:
         peak, source = _status_gb("VmHWM"), "VmHWM"
@@ -238,6 +239,7 @@ def run_case(work: str, model: str) -> dict:
         "trace": t1 - t0,
         "lower": t2 - t1,
         "compile": t3 - t2,
+        "kernels": compiled.as_text().count(" fusion("),
         "rss_before_gb": rss_before,
         "peak_gb": peak,
         "peak_source": source,
@@ -250,7 +252,8 @@ def measure(work: str, model: str, timeout: float, max_gb: float, cache: str | N
     env = dict(
         os.environ,
         DIFFKIN_CACHE_DIR=cache or os.environ.get("DIFFKIN_CACHE_DIR", "off"),
-        PYTHONPATH=os.pathsep.join([str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")]),
+        # a PYTHONPATH given (another checkout's diffkin, to compare) before this checkout
+        PYTHONPATH=os.pathsep.join(filter(None, [os.environ.get("PYTHONPATH"), str(ROOT)])),
     )
     proc = subprocess.Popen(
         [sys.executable, __file__, "--case", work, model],
@@ -320,13 +323,13 @@ NAMES = {
 
 
 def rows(parts=("fk", "jacobian", "ik"), quick: bool = False, timeout: float = 300.0, max_gb: float = 4.0):
-    """Markdown rows ``[work, model, trace, lower, compile, peak memory]`` of every case."""
+    """Markdown rows ``[work, model, trace, lower, compile, kernels, peak memory]`` of every case."""
     out = []
     for work, model in cases(parts, quick):
         r = measure(work, model, timeout, max_gb)
         name = NAMES.get(model, f"DH chain, {model} joints")
         if "stopped" in r:
-            out.append([work, name, r["stopped"], "", "", ""])
+            out.append([work, name, r["stopped"], "", "", "", ""])
         else:
             before = "" if r["rss_before_gb"] is None else f" (before tracing {r['rss_before_gb']:.2f} GB)"
             upper = "" if r["peak_source"] == "VmHWM" else " (ru_maxrss: an upper bound)"
@@ -337,6 +340,7 @@ def rows(parts=("fk", "jacobian", "ik"), quick: bool = False, timeout: float = 3
                     f"{r['trace']:.2f} s",
                     f"{r['lower']:.2f} s",
                     f"{r['compile']:.2f} s",
+                    f"{r['kernels']:,}",
                     f"{r['peak_gb']:.2f} GB{before}{upper}",
                 ]
             )
@@ -369,7 +373,7 @@ def cache_rows(timeout: float = 300.0, max_gb: float = 4.0):
 
 
 CACHE_HEADER = ["IK case (1,000 targets)", "first run: trace + lower, compile", "second run", "second / first"]
-HEADER = ["work", "model", "trace", "lower", "compile", "peak resident memory of the case's own process"]
+HEADER = ["work", "model", "trace", "lower", "compile", "kernels", "peak resident memory of the case's own process"]
 MEMORY = (
     "Memory: each case's own subprocess, its peak resident memory while tracing, lowering and compiling "
     "(`VmHWM` of `/proc/self/status`, reset just before tracing), and its resident memory just before tracing "
