@@ -28,8 +28,9 @@ from diffkin.collision._distance import BOUNDED, GENERAL, lower_bound, motion
 from diffkin.collision._robot import batch_shape
 from diffkin.collision._shapes import taken
 
-#: the exact motion of the near pairs is computed for 1 / NEAR_SHARE of the pairs at a time.
-NEAR_SHARE = 8
+#: the exact motion of the near pairs is computed for 1 / NEAR_SHARE of the pairs at a time: in clutter a few
+#: percent of the pairs are near, and a step costs its whole share, padding included (docs/performance.md).
+NEAR_SHARE = 64
 
 
 def _wrench(n: jax.Array, p: jax.Array) -> jax.Array:

@@ -382,12 +382,16 @@ def _arm_geometry():
     return dk.collision.load(ARM, robot), World(Sphere(np.zeros((1, 3)), np.ones(1)))
 
 
-def _random_boxes(rng, n, spread):
+def _random_boxes(rng, n, spread, onto=None):
+    """``n`` boxes, randomly turned, centred within ``spread`` of the origin; ``onto`` ``(k, 3)``: the first
+    ``k`` centred there instead."""
     T = np.tile(np.eye(4), (n, 1, 1))
     for k in range(n):
         w = rng.normal(size=3)
         T[k, :3, :3] = _rotation(w)
     T[:, :3, 3] = rng.uniform(-spread, spread, (n, 3))
+    if onto is not None:
+        T[: len(onto), :3, 3] = onto
     return Box(T, rng.uniform(0.03, 0.2, (n, 3)))
 
 
@@ -406,39 +410,53 @@ def test_near_motion_is_exact_where_the_reach_is():
     bound is not stops early). Box-box and
     capsule-box alone (their closed forms, gathered per kind), and joined with the general pairs
     capsule-cylinder and polytope-box in one GJK batch (apart: exact to GJK's tolerance; overlapping:
-    never shallower than exact), with no pair near (no step), few (one step) and most (several)."""
+    never shallower than a closed form, in contact where GJK alone is), with no pair near (no step), few
+    (one step) and most (several)."""
     from diffkin.collision import Capsule, Convex, Cylinder
-    from diffkin.collision._distance import lower_bound, motion
+    from diffkin.collision._distance import GENERAL, lower_bound, motion
     from diffkin.collision._near import NEAR_SHARE, near_motions
 
     near = jax.jit(near_motions)
     rng = np.random.default_rng(7)
-    n, reach = 200, 0.05
+    n, reach, spread = 200, 0.05, 8.0
     budget = -(-n // NEAR_SHARE)  # pairs per step of the boxes
     corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
-    for spread, steps in ((8.0, range(0, 1)), (1.0, range(1, 2)), (0.25, range(2, NEAR_SHARE + 1))):
+    # far apart, but the first `count` pairs of each kind placed near each other: none, a few, most
+    for count, steps in ((0, range(0, 1)), (max(1, budget // 2), range(1, 2)), (3 * n // 4, range(2, NEAR_SHARE + 1))):
+
+        def onto(centres, count=count):  # 0.1-0.2 m from the centres: touching, overlapping or near
+            offsets = rng.normal(size=(count, 3))
+            return (
+                centres[:count] + offsets * rng.uniform(0.1, 0.2, (count, 1)) / np.linalg.norm(offsets, axis=1)[:, None]
+            )
+
         ends = rng.uniform(-spread, spread, (n, 3))
         capsules = Capsule(ends, ends + rng.uniform(-0.2, 0.2, (n, 3)), rng.uniform(0.02, 0.1, n))
-        cylinders = _random_boxes(rng, n, spread)
+        cylinders = _random_boxes(rng, n, spread, onto(ends))
         cylinders = Cylinder(cylinders.pose, cylinders.half_extents[:, 0], cylinders.half_extents[:, 1])
         hulls = _random_boxes(rng, n, spread)
         hulls = Convex(hulls.pose, rng.uniform(0.5, 1.0, (n, 8, 1)) * corners * hulls.half_extents[:, None])
+        boxes = _random_boxes(rng, n, spread)
         closed = [
-            (capsules, _random_boxes(rng, n, spread)),
-            (_random_boxes(rng, n, spread), _random_boxes(rng, n, spread)),
+            (capsules, _random_boxes(rng, n, spread, onto(ends))),
+            (boxes, _random_boxes(rng, n, spread, onto(boxes.pose[:, :3, 3]))),
         ]
-        general = [(capsules, cylinders), (hulls, _random_boxes(rng, n, spread))]
+        general = [(capsules, cylinders), (hulls, _random_boxes(rng, n, spread, onto(hulls.pose[:, :3, 3])))]
         for pairs, joined in ((closed, False), (closed + general, True)):
             for (a, b), (d, Wa, Wb) in zip(pairs, near(pairs, reach), strict=True):
                 d, d_exact, Wa_exact, Wb_exact = (np.asarray(x) for x in (d, *motion(a, b)))
                 close, apart = d_exact < reach, d_exact > 0
                 measured = np.asarray(lower_bound(a, b)) < reach  # exact there, zero wrenches elsewhere
                 if not joined:  # gathered alone: the steps it took
-                    assert -(-measured.sum() // budget) in steps and (close.sum() > 0) == (steps.start > 0), spread
+                    assert -(-measured.sum() // budget) in steps and (close.sum() > 0) == (steps.start > 0), count
                 # GJK: the distance to its tolerance, the normal (the wrenches) to about its square root
                 tol = 1e-10 if joined else 1e-14
                 np.testing.assert_allclose(d[close & apart], d_exact[close & apart], rtol=0, atol=tol)
-                assert np.all(d[close & ~apart] <= d_exact[close & ~apart] + tol) and np.all(d[~close] >= reach)
+                assert np.all(d[~close] >= reach)
+                if (type(a), type(b)) in GENERAL:  # overlapping, `motion` is GJK too: two estimates of the depth
+                    assert np.all(d[close & ~apart] < 0)
+                else:  # overlapping, never shallower than the closed form
+                    assert np.all(d[close & ~apart] <= d_exact[close & ~apart] + tol)
                 # (an overlapping GJK pair's witnesses are support points, which may tie: apart ones only)
                 same = close & apart if joined else close
                 for W, exact in ((Wa, Wa_exact), (Wb, Wb_exact)):
