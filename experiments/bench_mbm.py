@@ -39,6 +39,7 @@ clear the slab and the self pairs by the margin on the real meshes, by coal).
     python experiments/bench_mbm.py --quick                # 10 problems per scene (stratified)
     python experiments/bench_mbm.py --model capsules --scenes box,cage --per-scene 2 --no-curobo
     python experiments/bench_mbm.py --write                # results/<machine>-mbm.md
+    python experiments/bench_mbm.py --scenes cage --per-scene 20 --no-curobo --loop --key 3   # a loop, other seeds
 """
 
 from __future__ import annotations
@@ -81,19 +82,30 @@ CUROBO_PUBLISHED = {"IK": (2.60138, 100.0), "collision-free IK": (2.72574, 100.0
 
 
 def solve_problems(
-    robot, geom, targets: np.ndarray, worlds: list, locked: dict, dtype, desc: str = "solve", loop: bool = False
+    robot,
+    geom,
+    targets: np.ndarray,
+    worlds: list,
+    locked: dict,
+    dtype,
+    desc: str = "solve",
+    loop: bool = False,
+    key: int = 0,
 ) -> dk.ik.IKResult:
     """``(N,)`` results of the targets ``(N, 4, 4)``, target ``k`` among ``worlds[k]`` (same counts): one call
     with a world per target (``World`` of problem axes ``(N,)``), or, with ``loop``, a Python loop of one
-    problem per call (``dk.ik.solve`` compiles once for the padded counts)."""
+    problem per call (``dk.ik.solve`` compiles once for the padded counts); the solver's seeds from
+    ``jax.random.key(key)`` in every call."""
     if not loop:
         world = jax.tree.map(lambda *x: jnp.stack(x), *worlds)  # (N, n_kind, ...): a world per target
         avoid = dk.ik.Avoid(geom, world, margin=MARGIN)
-        return jax.block_until_ready(dk.ik.solve(robot, {EE: jnp.asarray(targets, dtype)}, avoid=avoid, locked=locked))
+        T = jnp.asarray(targets, dtype)
+        return jax.block_until_ready(dk.ik.solve(robot, {EE: T}, avoid=avoid, locked=locked, key=jax.random.key(key)))
     out = []
     for T, world in zip(progress(targets, desc), worlds, strict=True):
         avoid = dk.ik.Avoid(geom, world, margin=MARGIN)
-        out.append(dk.ik.solve(robot, {EE: jnp.asarray(T[None], dtype)}, avoid=avoid, locked=locked))
+        target = jnp.asarray(T[None], dtype)
+        out.append(dk.ik.solve(robot, {EE: target}, avoid=avoid, locked=locked, key=jax.random.key(key)))
     return jax.block_until_ready(jax.tree.map(lambda *x: jnp.concatenate(x), *out))
 
 
@@ -195,7 +207,7 @@ def subset(problems: list, per_scene: int | None) -> list:
     return [problems[k] for k in np.linspace(0, len(problems) - 1, per_scene).round().astype(int)]
 
 
-def mbm(robot, geom, judge: Judge, scenes: dict, dtype, loop: bool) -> tuple[list, list, float]:
+def mbm(robot, geom, judge: Judge, scenes: dict, dtype, loop: bool, key: int = 0) -> tuple[list, list, float]:
     """Per scene: the solves and their judgement; returns the table's rows, the misses and the first call (s)."""
     locked = {"panda_finger_joint1": FINGER}
     goal_clearance = jax.jit(lambda q, w: C.clearance(robot, geom, q, w))  # diffkin's model at goal_q, float64
@@ -211,6 +223,7 @@ def mbm(robot, geom, judge: Judge, scenes: dict, dtype, loop: bool) -> tuple[lis
         dtype,
         "first call",
         loop,
+        key,
     )
     first = time.perf_counter() - start
     print(f"# first call ({len(first_problems)} problem(s), compile included): {first:.1f} s", flush=True)
@@ -219,7 +232,7 @@ def mbm(robot, geom, judge: Judge, scenes: dict, dtype, loop: bool) -> tuple[lis
         T = np.stack([target_of(p) for p in problems])
         worlds = [world_of(p, PAD) for p in problems]
         start = time.perf_counter()
-        res = solve_problems(robot, geom, T, worlds, locked, dtype, scene, loop)
+        res = solve_problems(robot, geom, T, worlds, locked, dtype, scene, loop, key)
         warm = time.perf_counter() - start
         obstacles = [judge.coal.obstacles(p) for p in problems]
         goal_q = np.stack([configuration(p["goal_q"]) for p in problems])
@@ -390,6 +403,9 @@ def main(argv=None) -> int:
     parser.add_argument("--curobo-draws", type=int, default=5, help="cuRobo's setting: batches of 100 (default 5)")
     parser.add_argument("--no-curobo", action="store_true", help="skip cuRobo's setting")
     parser.add_argument("--loop", action="store_true", help="one problem per call (default: a scene per call)")
+    parser.add_argument(
+        "--key", type=int, default=0, help="the solver's PRNG key, jax.random.key(KEY), in every call (default 0)"
+    )
     parser.add_argument("--write", action="store_true", help="write experiments/results/<machine>-mbm.md")
     args = parser.parse_args(argv)
     command = "python experiments/bench_mbm.py " + " ".join(argv if argv is not None else sys.argv[1:])
@@ -409,7 +425,7 @@ def main(argv=None) -> int:
     judge = Judge(urdf, robot, geom)
     n = sum(len(p) for p in scenes.values())
     print(f"# {n} MBM problems, robot model {args.model!r}, {args.dtype}; pose judged by {judge.fk_name}", flush=True)
-    rows, misses, first = mbm(robot, geom, judge, scenes, dtype, args.loop)
+    rows, misses, first = mbm(robot, geom, judge, scenes, dtype, args.loop, args.key)
     curobo_rows = None if args.no_curobo else curobo(robot, geom, judge, args.curobo_draws, dtype)
 
     parts = [
