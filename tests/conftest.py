@@ -125,10 +125,10 @@ def urdf_chains():
     return {name: dk.load_urdf(path, end) for name, (path, end) in URDF_ROBOTS.items()}
 
 
-# A worker keeps every program it compiled: run after run of modules, each holds 10 GB by the end of the
-# suite, and two of them on a 24 GB machine left XLA without memory (a segmentation fault while
-# compiling). Past this size a module's programs are dropped when it ends (the next module that needs
-# one reads it back from the run's persistent cache) and freed memory goes back to the system.
+# A worker keeps every program it compiled: module after module, the two workers together had filled the
+# machine's memory by the end of the suite and XLA failed while compiling (a segmentation fault). Past this
+# size a module's programs are dropped when it ends (the next module that needs one reads it back from the
+# run's persistent cache) and freed memory goes back to the system.
 RESIDENT_LIMIT_BYTES = 2 * 2**30
 
 
@@ -147,6 +147,6 @@ def _bounded_memory():
     if _resident_bytes() >= RESIDENT_LIMIT_BYTES:
         jax.clear_caches()
         gc.collect()
-        trim = getattr(ctypes.CDLL(None), "malloc_trim", None)  # glibc's: return the freed arenas' pages
-        if trim is not None:
+        trim = getattr(ctypes.CDLL(None), "malloc_trim", None) if sys.platform == "linux" else None
+        if trim is not None:  # glibc's: return the freed arenas' pages
             trim(0)
