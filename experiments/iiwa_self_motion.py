@@ -72,7 +72,7 @@ def clearance_plot(arm, target, gc0, out: str) -> None:
     psi = np.linspace(-np.pi, np.pi, 721)
     q, valid = (np.asarray(x) for x in srs.ik(arm, target, psi, srs.ALL_GC[:, None]))  # (8, P, 7), (8, P)
     clear = np.asarray(avoid.clearance(robot, q))  # (8, P)
-    samples, ok = srs.sample_self_motion(arm, target, 200, avoid=(robot, avoid))
+    samples, ok = srs.sample_self_motion(arm, target, 200, avoid=avoid, model=robot)
     sample_psi, sample_gc = (np.asarray(x) for x in srs.arm_angle(arm, samples))
     shown = [g for g in range(8) if mask[g].any()]
     fig, axes = plt.subplots(len(shown), 1, figsize=(9, 2.2 * len(shown)), sharex=True, squeeze=False)

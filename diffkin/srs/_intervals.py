@@ -19,6 +19,8 @@ Extra roots (``theta = L + pi``, the other sign of a cosine-type joint) only spl
 
 from __future__ import annotations
 
+import warnings
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -143,7 +145,8 @@ def sample_self_motion(
     *,
     key: jax.Array | None = None,
     gc: jax.Array | None = None,
-    avoid: tuple | None = None,
+    avoid=None,
+    model=None,
 ) -> tuple[jax.Array, jax.Array]:
     """``n`` exact IK solutions of one pose spread over its whole self-motion within the joint limits.
 
@@ -158,10 +161,12 @@ def sample_self_motion(
         n: number of samples (a positive Python int; static under ``jit``).
         key: optional ``jax.random`` key for jittered samples; ``None`` gives evenly spaced ones.
         gc: optional ``(3,)`` global configuration to sample; default all eight.
-        avoid: optional pair ``(robot, dk.ik.Avoid(geom, world, margin))``: a
-            :class:`~diffkin.Robot` whose seven joints are the arm's (its URDF with collision
-            geometry) and what to keep clear; a sample whose clearance is below the margin is not
-            ``valid``.
+        avoid: optional :class:`~diffkin.ik.Avoid` ``(geom, world, margin)`` of ``model``'s
+            geometry, as IK's ``avoid=``: a sample whose clearance is below the margin is not
+            ``valid``. (The pair ``(robot, Avoid)`` of earlier releases is still read, with a
+            DeprecationWarning.)
+        model: with ``avoid``, the :class:`~diffkin.Robot` whose seven joints are the arm's (its
+            URDF with collision geometry), as ``model=`` of :func:`diffkin.workspace.base_placement`.
 
     Returns:
         ``q (n, 7)`` joint angles (radians) and ``valid (n,)``: false when the pose has no
@@ -169,13 +174,13 @@ def sample_self_motion(
         or (with ``avoid``) where the arm collides.
 
     Raises:
-        TypeError: ``n`` not an int, ``arm`` not an :class:`SRSArm`, a bad ``avoid``.
-        ValueError: ``n <= 0``, ``target`` not ``(4, 4)``, ``gc`` not ``(3,)`` of ``+-1``, an
-            ``avoid`` robot without seven joints or with geometry of another robot.
+        TypeError: ``n`` not an int, ``arm`` not an :class:`SRSArm`, a bad ``avoid`` or ``model``.
+        ValueError: ``n <= 0``, ``target`` not ``(4, 4)``, ``gc`` not ``(3,)`` of ``+-1``, ``avoid``
+            without ``model`` (or ``model`` without ``avoid``), a ``model`` without seven joints or
+            ``avoid`` geometry of another robot.
     """
     instance(arm, SRSArm, "arm", AN_ARM)
-    if avoid is not None:
-        _check_avoid(avoid)
+    robot, avoid = _robot_and_avoid(model, avoid)
     n = positive_int(n, "n", "a positive int (number of samples)")
     target = pose_array(target)
     if target.shape != (4, 4):
@@ -198,20 +203,35 @@ def sample_self_motion(
     q, valid = ik(arm, target, psi, gc_of)
     valid = valid & (total > 0)
     if avoid is not None:
-        robot, clear_of = avoid
-        valid = valid & (clear_of.clearance(robot, q) >= clear_of.margin)
+        valid = valid & (avoid.clearance(robot, q) >= avoid.margin)
     return q, valid
 
 
-def _check_avoid(avoid) -> None:
-    """``avoid`` is ``(robot, Avoid)``: a seven-joint robot and an ``Avoid`` of its geometry."""
+def _robot_and_avoid(model, avoid) -> tuple:
+    """``(robot, avoid)`` of ``model=`` and ``avoid=`` (``(None, None)`` without them), checked on the host:
+    a seven-joint robot and an ``Avoid`` of its geometry. The pair ``avoid=(robot, Avoid)`` of earlier
+    releases is read as ``model=robot, avoid=Avoid``, with a DeprecationWarning."""
     from diffkin.ik.interface import check_avoid
     from diffkin.models.robot import Robot
 
-    if not (isinstance(avoid, tuple) and len(avoid) == 2):
-        raise TypeError(f"avoid: expected a pair (robot, dk.ik.Avoid(...)), got {type(avoid).__name__}")
-    robot, clear_of = avoid
-    instance(robot, Robot, "avoid[0]", "a diffkin.Robot whose joints are the arm's")
-    if robot.dof != 7:
-        raise ValueError(f"avoid[0]: expected a robot with the arm's 7 joints, got {robot.dof}")
-    check_avoid(robot, clear_of, "avoid[1]")
+    if isinstance(avoid, tuple) and model is None:
+        if len(avoid) != 2:
+            raise TypeError(f"avoid: expected a dk.ik.Avoid(geom, world, margin), got a tuple of {len(avoid)}")
+        warnings.warn(
+            "sample_self_motion(avoid=(robot, Avoid)) is deprecated: pass avoid=Avoid(...), model=robot "
+            "(as dk.workspace.base_placement takes them)",
+            DeprecationWarning,
+            stacklevel=3,
+        )
+        model, avoid = avoid
+    if avoid is None:
+        if model is not None:
+            raise ValueError("model: only needed with avoid (the robot whose shapes are checked)")
+        return None, None
+    if model is None:
+        raise ValueError("avoid: needs model=robot, the Robot whose seven joints are the arm's")
+    instance(model, Robot, "model", "a diffkin.Robot whose joints are the arm's")
+    if model.dof != 7:
+        raise ValueError(f"model: expected a robot with the arm's 7 joints, got {model.dof}")
+    check_avoid(model, avoid)
+    return model, avoid

@@ -348,9 +348,10 @@ def test_baxter_two_hands_clear_of_itself_against_coal():
 
 
 def test_self_motion_samples_in_collision_are_not_valid():
-    """``srs.sample_self_motion(..., avoid=(robot, Avoid))`` on the iiwa14 with a capsule per link
+    """``srs.sample_self_motion(..., avoid=Avoid, model=robot)`` on the iiwa14 with a capsule per link
     (``experiments/iiwa_self_motion.py``) beside a ball on its elbow circle: ``valid`` is the closed
-    form's validity and a clearance of at least the margin, recomputed by ``dk.collision.clearance``."""
+    form's validity and a clearance of at least the margin, recomputed by ``dk.collision.clearance``.
+    The pair ``avoid=(robot, Avoid)`` of 0.1.0 gives the same samples, with a DeprecationWarning."""
     sys.path.insert(0, EXPERIMENTS)
     from iiwa_self_motion import iiwa14_with_capsules
 
@@ -365,16 +366,27 @@ def test_self_motion_samples_in_collision_are_not_valid():
     elbow = np.asarray(dk.fk(robot, q_target, "iiwa14_link_4"))[:3, 3]
     world = World(Sphere(elbow[None] + np.array([[0.0, 0.0, 0.12]]), np.array([0.08])))
     avoid = dk.ik.Avoid(geom, world, margin=0.02)
-    q, valid = dk.srs.sample_self_motion(arm, target, 300, avoid=(robot, avoid))
+    q, valid = dk.srs.sample_self_motion(arm, target, 300, avoid=avoid, model=robot)
     q_all, valid_all = dk.srs.sample_self_motion(arm, target, 300)
     np.testing.assert_array_equal(np.asarray(q), np.asarray(q_all))
     clear = np.asarray(dk.collision.clearance(robot, geom, np.asarray(q), world)) >= 0.02
     np.testing.assert_array_equal(np.asarray(valid), np.asarray(valid_all) & clear)
     assert 0.05 < np.mean(~clear[np.asarray(valid_all)]) < 0.95
-    with pytest.raises(ValueError, match="avoid\\[0\\]: expected a robot with the arm's 7 joints"):
-        dk.srs.sample_self_motion(arm, target, 3, avoid=(dk.load_robot(ARM), dk.ik.Avoid(*_arm_geometry())))
-    with pytest.raises(TypeError, match="avoid: expected a pair"):
+    with pytest.warns(DeprecationWarning, match=r"avoid=\(robot, Avoid\)\) is deprecated"):
+        q_pair, valid_pair = dk.srs.sample_self_motion(arm, target, 300, avoid=(robot, avoid))
+    np.testing.assert_array_equal(np.asarray(q_pair), np.asarray(q))
+    np.testing.assert_array_equal(np.asarray(valid_pair), np.asarray(valid))
+    two_joints = dk.load_robot(ARM)
+    with pytest.raises(ValueError, match="^model: expected a robot with the arm's 7 joints"):
+        dk.srs.sample_self_motion(arm, target, 3, avoid=dk.ik.Avoid(*_arm_geometry()), model=two_joints)
+    with pytest.raises(ValueError, match="^avoid: needs model=robot"):
         dk.srs.sample_self_motion(arm, target, 3, avoid=avoid)
+    with pytest.raises(ValueError, match="^model: only needed with avoid"):
+        dk.srs.sample_self_motion(arm, target, 3, model=robot)
+    with pytest.raises(TypeError, match=r"^avoid: expected a dk\.ik\.Avoid\(geom, world, margin\), got World$"):
+        dk.srs.sample_self_motion(arm, target, 3, avoid=world, model=robot)
+    with pytest.raises(TypeError, match="^model: expected a diffkin.Robot"):
+        dk.srs.sample_self_motion(arm, target, 3, avoid=avoid, model=robot.chain("iiwa14_link_ee"))
 
 
 def _arm_geometry():
