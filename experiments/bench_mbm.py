@@ -257,8 +257,8 @@ def mbm(robot, geom, judge: Judge, scenes: dict, dtype, loop: bool, key: int = 0
             "off pose": int((success & ~(on_pose(j, TIGHT) & j["limits"])).sum()),
             "warm": warm,
         }
-        for key, value in counts.items():
-            totals[key] = totals.get(key, 0) + value
+        for name, value in counts.items():  # (not `key`: the solver's PRNG key of every scene)
+            totals[name] = totals.get(name, 0) + value
         rows.append(_row(scene, counts))
         print(f"# {scene}: {' | '.join(rows[-1])}", flush=True)
         res_clearance = np.asarray(res.clearance, np.float64)
