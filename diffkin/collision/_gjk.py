@@ -243,7 +243,7 @@ def _overlap_direction(a, b, hint: jax.Array, dtype) -> jax.Array:
     spread = jnp.asarray(_SPREAD, dtype).reshape((len(_SPREAD),) + (1,) * (len(batch) - 1) + (3,))
     own = [hint, b.centre() - a.centre()] + _axes(a) + _axes(b)
     fallback = jnp.array([1.0, 0.0, 0.0], dtype)
-    tries = jnp.stack([jnp.broadcast_to(_unit(c, fallback), batch) for c in own])  # (K, ..., 3)
+    tries = _unit(jnp.stack([jnp.broadcast_to(c, batch) for c in own]), fallback)  # (K, ..., 3): one _unit, not K
     tries = jnp.concatenate([tries, jnp.broadcast_to(spread, (len(_SPREAD),) + batch)])
     tries = jnp.concatenate([tries, -tries])
     s = separation(a, b, tries)  # every candidate in one evaluation: (2K, ...)
