@@ -1,6 +1,7 @@
 """What the first call costs: trace, lower and compile times, and the compile's peak memory.
 
     python experiments/bench_compile.py [--quick] [--only fk,jacobian,ik] [--timeout 300] [--max-gb 4] [--cache]
+    python experiments/bench_compile.py --only clutter --parts
 
 ``--quick``: one case, the first of the parts asked for (FK of the 7-joint arm by default).
 
@@ -8,6 +9,7 @@ For FK, the world Jacobian (analytic, the default, and autodiff) and the default
 targets) of synthetic DH chains of 7, 20 and 50 joints (IK: the iiwa14 and chains of 20 and 50 joints), for FK
 and Jacobians of a whole tree (Talos from example-robot-data, 32 joints, 60 frames, where installed), and for
 whole-robot IK (``--only ik-robots``: Baxter's two grippers, Talos' two soles and two grippers with the root
+solved, the Unitree G1's two feet, a hand and its centre of mass with the root
 solved): ``jax.jit(f).trace(x)``, ``.lower()`` and ``.compile()`` timed separately, float32 (the IK with the
 compiler options ``dk.ik.solve`` gives its own ``jit``), and the compiled program's kernels (XLA fusions: its
 CPU compile time follows their number). A ``PYTHONPATH`` given comes before this checkout, so that
@@ -20,6 +22,10 @@ started by ``subprocess`` starts with its parent's peak there, so every case wou
 memory. Where ``/proc`` is missing (not Linux) the table says ``ru_maxrss`` and is an upper bound. A case is
 stopped after ``--timeout`` seconds or above ``--max-gb`` GB of resident memory and reported as such. The
 batch (1,000 configurations) does not change what is compiled.
+
+``--parts``: also each case's kernels by where the IK search calls them (the chain of its functions on a
+kernel's call stack, read from the compiled module's stack tables) and by part (collision, forward pass,
+other): where a solver's compile time goes.
 
 ``--cache``: what JAX's persistent cache (on by default for diffkin's users) saves a script's second run:
 each IK case (the iiwa14, Baxter, Talos' contacts, and the Panda with ``avoid``: capsules, a few
@@ -98,7 +104,15 @@ ROBOT_IK = {
         ["left_sole_link", "right_sole_link", "gripper_left_base_link", "gripper_right_base_link"],
         True,
     ),
+    # Unitree G1 (29 joints; example-robot-data's URDF: the MJCF of issue 57 is not installed here)
+    "g1-com": (
+        "g1_description/urdf/g1_29dof_rev_1_0.urdf",
+        ["left_ankle_roll_link", "right_ankle_roll_link", "left_rubber_hand"],
+        True,
+    ),
 }
+#: the cases of ROBOT_IK that also keep the centre of mass (horizontal, ``com=``) where it was
+WITH_COM = ("g1-com",)
 
 
 def panda_avoid():
@@ -173,6 +187,10 @@ def case_function(work: str, model: str):
         q = np.random.default_rng(0).uniform(lo, hi, (BATCH, m.dof))
         T = jnp.asarray(dk.fk(m, q, frames), jnp.float32)
         targets = {f: T[:, k] for k, f in enumerate(frames)}
+        if model in WITH_COM:
+            c = jnp.asarray(dk.com(m, q)[:, :2], jnp.float32)
+            solve = lambda t, c, key: dk.ik.solve(m, t, com=c, key=key, solve_base=floating)  # noqa: E731
+            return solve, (targets, c, jax.random.key(1))
         return (lambda t, key: dk.ik.solve(m, t, key=key, solve_base=floating)), (targets, jax.random.key(1))
     if model == "talos":
         m = talos()
@@ -211,6 +229,75 @@ def _reset_peak() -> bool:
         return False
 
 
+#: a kernel's part: the first of these folders found on its call stack (collision, forward pass), else other
+PARTS = ("/diffkin/collision/", "/diffkin/models/")
+#: what a kernel does in the search: the first of these functions on its call stack
+SITES = {
+    "_iterate": "iterations",
+    "Problem.screen_cost": "seed screening",
+    "Problem.deferred_slack": "clearance check",
+    "constraints_at": "clearance",
+}
+
+
+def _sections(text: str) -> dict[str, dict[int, str]]:
+    """The numbered tables after a compiled module's HLO (``FileNames``, ``FunctionNames``, ``FileLocations``,
+    ``StackFrames``: the call stacks that ``stack_frame_id`` names)."""
+    out: dict[str, dict[int, str]] = {}
+    table = None
+    for line in text.splitlines():
+        if line in ("FileNames", "FunctionNames", "FileLocations", "StackFrames"):
+            table = out.setdefault(line, {})
+        elif table is not None and re.match(r"^\d+ ", line):
+            number, rest = line.split(" ", 1)
+            table[int(number)] = rest
+        else:
+            table = None
+    return out
+
+
+def kernels_by_part(text: str) -> list[tuple[str, int, int, int]]:
+    """The kernels (fusions) of a compiled module by where the IK search calls them and what they compute:
+    ``(site, collision, forward pass, other)`` per site, most kernels first. A site is the part of the
+    search a kernel's call stack passes through (the first round, a pass of later rounds named by the line
+    of ``_retry_unsolved`` that runs it, the final check) and what it does there (:data:`SITES`); a kernel's
+    part is the first folder of :data:`PARTS` on its stack. Empty where the module has no stack tables."""
+    t = _sections(text)
+    if not t.get("StackFrames"):
+        return []
+    files = {k: v.strip('"') for k, v in t["FileNames"].items()}
+    names = {k: v.strip('"').replace("<locals>.", "") for k, v in t["FunctionNames"].items()}
+    where, frames = {}, {}
+    for k, v in t["FileLocations"].items():
+        f = dict(re.findall(r"(\w+)=(\d+)", v))
+        where[k] = (files[int(f["file_name_id"])], names[int(f["function_name_id"])], int(f["line"]))
+    for k, v in t["StackFrames"].items():
+        f = dict(re.findall(r"(\w+)=(\d+)", v))
+        frames[k] = (int(f["file_location_id"]), int(f["parent_frame_id"]) - 1)  # printed one above: 0 none
+
+    def stack(frame: int) -> list[tuple[str, str, int]]:
+        out = []
+        while frame > 0:
+            location, frame = frames[frame]
+            out.append(where[location])
+        return out[::-1]
+
+    counts: dict[str, list[int]] = {}
+    for line in text.splitlines():
+        if " fusion(" not in line:
+            continue
+        found = re.search(r"stack_frame_id=(\d+)", line)
+        calls = stack(int(found.group(1))) if found else []
+        functions = [fn for _, fn, _ in calls]
+        phase = next((f"later rounds (_retry_unsolved:{n})" for _, fn, n in calls if fn == "_retry_unsolved"), None)
+        phase = phase or ("the final check" if "constraints_at" in functions else "the first round")
+        what = next((label for fn, label in SITES.items() if fn in functions), None)
+        site = f"{phase}: {what}" if what else "the rest"
+        part = min((k for f, _, _ in calls for k, folder in enumerate(PARTS) if folder in f), default=len(PARTS))
+        counts.setdefault(site, [0, 0, 0])[part] += 1
+    return sorted(((s, *c) for s, c in counts.items()), key=lambda r: -sum(r[1:]))
+
+
 def run_case(work: str, model: str) -> dict:
     """Time trace, lower and compile of one case in this process (the subprocess side), and its own memory."""
     import jax
@@ -229,6 +316,7 @@ def run_case(work: str, model: str) -> dict:
     t2 = time.perf_counter()
     compiled = lowered.compile()
     t3 = time.perf_counter()
+    text = compiled.as_text()
     if own:
         peak, source = _status_gb("VmHWM"), "VmHWM"
     else:  # no /proc: getrusage, which includes what the parent held when it started this process
@@ -239,7 +327,8 @@ def run_case(work: str, model: str) -> dict:
         "trace": t1 - t0,
         "lower": t2 - t1,
         "compile": t3 - t2,
-        "kernels": compiled.as_text().count(" fusion("),
+        "kernels": text.count(" fusion("),
+        "parts": kernels_by_part(text),
         "rss_before_gb": rss_before,
         "peak_gb": peak,
         "peak_source": source,
@@ -316,18 +405,24 @@ NAMES = {
     "7": "iiwa14 (7 joints)",
     "baxter": "Baxter, two grippers (2 poses)",
     "talos-contacts": "Talos, 2 soles + 2 grippers (4 poses), root solved",
+    "g1-com": "Unitree G1 (URDF), 2 feet + a hand (3 poses), centre of mass (horizontal), root solved",
     "panda-avoid": "Panda with avoid= (capsules, 3 obstacles, 5 mm margin)",
     "panda-mbm": "Panda, one MotionBenchMaker target, no avoid=",
     "panda-mbm-avoid": "Panda, one MotionBenchMaker target, avoid= (hulls, its obstacles padded to 21, 5 mm margin)",
 }
 
 
-def rows(parts=("fk", "jacobian", "ik"), quick: bool = False, timeout: float = 300.0, max_gb: float = 4.0):
-    """Markdown rows ``[work, model, trace, lower, compile, kernels, peak memory]`` of every case."""
+def rows(
+    parts=("fk", "jacobian", "ik"), quick: bool = False, timeout: float = 300.0, max_gb: float = 4.0, by_part=None
+):
+    """Markdown rows ``[work, model, trace, lower, compile, kernels, peak memory]`` of every case; given a list
+    ``by_part``, each case's ``(name, kernels_by_part rows)`` appended to it."""
     out = []
     for work, model in cases(parts, quick):
         r = measure(work, model, timeout, max_gb)
         name = NAMES.get(model, f"DH chain, {model} joints")
+        if by_part is not None and r.get("parts"):
+            by_part.append((name, r["parts"]))
         if "stopped" in r:
             out.append([work, name, r["stopped"], "", "", "", ""])
         else:
@@ -373,6 +468,7 @@ def cache_rows(timeout: float = 300.0, max_gb: float = 4.0):
 
 
 CACHE_HEADER = ["IK case (1,000 targets)", "first run: trace + lower, compile", "second run", "second / first"]
+PART_HEADER = ["call site (the search's functions)", "collision", "forward pass", "other", "kernels"]
 HEADER = ["work", "model", "trace", "lower", "compile", "kernels", "peak resident memory of the case's own process"]
 MEMORY = (
     "Memory: each case's own subprocess, its peak resident memory while tracing, lowering and compiling "
@@ -405,6 +501,11 @@ def main() -> int:
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds per case (default 300)")
     parser.add_argument("--max-gb", type=float, default=4.0, help="resident memory per case (default 4 GB)")
     parser.add_argument("--cache", action="store_true", help="the IK cases' second runs with JAX's persistent cache")
+    parser.add_argument(
+        "--parts",
+        action="store_true",
+        help="also each case's kernels by the search's call site and by part (collision, forward pass, other)",
+    )
     args = parser.parse_args()
     if args.case:
         print(json.dumps(run_case(*args.case)))
@@ -417,8 +518,13 @@ def main() -> int:
         print("\n\n".join([p for p in paragraphs if p] + [table(CACHE_HEADER, body)]))
         return 0
 
-    body = rows(tuple(args.only.split(",")), args.quick, args.timeout, args.max_gb)
+    by_part: list = []
+    body = rows(tuple(args.only.split(",")), args.quick, args.timeout, args.max_gb, by_part)
     paragraphs = ["# diffkin compile cost", machine_line(), busy_note(), MEMORY, table(HEADER, body)]
+    if args.parts:
+        for name, parts in by_part:
+            lines = [[site, *(f"{k:,}" for k in (*c, sum(c)))] for site, *c in parts]
+            paragraphs += [f"Kernels of {name}, by call site:", table(PART_HEADER, lines)]
     print("\n\n".join(p for p in paragraphs if p))
     return 0
 
