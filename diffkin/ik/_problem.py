@@ -21,6 +21,7 @@ from diffkin.ik._terms import Constraint, Term
 from diffkin.models.ranges import into_cones
 
 BASE_ROWS = 12  # state rows of a solved root pose: p (3), then R row by row (9)
+_LINEAR = np.asarray([True] * 3 + [False] * 3)  # the rows of a twist [v; w] that are v
 
 
 class Eval(NamedTuple):
@@ -44,7 +45,8 @@ class Eval(NamedTuple):
 
 class Entries(NamedTuple):
     """The fields of an :class:`Eval` before they are computed into arrays: one entry (an array of
-    the problem shape, or a folded Python float) per value, ``J`` row by row; ``pos_err`` and
+    the problem shape, or a folded Python float) per value, ``J`` row by row (a row a list of
+    entries, or several rows as one array ``(k, n, P)``: :data:`Rows.J`); ``pos_err`` and
     ``rot_err`` one entry per term (see :func:`settle`). Rows that terms give as blocks
     (:class:`diffkin.ik._terms.Rows`) are ``blocks``: ``(r (m_b, P), J (m_b, n, P))``, stacked after
     the entries' rows; ``cost`` counts them."""
@@ -66,13 +68,16 @@ class Kinematics:
     velocity per column. ``dtype``, ``shape``: the solver's dtype and the problems' shape ``(P,)``.
     """
 
-    def __init__(self, problem: Problem, x: jax.Array):
+    def __init__(self, problem: Problem, x: jax.Array, table: tuple = ()):
+        """``table``: the frames whose :meth:`point_columns` are read (computed together, on first use)."""
         root = problem.root(x)
         self.kin = problem.model.forward(list(problem.joints(x)), root)
         self.locked = problem.locked
         self.root_columns = rg.root_screws(root) if problem.solve_base else []
         self.dtype = x.dtype
         self.shape = x.shape[1:]
+        self.table = table
+        self._point_columns: dict | None = None
 
     def pose(self, frame: int | None) -> rg.Rigid:
         return self.kin.pose(frame)
@@ -82,6 +87,55 @@ class Kinematics:
         joints = [zero if lock else c for lock, c in zip(self.locked, self.kin.columns(frame), strict=True)]
         return joints + self.root_columns
 
+    def point_columns(self, frame: int | None) -> jax.Array | None:
+        """``(6, n) + shape``: per column of the state, the velocity of ``frame``'s origin and its angular
+        velocity ``[v; w]`` (world axes; :meth:`columns` moved to the frame's origin), as one array;
+        ``None`` for a frame not in ``table``.
+
+        The columns of every frame of ``table`` are put together from their distinct entries (the
+        joints' screws, shared along the paths, and the frames' positions), computed once behind one
+        barrier: XLA's CPU backend compiles each kernel apart (~10 ms each), and the entry-wise
+        Jacobian of a whole robot is hundreds of kernels (Talos' four contacts: 288), its array form
+        one per distinct entry (about two thirds of that) and a few.
+        """
+        if frame not in self.table:
+            return None
+        if self._point_columns is None:
+            self._point_columns = self._table_columns()
+        return self._point_columns[frame]
+
+    def _table_columns(self) -> dict:
+        """:meth:`point_columns` of every frame of ``table``."""
+        distinct: list = []
+        index: dict[int, int] = {}
+
+        def slot(e) -> int:  # the entry's row in `distinct`, -1 for a folded constant
+            if isinstance(e, float):
+                return -1
+            if id(e) not in index:
+                index[id(e)] = len(distinct)
+                distinct.append(e)
+            return index[id(e)]
+
+        layouts = {}
+        for frame in dict.fromkeys(self.table):
+            columns = self.columns(frame)
+            screws = [[c[a][i] for c in columns] for a in (0, 1) for i in range(3)]  # (6, n): [v; w]
+            p = list(self.pose(frame).p)
+            layouts[frame] = (screws, p, [[slot(e) for e in row] for row in screws], [slot(e) for e in p])
+        done = materialize(distinct) if distinct else jnp.zeros((0,) + self.shape, self.dtype)
+        lead = (1,) * len(self.shape)
+        out = {}
+        for frame, (screws, p, rows, p_rows) in layouts.items():
+            S, p_f = (_gathered(done, np.asarray(s), e, lead, self.dtype) for s, e in ((rows, screws), (p_rows, p)))
+            # rg.world_from_space: v + w x p on rows 0-2 (the same operations in the same order as on
+            # entries), w on rows 3-5; gathers and a select, not a stack (a kernel per operand)
+            a, b = np.asarray([4, 5, 3] * 2), np.asarray([5, 3, 4] * 2)
+            p_f = p_f[:, None]  # (3, 1) + shape
+            cross = S[a] * p_f[b - 3] + -(S[b] * p_f[a - 3])
+            out[frame] = jnp.where(_LINEAR.reshape((6, 1) + lead), S + cross, S)
+        return out
+
     def com(self, velocities: bool = True) -> tuple[rg.Vec3, list[rg.Vec3]]:
         """The robot's centre of mass and its velocity per column of the state (empty without ``velocities``)."""
         c, joint_velocities = self.kin.com(velocities)
@@ -90,6 +144,19 @@ class Kinematics:
         zero = (0.0, 0.0, 0.0)
         joints = [zero if lock else v for lock, v in zip(self.locked, joint_velocities, strict=True)]
         return c, joints + [v for v, _ in rg.world_from_space(self.root_columns, c)]
+
+
+def _gathered(done: jax.Array, rows: np.ndarray, entries: list, lead: tuple, dtype) -> jax.Array:
+    """``rows.shape + batch``: the rows ``rows`` of ``done`` (``-1``: the folded constant in ``entries``,
+    nested as ``rows``)."""
+    constant = rows < 0
+    gathered = done[np.where(constant, 0, rows)] if len(done) else None
+    if gathered is not None and not constant.any():
+        return gathered
+    flat = [e for row in entries for e in row] if rows.ndim == 2 else entries
+    values = np.asarray([e if isinstance(e, float) else 0.0 for e in flat], np.float64).reshape(rows.shape + lead)
+    constants = jnp.asarray(values, dtype)
+    return constants if gathered is None else jnp.where(constant.reshape(rows.shape + lead), constants, gathered)
 
 
 class Spec(NamedTuple):
@@ -222,7 +289,8 @@ class Problem(NamedTuple):
 
     def residual(self, x: jax.Array, jacobian: bool = True) -> Entries:
         """The entries of every term's residual, Jacobian and errors at ``x``, from one forward pass."""
-        kin = Kinematics(self, x)
+        table = tuple(f for t in self.terms if getattr(t, "point_columns", False) for f in t.frames) if jacobian else ()
+        kin = Kinematics(self, x, table)
         r: list = []
         J: list = []
         pos_err: list = []
@@ -237,7 +305,7 @@ class Problem(NamedTuple):
                 off = jnp.max(jnp.stack(jnp.broadcast_arrays(*errors, zero)), 0) if errors else None
                 rows = cast(Constraint, term).rows(kin, bound, jacobian, off)
             r += rows.r
-            J += rows.J
+            J += rows.J if isinstance(rows.J, list) else [rows.J]
             pos_err.append(rows.pos_err)
             rot_err.append(rows.rot_err)
             if rows.block is not None:
@@ -315,14 +383,48 @@ def _head(entries: Entries) -> list:
 
 
 def _arrays(entries: Entries, head, J, blocks=None) -> Eval:
-    """An :class:`Eval` of arrays from ``head`` (:func:`_head`, stacked), ``J`` ``(m * n, P)`` and the
-    row blocks (``entries.blocks``, or ones chosen from them)."""
+    """An :class:`Eval` of arrays from ``head`` (:func:`_head`, stacked), ``J`` ``(m, n, P)`` (:func:`_assembled`)
+    and the row blocks (``entries.blocks``, or ones chosen from them)."""
     m, k = len(entries.r), len(entries.pos_err)
-    n = len(entries.J[0]) if len(entries.J) else 0 if blocks is None else blocks[1].shape[1]
-    r, J = head[:m], J.reshape((m, n) + head.shape[1:])
+    r = head[:m]
     if blocks is not None:
         r, J = jnp.concatenate([r, blocks[0]]), jnp.concatenate([J, blocks[1]])
     return Eval(r, J, head[m], head[m + 1 : m + 1 + k], head[m + 1 + k :])
+
+
+def _pieces(J: list) -> list:
+    """``J``'s rows (:class:`Entries`) as pieces: each run of entry rows one list of rows, each array as it is."""
+    pieces: list = []
+    for row in J:
+        if not isinstance(row, list):
+            pieces.append(row)
+        elif pieces and isinstance(pieces[-1], list):
+            pieces[-1].append(row)
+        else:
+            pieces.append([row])
+    return pieces
+
+
+def _entries_of(pieces: list) -> list:
+    """The entries of the pieces of entry rows, row by row."""
+    return [e for piece in pieces if isinstance(piece, list) for row in piece for e in row]
+
+
+def _assembled(pieces: list, entries: Entries, values: jax.Array, arrays: list) -> jax.Array:
+    """``(m, n, P)``: the pieces in order, entry rows from ``values`` ``(entries, P)`` (:func:`_jacobian`),
+    array pieces from ``arrays`` (one per array piece)."""
+    if not pieces:  # no Jacobian, or only blocks': no rows of n columns
+        n = 0 if entries.blocks is None else entries.blocks[1].shape[1]
+        return values.reshape((len(entries.r), n) + values.shape[1:])
+    n = len(pieces[0][0]) if isinstance(pieces[0], list) else pieces[0].shape[1]
+    out, at, given = [], 0, iter(arrays)
+    for piece in pieces:
+        if isinstance(piece, list):
+            out.append(values[at : at + len(piece) * n].reshape((len(piece), n) + values.shape[1:]))
+            at += len(piece) * n
+        else:
+            out.append(next(given))
+    return out[0] if len(out) == 1 else jnp.concatenate(out)
 
 
 def _computed(J: list) -> np.ndarray:
@@ -351,12 +453,15 @@ def _jacobian(J: list, computed: np.ndarray, values: jax.Array) -> jax.Array:
 
 def settle(entries: Entries) -> Eval:
     """The entries computed once into the arrays of an :class:`Eval`."""
-    head, J = _head(entries), [e for row in entries.J for e in row]
+    head, pieces = _head(entries), _pieces(entries.J)
+    J = _entries_of(pieces)
     computed = _computed(J)
     # Materialised: XLA's CPU fusion would otherwise recompute the whole forward pass inside
     # every kernel of the solver that consumes these entries (20x slower).
     done = materialize(head + [J[i] for i in computed])
-    return _arrays(entries, done[: len(head)], _jacobian(J, computed, done[len(head) :]), entries.blocks)
+    arrays = [piece for piece in pieces if not isinstance(piece, list)]
+    J_all = _assembled(pieces, entries, _jacobian(J, computed, done[len(head) :]), arrays)
+    return _arrays(entries, done[: len(head)], J_all, entries.blocks)
 
 
 def settle_choosing(entries: Entries, old: Eval, choose) -> tuple[Eval, jax.Array, Any]:
@@ -365,9 +470,9 @@ def settle_choosing(entries: Entries, old: Eval, choose) -> tuple[Eval, jax.Arra
     ``choose(cost)`` maps the new cost ``(P,)`` to ``(take, extra)``, ``take`` ``(P,)`` bool;
     returns ``(ev, take, extra)`` with ``take`` computed once. The residual, cost and errors are
     computed first (``choose`` reads the cost); the Jacobian's entries are then computed and
-    chosen inside the same kernels. That saves writing the new Jacobian and then a pass that reads
-    it with the old one and writes one, the largest memory traffic of an LM iteration
-    (:func:`diffkin.ik._search._iterate`).
+    chosen inside the same kernels (a term's rows given as one array: one select). That saves
+    writing the new Jacobian and then a pass that reads it with the old one and writes one, the
+    largest memory traffic of an LM iteration (:func:`diffkin.ik._search._iterate`).
     """
     head_try = materialize(_head(entries))
     take, extra = choose(head_try[len(entries.r)])
@@ -381,17 +486,29 @@ def settle_choosing(entries: Entries, old: Eval, choose) -> tuple[Eval, jax.Arra
             old.rot_err.reshape((-1,) + shape),
         ]
     )
-    J_try = [e for row in entries.J for e in row]
+    pieces = _pieces(entries.J)
+    J_try = _entries_of(pieces)
     computed = _computed(J_try)
     m = len(entries.r)
-    J_old = old.J[:m].reshape((-1,) + shape)
+    rows, arrays, at = [], [], 0  # the old rows of the entry pieces; the array pieces chosen
+    for piece in pieces:
+        k = len(piece) if isinstance(piece, list) else piece.shape[0]
+        if isinstance(piece, list):
+            rows.append(np.arange(at, at + k))
+        else:
+            arrays.append(jnp.where(take, piece, old.J[at : at + k]))
+        at += k
+    entry_rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+    contiguous = len(entry_rows) == m  # (every row an entry row: the old Jacobian's rows as they are)
+    J_old = (old.J[:m] if contiguous else old.J[entry_rows]).reshape((-1,) + shape)
     J = materialize([jnp.where(take, J_try[i], J_old[i]) for i in computed]) if len(computed) else J_old[:0]
     blocks = None
     if entries.blocks is not None:
         blocks = tuple(
             jnp.where(take, new, old_b[m:]) for new, old_b in zip(entries.blocks, (old.r, old.J), strict=True)
         )
-    return _arrays(entries, jnp.where(take, head_try, old_head), _jacobian(J_try, computed, J), blocks), take, extra
+    J_all = _assembled(pieces, entries, _jacobian(J_try, computed, J), arrays)
+    return _arrays(entries, jnp.where(take, head_try, old_head), J_all, blocks), take, extra
 
 
 def gradient(ev: Eval) -> jax.Array:

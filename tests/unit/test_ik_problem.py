@@ -50,3 +50,61 @@ def test_the_jacobian_is_put_in_place_without_a_scatter():
     """XLA's CPU backend runs a scatter into zeros as a loop over the computed entries, one row at a time."""
     jaxpr = str(jax.make_jaxpr(lambda s: settle(_entries(s)).J)(1.0))
     assert "scatter" not in jaxpr and "gather" in jaxpr
+
+
+def _mixed(scale: float) -> Entries:
+    """Entry rows, two rows as one array ``(2, 3, P)`` (a term's Jacobian in array form), an entry row."""
+    a = jnp.arange(P, dtype=jnp.float32) * scale
+    block = jnp.stack([jnp.stack([a, a + 1, a + 2]), jnp.stack([-a, 0 * a, a * a])])
+    r = [a, a + 0.5, a - 1, a + 2]
+    return Entries(r=r, J=[[a + 1, 0.0, a * 2], block, [0.0, a - 3, 0.0]], cost=a * a, pos_err=[a], rot_err=[a * 0.1])
+
+
+def _mixed_dense(scale: float) -> np.ndarray:
+    a = np.arange(P, dtype=np.float32) * scale
+    zero = np.zeros(P, np.float32)
+    rows = [[a + 1, zero, a * 2], [a, a + 1, a + 2], [-a, zero, a * a], [zero, a - 3, zero]]
+    return np.stack([np.stack(row) for row in rows])
+
+
+def test_settle_keeps_the_rows_of_entries_and_arrays_in_order():
+    ev = settle(_mixed(1.0))
+    assert ev.J.shape == (4, 3, P) and ev.r.shape == (4, P)
+    np.testing.assert_array_equal(ev.J, _mixed_dense(1.0))
+
+
+@pytest.mark.parametrize("taken", [[True, False, True, False, True], [False] * P, [True] * P])
+def test_settle_choosing_takes_array_rows_where_chosen(taken):
+    old = settle(_mixed(1.0))
+    take = jnp.asarray(taken)
+    ev, _, _ = settle_choosing(_mixed(2.0), old, lambda cost: (take, cost))
+    np.testing.assert_array_equal(ev.J, np.where(taken, _mixed_dense(2.0), _mixed_dense(1.0)))
+
+
+def test_a_pose_term_reads_its_jacobian_as_one_array_with_the_entries_numbers():
+    """A pose target's Jacobian from the frames' columns put together once
+    (:meth:`Kinematics.point_columns`) equals the entry-wise one, to the bit op by op (the same
+    operations; compiled, XLA may fuse them differently), weights, a locked joint and a solved root included."""
+    from _models import PANDA
+
+    import diffkin as dk
+    from diffkin.ik._keywords import terms_of
+    from diffkin.ik._problem import Kinematics, Spec
+
+    robot = dk.load_robot(PANDA, floating=True)
+    names = ("panda_link3", "panda_hand")
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-1.0, 1.0, (P, robot.dof))
+    T = np.asarray(dk.fk(robot, q + 0.1, names))
+    weights = {"panda_link3": (1.0, 0.5, 0.0, 2.0, 1.0, 0.0)}
+    terms = terms_of(robot, {n: T[:, k] for k, n in enumerate(names)}, {}, weights)
+    spec = Spec(terms.targets, (), tuple(i == 2 for i in range(robot.dof)), (), True, True)
+    problem = spec.problem(robot, spec.bind(tuple(terms.data), ()))
+    base = np.concatenate([rng.normal(size=(3, P)), np.tile(np.eye(3).reshape(9, 1), (1, P))])
+    x = jnp.asarray(np.concatenate([q.T, base]))
+    arrays = problem.evaluate(x).J
+    entries = Kinematics(problem, x)  # no table: the entry-wise columns
+    rows = [t.rows(entries, b, True) for t, b in zip(problem.terms, problem.bound, strict=True)]
+    assert all(isinstance(r.J, list) for r in rows)
+    dense = np.stack([np.stack([jnp.broadcast_to(e, (P,)) for e in row]) for r in rows for row in r.J])
+    np.testing.assert_array_equal(np.asarray(arrays), dense)

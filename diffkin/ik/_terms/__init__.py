@@ -40,14 +40,15 @@ from diffkin import _rigid as rg
 
 
 class Rows(NamedTuple):
-    """A term's residual entries ``r``, its Jacobian rows ``J`` (``J[i][c]``) and its errors (metres, radians).
+    """A term's residual entries ``r``, its Jacobian rows ``J`` (``J[i][c]``, or all of them as one array
+    ``(len(r), C, P)``) and its errors (metres, radians).
 
     A term with many rows computed together gives them as one ``block`` instead: ``(r (m, P),
     J (m, C, P))`` arrays (``J`` ``(m, 0, P)`` without Jacobian), after the entries.
     """
 
     r: list[rg.Entry]
-    J: list[list[rg.Entry]]
+    J: list[list[rg.Entry]] | jax.Array
     pos_err: rg.Entry
     rot_err: rg.Entry
     block: tuple[jax.Array, jax.Array] | None = None

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -45,9 +46,14 @@ def target_entries(T: jax.Array, position_only: bool) -> tuple:
     return p, R
 
 
-def error_rows(T: rg.Rigid, columns: list, p_t, R_t, weights: tuple[float, ...], dtype) -> Rows:
+def error_rows(T: rg.Rigid, columns, p_t, R_t, weights: tuple[float, ...], dtype) -> Rows:
     """The rows of a pose error: ``T`` the pose reached and ``columns`` its point velocities ``(v, w)``
-    per column of the state (empty: no Jacobian), both in the axes of the target ``(p_t, R_t)``'s frame."""
+    per column of the state (empty: no Jacobian), or all of them as one array ``(6, n) + shape`` of
+    ``[v; w]`` (:meth:`diffkin.ik._problem.Kinematics.point_columns`; the Jacobian is then one array),
+    both in world axes."""
+    if not isinstance(columns, list):
+        without = error_rows(T, [], p_t, R_t, weights, dtype)
+        return without._replace(J=jacobian_rows(columns, R_t, weights))
     e = [rg.add(p_t[i], -T.p[i]) for i in range(3)]
     angle = None
     if R_t is not None:
@@ -70,6 +76,26 @@ def error_rows(T: rg.Rigid, columns: list, p_t, R_t, weights: tuple[float, ...],
     r = [rg.mul(weights[a], e[a]) for a in free]
     J = [[rg.mul(weights[a], c) for c in rows[a]] for a in free] if columns else []
     return Rows(r, J, pos_err, rot_err)
+
+
+def jacobian_rows(columns: jax.Array, R_t, weights: tuple[float, ...]) -> jax.Array:
+    """``(k, n) + shape``: the Jacobian rows of :func:`error_rows` (the free axes' ``k``) from the point
+    velocities ``columns`` ``(6, n) + shape`` (``[v; w]``, world axes), with the operations the entries
+    take, in the same order (the same numbers)."""
+    lead = (1,) * (columns.ndim - 2)
+    if weights != ONES and R_t is not None:  # into the target frame: R_t^T v, R_t^T w (rg.rotate, rg.dot)
+        Rt = jnp.stack(
+            [jnp.stack([jnp.broadcast_to(R_t[i][j], columns.shape[2:]) for j in range(3)]) for i in range(3)]
+        )
+        Rt = jnp.concatenate([Rt, Rt], axis=1)[:, :, None]  # (3, 6, 1) + shape: R_t[i][a % 3]
+        blocks = np.asarray([0, 0, 0, 3, 3, 3])
+        columns = (Rt[0] * columns[blocks] + Rt[1] * columns[blocks + 1]) + Rt[2] * columns[blocks + 2]
+    scale = np.asarray([1.0] * 3 + [ROT_WEIGHT] * 3).reshape((6, 1) + lead)
+    rows = jnp.where(scale != 1.0, jnp.asarray(scale, columns.dtype) * columns, columns)
+    free = np.asarray([a for a in range(3 if R_t is None else 6) if weights[a] != 0.0])  # (a position: v's rows)
+    w = np.asarray(weights)[free].reshape((-1, 1) + lead)
+    rows = rows if len(free) == 6 else rows[free]
+    return rows if np.all(w == 1.0) else jnp.where(w != 1.0, jnp.asarray(w, columns.dtype) * rows, rows)
 
 
 def screen_cost(T: rg.Rigid, p_t, R_t, weights: tuple[float, ...], dtype) -> rg.Entry:
@@ -108,6 +134,8 @@ class PoseTarget(Target):
     frame: int | None
     position_only: bool
     weights: tuple[float, ...] = ONES
+    #: its Jacobian is read as one array (:meth:`diffkin.ik._problem.Kinematics.point_columns`)
+    point_columns: ClassVar[bool] = True
 
     @property
     def frames(self) -> tuple[int | None, ...]:  # type: ignore[override]  # (Term's field, derived here)
@@ -118,7 +146,9 @@ class PoseTarget(Target):
 
     def rows(self, kin, bound: tuple, jacobian: bool) -> Rows:
         T = kin.pose(self.frame)
-        columns = rg.world_from_space(kin.columns(self.frame), T.p) if jacobian else []
+        columns = getattr(kin, "point_columns", lambda frame: None)(self.frame) if jacobian else None
+        if columns is None:
+            columns = rg.world_from_space(kin.columns(self.frame), T.p) if jacobian else []
         p_t, R_t = bound
         return error_rows(T, columns, p_t, R_t, self.weights, kin.dtype)
 
