@@ -12,7 +12,9 @@ is then a lower bound over the whole piece, and the motion's is the smallest ove
 Only the pairs that a piece's motion could bring within the margin need their exact distance: the
 others get a cheap lower bound at least ``margin + 2 max delta + 1 cm`` (:func:`diffkin.collision._near`),
 which keeps their pieces above the margin. Pieces of one size (rather than a tree of halvings, whose
-coarse pieces move far and so need almost every pair exactly) keep that reach short.
+coarse pieces move far and so need almost every pair exactly) keep that reach short; then the few pieces
+of each curve whose bound is lowest (where a curve passes close to an obstacle) are cut finer, which
+tightens the bound where it decides, at a fixed cost.
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ from diffkin.traj import _rows, _spline
 
 #: pieces per segment
 PIECES = 32
+#: pieces per curve whose bound is refined (the lowest), and the sub-pieces each is cut into
+REFINED, SUB = 16, 8
 
 
 def _piece_speed(start: jax.Array, mid: jax.Array, end: jax.Array) -> jax.Array:
@@ -35,17 +39,41 @@ def _piece_speed(start: jax.Array, mid: jax.Array, end: jax.Array) -> jax.Array:
     return jnp.maximum(jnp.maximum(jnp.abs(start), jnp.abs(end)), jnp.abs(inner))
 
 
-def motion(reach: np.ndarray, P: jax.Array, pieces: int = PIECES) -> tuple[jax.Array, jax.Array]:
-    """``(q, delta)``: the pieces' middles ``(..., segs pieces, dof)`` of the curves ``P`` ``(..., N, dof)``
-    and how far each shape moves from there within its piece, ``(..., segs pieces, S)`` metres."""
-    segs = _spline.segments(P.shape[-2])
-    mids = (np.arange(segs * pieces) + 0.5) / pieces
-    half = 0.5 / pieces
-    u = jnp.asarray(mids, P.dtype)
+def motion(reach: np.ndarray, P: jax.Array, u: jax.Array, half: float) -> tuple[jax.Array, jax.Array]:
+    """``(q, delta)``: the curves ``P`` ``(..., N, dof)`` at the pieces' middles ``u`` ``(..., Q)`` (pieces of
+    half-width ``half``, each within one segment), ``(..., Q, dof)``, and how far each shape moves from
+    there within its piece, ``(..., Q, S)`` metres."""
     Pb = P[..., None, :, :]
     q = _spline.evaluate(Pb, u)
     speed = _piece_speed(*(_spline.evaluate(Pb, u + side * half, 1) for side in (-1, 0, 1)))
     return q, (speed * half) @ jnp.asarray(reach, P.dtype)
+
+
+def _bounds(model, avoid, reach, P, u, half, base, locked) -> tuple[jax.Array, jax.Array]:
+    """``(lower, sampled)`` each ``(B, K, Q)``: per piece of middle ``u`` ``(B, K, Q)`` and half-width ``half``,
+    a lower bound of the clearance over it and the smallest distance at its middle."""
+    B, K, N, dof = P.shape
+    q, delta = motion(reach, P, u, half)  # (B, K, Q, dof), (B, K, Q, S)
+    Q = q.shape[2]
+    delta = jnp.moveaxis(delta, -1, 0).reshape(-1, B * K, Q)  # (S, C, Q)
+    # pairs farther than any piece's motion can bring within the margin need no exact distance: a
+    # lower bound at least that far stands for them (the bound of a piece stays above the margin)
+    near = avoid.margin + 2 * jnp.max(delta) + 0.01
+    d_self, d_world = _rows.distances(model, avoid, locked, base, K, q.reshape(B * K, Q, dof), near)
+    parts, sampled = [], []
+    if d_self is not None:
+        pairs = avoid.geom.pairs
+        parts.append(jnp.min(d_self - delta[pairs[:, 0]] - delta[pairs[:, 1]], axis=0))
+        sampled.append(jnp.min(d_self, axis=0))
+    if d_world is not None:
+        parts.append(jnp.min(d_world - delta[:, None], axis=(0, 1)))
+        sampled.append(jnp.min(d_world, axis=(0, 1)))
+    if not parts:
+        inf = jnp.full((B, K, Q), jnp.inf, P.dtype)
+        return inf, inf
+    lower = jnp.min(jnp.stack(parts), axis=0).reshape(B, K, Q)
+    lower = jnp.where(jnp.isnan(lower), -jnp.inf, lower)
+    return lower, jnp.min(jnp.stack(sampled), axis=0).reshape(B, K, Q)
 
 
 def certified(
@@ -57,27 +85,24 @@ def certified(
     motion of a piece plus 1 cm; a cheap lower bound, beyond that, for the others: at least the certified
     bound, at most the true smallest where it is within that reach).
 
+    Each segment is cut into ``pieces`` pieces; the :data:`REFINED` pieces of lowest bound of each curve
+    are then cut into :data:`SUB` sub-pieces each, and a refined piece's bound is the larger of its own and
+    its sub-pieces' smallest (both hold).
+
     ``avoid``'s world is shared or one per problem, flat ``(B, n_kind)`` (:meth:`diffkin.ik.Avoid.flat`);
     ``base`` ``(B, 4, 4)`` or ``None``; ``reach`` ``(dof, S)`` (:func:`diffkin.traj._reach.reach`).
     """
     B, K, N, dof = P.shape
-    q, delta = motion(reach, P, pieces)  # (B, K, Q, dof), (B, K, Q, S)
-    Q = q.shape[2]
-    delta = jnp.moveaxis(delta, -1, 0).reshape(-1, B * K, Q)  # (S, C, Q)
-    # pairs farther than any piece's motion can bring within the margin need no exact distance: a
-    # lower bound at least that far stands for them (the bound of a piece stays above the margin)
-    near = avoid.margin + 2 * jnp.max(delta) + 0.01
-    d_self, d_world = _rows.distances(model, avoid, locked, base, K, q.reshape(B * K, Q, dof), near)
-    parts, sampled = [], []
-    if d_self is not None:
-        pairs = avoid.geom.pairs
-        parts.append(jnp.min(d_self - delta[pairs[:, 0]] - delta[pairs[:, 1]], axis=(0, 2)))
-        sampled.append(jnp.min(d_self, axis=(0, 2)))
-    if d_world is not None:
-        parts.append(jnp.min(d_world - delta[:, None], axis=(0, 1, 3)))
-        sampled.append(jnp.min(d_world, axis=(0, 1, 3)))
-    if not parts:
-        inf = jnp.full((B, K), jnp.inf, P.dtype)
-        return inf, inf
-    lower = jnp.min(jnp.stack(parts), axis=0).reshape(B, K)
-    return lower, jnp.min(jnp.stack(sampled), axis=0).reshape(B, K)
+    segs = _spline.segments(N)
+    half = 0.5 / pieces
+    mids = jnp.broadcast_to(jnp.asarray((np.arange(segs * pieces) + 0.5) / pieces, P.dtype), (B, K, segs * pieces))
+    lower, sampled = _bounds(model, avoid, reach, P, mids, half, base, locked)
+    refined = min(REFINED, segs * pieces)
+    _, worst = jax.lax.top_k(-lower, refined)  # (B, K, F)
+    offsets = jnp.asarray((2 * np.arange(SUB) + 1 - SUB) / SUB * half, P.dtype)  # sub-pieces' middles
+    u = jnp.take_along_axis(mids, worst, axis=-1)[..., None] + offsets  # (B, K, F, SUB)
+    fine, fine_sampled = _bounds(model, avoid, reach, P, u.reshape(B, K, -1), half / SUB, base, locked)
+    fine = jnp.min(fine.reshape(B, K, refined, SUB), axis=-1)
+    coarse = jnp.take_along_axis(lower, worst, axis=-1)
+    lower = jnp.put_along_axis(lower, worst, jnp.maximum(coarse, fine), axis=-1, inplace=False)
+    return jnp.min(lower, axis=-1), jnp.minimum(jnp.min(sampled, axis=-1), jnp.min(fine_sampled, axis=-1))

@@ -29,7 +29,7 @@ from diffkin.traj import _rows, _spline
 
 W_LENGTH = 0.05  # per rad of a control-polygon step
 W_BEND = 0.2  # per rad of a second difference
-SAMPLES = 4  # clearance samples per segment
+SAMPLES = 8  # clearance samples per segment (fewer let a curve pass through a thin board between two)
 EXTRA = 0.02  # metres the clearance rows aim beyond the margin
 W_CLEAR = 30.0  # per metre of a clearance row (rows in metres against smoothness in radians)
 _MU_INIT, _MU_MIN, _MU_MAX, _MU_UP, _MU_DOWN = 1e-2, 1e-6, 1e6, 8.0, 0.25
@@ -59,12 +59,16 @@ class Curves:
             X = jnp.where(jnp.asarray(self.locked), self.locked_q[:, None, :], X)
         return X
 
+    def cap(self) -> jax.Array:
+        """The clearance the clearance rows aim for: the margin plus :data:`EXTRA`."""
+        return self.avoid.margin + EXTRA
+
     def control(self, X: jax.Array) -> jax.Array:
         return _spline.control_points(self.q_start, X, self.q_goal)
 
     def _clearance_rows(self, q: jax.Array) -> tuple[jax.Array, jax.Array]:
         """``r (m, C, Q)`` and ``dr/dq`` ``(m, dof, C, Q)`` at configurations ``q`` ``(C, Q, dof)``, weighted."""
-        avoid = dataclasses.replace(self.avoid, margin=self.avoid.margin + EXTRA)
+        avoid = dataclasses.replace(self.avoid, margin=self.cap())
         r, J = _rows.rows(self.model, avoid, self.locked, self.base, self.k, q)
         return W_CLEAR * r, W_CLEAR * J
 

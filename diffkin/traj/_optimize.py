@@ -15,7 +15,7 @@ from diffkin._xla import solver_jit
 from diffkin.ik import Avoid
 from diffkin.ik.interface import cast, check_avoid, check_batched, default_key, detach, finite
 from diffkin.models.robot import Robot
-from diffkin.traj import _limits, _reach, _spline
+from diffkin.traj import _limits, _reach, _seeds, _spline
 from diffkin.traj._certify import certified
 from diffkin.traj._descent import Curves
 from diffkin.traj._trajectory import Trajectory
@@ -44,17 +44,19 @@ def optimize(
 
     The motion is a uniform cubic B-spline in joint space with ``knots`` knots (``knots + 2`` control
     points: the start and the goal three times each, so it starts and stops at rest). Every problem
-    runs ``num_seeds`` seeds (the straight line, then curves through random via points) through at
-    most ``max_iters`` Levenberg-Marquardt iterations on its free control points (smoothness rows and the
-    clearance rows of collision-aware IK at 4 samples per segment, pushed through the spline's
-    basis); each result is then timed and certified:
+    runs ``num_seeds`` seeds (the straight line, then curves through via points: with ``avoid``, the
+    clearest of 32 random ones, :mod:`diffkin.traj._seeds`) through at most ``max_iters``
+    Levenberg-Marquardt iterations on its free control points (smoothness rows and the clearance rows of
+    collision-aware IK at 8 samples per segment, pushed through the spline's basis); each result is then
+    timed and certified:
 
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
       hull of the control polygon's differences);
-    - **clearance**: a certified lower bound over the whole motion (each segment cut into 32 pieces; on
-      a piece, the distances at its middle minus how far the shapes can move within it, from the joint
-      speeds and each joint's reach to the shapes it moves: :mod:`diffkin.traj._certify`).
+    - **clearance**: a certified lower bound over the whole motion (each segment cut into 32 pieces, the
+      16 lowest of a curve cut 8 times finer; on a piece, the distances at its middle minus how far the
+      shapes can move within it, from the joint speeds and each joint's reach to the shapes it moves:
+      :mod:`diffkin.traj._certify`).
 
     The best seed of each problem is kept: a successful one of the shortest duration, else the one
     with the largest certified clearance. Failures stay honest: ``success=False`` with finite values
@@ -218,23 +220,6 @@ def _locked(model, locked, batch) -> tuple[tuple[bool, ...], jax.Array | None]:
     return tuple(n in locked for n in names), jnp.stack(values, axis=-1)
 
 
-def _seeds(q_start, q_goal, lower, upper, free: int, seeds: int, key) -> jax.Array:
-    """``(B, seeds, free, dof)``: the straight line, then lines through a random via point."""
-    s = jnp.asarray((np.arange(free) + 1) / (free + 1), q_start.dtype)[:, None]  # (free, 1)
-    line = q_start[:, None] + s * (q_goal - q_start)[:, None]  # (B, free, dof)
-    if seeds == 1:
-        return line[:, None]
-    B, dof = q_start.shape
-    span = jnp.where(jnp.isfinite(upper - lower), upper - lower, 2 * np.pi)
-    mid = (q_start + q_goal) / 2
-    noise = jax.random.uniform(key, (B, seeds - 1, dof), q_start.dtype, -1.0, 1.0)
-    via = jnp.clip(mid[:, None] + 0.25 * span * noise, lower, upper)  # (B, seeds - 1, dof)
-    first = s < 0.5
-    to_via = q_start[:, None, None] + (s / 0.5) * (via[:, :, None] - q_start[:, None, None])
-    from_via = via[:, :, None] + ((s - 0.5) / 0.5) * (q_goal[:, None, None] - via[:, :, None])
-    return jnp.concatenate([line[:, None], jnp.where(first, to_via, from_via)], axis=1)
-
-
 def _core(
     static, traced, q_start, q_goal, goal_ok, avoid, base, locked_q, bounds, reach, key, *, locked, free, seeds, iters
 ):
@@ -248,7 +233,8 @@ def _core(
         held = jnp.asarray(locked)
         q_start, q_goal = jnp.where(held, locked_q, q_start), jnp.where(held, locked_q, q_goal)
     B = q_start.shape[0]
-    X = _seeds(q_start, q_goal, lower, upper, free, seeds, jax.random.fold_in(key, 1))  # (B, k, free, dof)
+    ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, avoid, base, 1)
+    X = _seeds.seeds(ends, seeds, free, jax.random.fold_in(key, 1))  # (B, k, free, dof)
     rep = lambda x: None if x is None else jnp.repeat(x, seeds, axis=0)  # noqa: E731
     curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), avoid, base, seeds)
     X = curves.descend(X.reshape(B * seeds, free, dof), iters)

@@ -125,24 +125,31 @@ def _certify_line(q_start, q_goal, world):
     free = (q_start + q_goal)[None] / 2  # one free control point, in the middle
     P = _spline.control_points(q_start, free, q_goal)[None, None]  # (1, 1, 7, dof)
     avoid = dk.ik.Avoid(GEOM, world, 0.0).flat(())
-    lower, sampled = _certify.certified(ROBOT, avoid, _reach.reach(ROBOT, GEOM), P, None, (False, False))
-    return lower[0, 0], sampled[0, 0], P[0, 0], _spline.knots(P[0, 0])
+    reach = _reach.reach(ROBOT, GEOM)
+    lower, sampled = _certify.certified(ROBOT, avoid, reach, P, None, (False, False))
+    pieces = _certify.PIECES
+    mids = jnp.asarray((np.arange(4 * pieces) + 0.5) / pieces)[None, None]  # the 4 segments' pieces
+    coarse, _ = _certify._bounds(ROBOT, avoid, reach, P, mids, 0.5 / pieces, None, (False, False))
+    return lower[0, 0], sampled[0, 0], P[0, 0], _spline.knots(P[0, 0]), jnp.min(coarse)
 
 
 def test_sampling_at_the_knots_misses_what_the_bound_rejects():
     # a straight motion whose knots all clear the sphere, which it passes through between two knots:
     # the certificate is below zero
     world = World(Sphere(jnp.array([[0.0, 0.0, 1.02]]), jnp.array([0.05])))
-    lower, sampled, P, knots = _certify_line(jnp.array([-1.0, 0.0]), jnp.array([0.6, 0.0]), world)
+    lower, sampled, P, knots, _ = _certify_line(jnp.array([-1.0, 0.0]), jnp.array([0.6, 0.0]), world)
     assert float(_clearance(jnp.resize(knots, (2001, 2)), world).min()) > 0.05
     q = _spline.evaluate(P, jnp.linspace(0.0, 4.0, 2001))
     truth = float(_clearance(q, world).min())
     assert truth < 0
     assert float(lower) <= truth <= float(sampled) + 1e-9
     # and the reverse: where the certificate says clear, dense sampling agrees (far from the sphere)
-    lower, _, P, _ = _certify_line(jnp.array([-1.0, 0.0]), jnp.array([-0.4, 0.5]), world)
+    lower, _, P, _, coarse = _certify_line(jnp.array([-1.0, 0.0]), jnp.array([-0.4, 0.5]), world)
     q = _spline.evaluate(P, jnp.linspace(0.0, 4.0, 2001))
-    assert 0 < float(lower) <= float(_clearance(q, world).min())
+    truth = float(_clearance(q, world).min())
+    assert 0 < float(lower) <= truth
+    # the lowest pieces cut finer: a tighter bound than the pieces' own, still below the truth
+    assert float(coarse) < float(lower) and truth - float(lower) < 0.5 * (truth - float(coarse))
 
 
 def test_reach_of_each_joint_to_each_shape():

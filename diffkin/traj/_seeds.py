@@ -1,0 +1,100 @@
+"""The curves a problem's descent starts from: the straight line, then lines through via points.
+
+Without obstacles the via points are random (near the middle of the start and the goal). With them, each
+problem draws :data:`CANDIDATES` via points (three quarters anywhere within the joint limits, a quarter
+near the middle), measures the clearance along the curves whose control points lie on ``start -> via ->
+goal`` (:data:`SAMPLES` points per segment: the curve cuts the corner at the via point) and keeps the
+best: the largest clearance (counted up to ``cap``, the clearance the descent aims for), then the
+shortest. A via point that clears the obstacles gives the descent a curve around them that it only has
+to smooth; a passage the straight line misses is found this way.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffkin.traj import _rows, _spline
+
+#: via points drawn and screened per problem
+CANDIDATES = 32
+#: clearance samples per segment of a candidate's curve
+SAMPLES = 2
+#: metres of clearance one radian of joint-space path length is worth among candidates
+PER_RADIAN = 1e-3
+
+
+def lines(q_start: jax.Array, q_goal: jax.Array, via: jax.Array, free: int) -> jax.Array:
+    """``(B, V, free, dof)``: the free control points of ``start -> via -> goal`` (``via`` ``(B, V, dof)``),
+    evenly spread, the first half on the first leg."""
+    s = jnp.asarray((np.arange(free) + 1) / (free + 1), q_start.dtype)[:, None]  # (free, 1)
+    a, b, v = q_start[:, None, None], q_goal[:, None, None], via[:, :, None]
+    return jnp.where(s < 0.5, a + (s / 0.5) * (v - a), v + ((s - 0.5) / 0.5) * (b - v))
+
+
+def _near_middle(key, q_start, q_goal, lower, upper, shape) -> jax.Array:
+    span = jnp.where(jnp.isfinite(upper - lower), upper - lower, 2 * np.pi)
+    noise = jax.random.uniform(key, shape + (q_start.shape[-1],), q_start.dtype, -1.0, 1.0)
+    mid = (q_start + q_goal) / 2
+    return jnp.clip(mid[:, None] + 0.25 * span * noise, lower, upper)
+
+
+def _anywhere(key, lower, upper, shape, dtype) -> jax.Array:
+    lo = jnp.where(jnp.isfinite(lower), lower, -np.pi)
+    hi = jnp.where(jnp.isfinite(upper), upper, np.pi)
+    return jax.random.uniform(key, shape + (lower.shape[-1],), dtype, lo, hi)
+
+
+def seeds(curves, count: int, free: int, key) -> jax.Array:
+    """``(B, count, free, dof)``: the straight line, then ``count - 1`` lines through via points, for the
+    problems of ``curves`` (:class:`diffkin.traj._descent.Curves` of one curve per problem)."""
+    q_start, q_goal, lower, upper = curves.q_start, curves.q_goal, curves.lower, curves.upper
+    B, dof = q_start.shape
+    line = lines(q_start, q_goal, (q_start + q_goal)[:, None] / 2, free)
+    if count == 1:
+        return line
+    if curves.avoid is None:
+        return jnp.concatenate([line, lines(q_start, q_goal, _near_middle(key, q_start, q_goal, lower, upper,
+                                                                          (B, count - 1)), free)], axis=1)  # fmt: skip
+    k_any, k_mid = jax.random.split(key)
+    quarter = CANDIDATES // 4
+    via = jnp.concatenate(
+        [
+            _anywhere(k_any, lower, upper, (B, CANDIDATES - quarter), q_start.dtype),
+            _near_middle(k_mid, q_start, q_goal, lower, upper, (B, quarter)),
+        ],
+        axis=1,
+    )  # (B, M, dof)
+    if any(curves.locked):
+        via = jnp.where(jnp.asarray(curves.locked), curves.locked_q[:, None], via)
+    X = lines(q_start, q_goal, via, free)  # (B, M, free, dof)
+    length = jnp.linalg.norm(via - q_start[:, None], axis=-1) + jnp.linalg.norm(q_goal[:, None] - via, axis=-1)
+    score = jnp.minimum(clearance(curves, X), curves.cap()) - PER_RADIAN * length
+    _, best = jax.lax.top_k(score, count - 1)  # (B, count - 1)
+    chosen = jnp.take_along_axis(X, best[:, :, None, None], axis=1)
+    return jnp.concatenate([line, chosen], axis=1)
+
+
+def clearance(curves, X: jax.Array, per_segment: int = SAMPLES) -> jax.Array:
+    """``(B, V)``: the smallest distance (counted up to ``curves.cap()``) along the curves of free control
+    points ``X`` ``(B, V, n, dof)`` of ``curves``' problems, at ``per_segment`` points per segment and the end."""
+    B, V, n, dof = X.shape
+    ends = lambda q: jnp.broadcast_to(q[:, None], (B, V, dof))  # noqa: E731
+    P = _spline.control_points(ends(curves.q_start), X, ends(curves.q_goal))  # (B, V, N, dof)
+    segs = _spline.segments(n + 2 * _spline.ENDS)
+    u = jnp.asarray(np.arange(segs * per_segment + 1) / per_segment, X.dtype)
+    q = _spline.evaluate(P[:, :, None], u)  # (B, V, Q, dof)
+    Q = q.shape[2]
+    d_self, d_world = _rows.distances(
+        curves.model, curves.avoid, curves.locked, curves.base, V, q.reshape(B * V, Q, dof), curves.cap()
+    )
+    parts = []
+    if d_self is not None:
+        parts.append(jnp.min(d_self, axis=(0, 2)))
+    if d_world is not None:
+        parts.append(jnp.min(d_world, axis=(0, 1, 3)))
+    if not parts:
+        return jnp.full((B, V), jnp.inf, X.dtype)
+    d = jnp.min(jnp.stack(parts), axis=0).reshape(B, V)
+    return jnp.where(jnp.isnan(d), -jnp.inf, d)
