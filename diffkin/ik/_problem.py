@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffkin import _rigid as rg
+from diffkin._static import host
 from diffkin._xla import materialize
 from diffkin.ik._terms import Constraint, Term
 from diffkin.models.ranges import into_cones
@@ -68,15 +69,16 @@ class Kinematics:
     velocity per column. ``dtype``, ``shape``: the solver's dtype and the problems' shape ``(P,)``.
     """
 
-    def __init__(self, problem: Problem, x: jax.Array, table: tuple = ()):
-        """``table``: the frames whose :meth:`point_columns` are read (computed together, on first use)."""
+    def __init__(self, problem: Problem, x: jax.Array, table: tuple = (), com_table: bool = False):
+        """``table``: the frames whose :meth:`point_columns` are read, ``com_table``: whether
+        :meth:`com_columns` is (computed together, on first use)."""
         root = problem.root(x)
         self.kin = problem.model.forward(list(problem.joints(x)), root)
         self.locked = problem.locked
         self.root_columns = rg.root_screws(root) if problem.solve_base else []
         self.dtype = x.dtype
         self.shape = x.shape[1:]
-        self.table = table
+        self.table, self.com_table = table, com_table
         self._point_columns: dict | None = None
 
     def pose(self, frame: int | None) -> rg.Rigid:
@@ -104,6 +106,72 @@ class Kinematics:
             self._point_columns = self._table_columns()
         return self._point_columns[frame]
 
+    def com_columns(self) -> tuple[rg.Vec3, jax.Array] | None:
+        """The centre of mass and its velocity per column of the state ``(3, n) + shape`` (as :meth:`com`),
+        from the table of :meth:`point_columns` (the joints' screws and the bodies' first moments computed
+        once, with the frames' entries); ``None`` without ``com_table`` or for a model it does not cover
+        (closed loops, a scanned pass, traced masses or multipliers: :meth:`com` then)."""
+        if not self.com_table:
+            return None
+        if self._point_columns is None:
+            self._point_columns = self._table_columns()
+        return self._point_columns.get("com")
+
+    def _com_entries(self) -> tuple | None:
+        """``(moments (bodies, 3), screws (joints, 6))``: the entries :meth:`com_columns` reads, or ``None``."""
+        from diffkin.models._passes import ScannedPass
+
+        p = self.kin
+        robot = getattr(p, "robot", None)
+        if robot is None or isinstance(p, ScannedPass) or p.fold or not hasattr(p, "bodies"):
+            return None
+        masses = rg.per_joint(host(robot.masses), snap=False)
+        if not all(isinstance(e, float) for e in [*masses, *p.multipliers]):
+            return None
+        c = host(robot.body_coms)
+        moments = [
+            list(rg.scale(masses[b], rg.vadd(rg.rotate(T.R, rg.vector(c[b])), T.p))) for b, T in enumerate(p.bodies)
+        ]
+        return moments, [[*v, *w] for v, w in p.screws]
+
+    def _com_from(self, done: jax.Array, slots, entries, lead: tuple) -> tuple[rg.Vec3, jax.Array]:
+        """:meth:`com_columns` from the table ``done``: ``slots``/``entries`` those of :meth:`_com_entries` and
+        the root's columns (:func:`_gathered`). The subtree sums as one product with the subtree incidence
+        (rounding: the sums' order is the product's)."""
+        robot, p = self.kin.robot, self.kin
+        moment_slots, screw_slots, root_slots = slots
+        moments, screws, root = entries
+        nb, nj = len(moments), len(screws)
+        below = np.eye(nb)  # below[k, b]: body b is in the subtree of body k (children follow parents)
+        for j in reversed(range(nj)):
+            below[robot.parents[j]] += below[j + 1]
+        mass = below @ np.asarray(host(robot.masses), np.float64)
+        inverse = 1.0 / float(mass[0]) if mass[0] > 0.0 else 0.0  # (a Python float: weakly typed)
+        M = _gathered(done, np.asarray(moment_slots), moments, lead, self.dtype)  # (nb, 3) + shape
+        S = jnp.moveaxis(jnp.tensordot(jnp.asarray(below, self.dtype), M, axes=1), 1, 0)  # (3, nb) + shape
+        c = inverse * S[:, 0]
+        if nj:
+            T = jnp.moveaxis(_gathered(done, np.asarray(screw_slots), screws, lead, self.dtype), 1, 0)  # (6, nj)
+            k = jnp.asarray(np.asarray([float(m) * inverse for m in p.multipliers]).reshape((1, nj) + lead), self.dtype)
+            subtree = jnp.asarray(mass[1:].reshape((1, nj) + lead), self.dtype)
+            moved = k * (subtree * T[:3] + _cross(T[3:], S[:, 1:]))  # (3, nj) + shape
+            moved = jnp.concatenate([moved, jnp.zeros_like(moved[:, :1])], axis=1)  # a zero column at nj
+            driving: list[list[int]] = [[] for _ in range(robot.dof)]
+            for j in range(nj):
+                if not self.locked[robot.sources[j]]:
+                    driving[robot.sources[j]].append(j)
+            parts = [
+                moved[:, np.asarray([d[i] if i < len(d) else nj for d in driving])]
+                for i in range(max(map(len, driving)))
+            ]
+            joints = sum(parts[1:], parts[0]) if parts else jnp.zeros((3, robot.dof) + self.shape, self.dtype)
+        else:
+            joints = jnp.zeros((3, robot.dof) + self.shape, self.dtype)
+        if not root_slots:
+            return (c[0], c[1], c[2]), joints
+        R = jnp.moveaxis(_gathered(done, np.asarray(root_slots), root, lead, self.dtype), 1, 0)  # (6, 6)
+        return (c[0], c[1], c[2]), jnp.concatenate([joints, R[:3] + _cross(R[3:], c[:, None])], axis=1)
+
     def _table_columns(self) -> dict:
         """:meth:`point_columns` of every frame of ``table``."""
         distinct: list = []
@@ -123,9 +191,13 @@ class Kinematics:
             screws = [[c[a][i] for c in columns] for a in (0, 1) for i in range(3)]  # (6, n): [v; w]
             p = list(self.pose(frame).p)
             layouts[frame] = (screws, p, [[slot(e) for e in row] for row in screws], [slot(e) for e in p])
+        com = self._com_entries() if self.com_table else None
+        if com is not None:
+            root = [[*v, *w] for v, w in self.root_columns]
+            com = (com[0], com[1], root), tuple([[slot(e) for e in row] for row in part] for part in (*com, root))
         done = materialize(distinct) if distinct else jnp.zeros((0,) + self.shape, self.dtype)
         lead = (1,) * len(self.shape)
-        out = {}
+        out: dict = {} if com is None else {"com": self._com_from(done, com[1], com[0], lead)}
         for frame, (screws, p, rows, p_rows) in layouts.items():
             S, p_f = (_gathered(done, np.asarray(s), e, lead, self.dtype) for s, e in ((rows, screws), (p_rows, p)))
             # rg.world_from_space: v + w x p on rows 0-2 (the same operations in the same order as on
@@ -146,6 +218,12 @@ class Kinematics:
         return c, joints + [v for v, _ in rg.world_from_space(self.root_columns, c)]
 
 
+def _cross(a: jax.Array, b: jax.Array) -> jax.Array:
+    """``a x b`` of vectors on the leading axis (3), as :func:`diffkin._rigid.cross` computes each entry."""
+    i, j = np.asarray([1, 2, 0]), np.asarray([2, 0, 1])
+    return a[i] * b[j] + -(a[j] * b[i])
+
+
 def _gathered(done: jax.Array, rows: np.ndarray, entries: list, lead: tuple, dtype) -> jax.Array:
     """``rows.shape + batch``: the rows ``rows`` of ``done`` (``-1``: the folded constant in ``entries``,
     nested as ``rows``)."""
@@ -156,7 +234,9 @@ def _gathered(done: jax.Array, rows: np.ndarray, entries: list, lead: tuple, dty
     flat = [e for row in entries for e in row] if rows.ndim == 2 else entries
     values = np.asarray([e if isinstance(e, float) else 0.0 for e in flat], np.float64).reshape(rows.shape + lead)
     constants = jnp.asarray(values, dtype)
-    return constants if gathered is None else jnp.where(constant.reshape(rows.shape + lead), constants, gathered)
+    if gathered is None:  # every entry a constant: broadcast to the problems' shape, as entries would be
+        return jnp.broadcast_to(constants, rows.shape + done.shape[1:])
+    return jnp.where(constant.reshape(rows.shape + lead), constants, gathered)
 
 
 class Spec(NamedTuple):
@@ -290,7 +370,8 @@ class Problem(NamedTuple):
     def residual(self, x: jax.Array, jacobian: bool = True) -> Entries:
         """The entries of every term's residual, Jacobian and errors at ``x``, from one forward pass."""
         table = tuple(f for t in self.terms if getattr(t, "point_columns", False) for f in t.frames) if jacobian else ()
-        kin = Kinematics(self, x, table)
+        com_table = jacobian and any(getattr(t, "com_columns", False) for t in self.terms)
+        kin = Kinematics(self, x, table, com_table)
         r: list = []
         J: list = []
         pos_err: list = []

@@ -9,6 +9,7 @@ needs ``|c_t - c| <= pos_tol`` over the constrained axes.
 from __future__ import annotations
 
 import dataclasses
+from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -37,11 +38,16 @@ class ComTarget(Target):
     weights: tuple[float, ...] = ONES
     position_only: bool = True
     result_field = "com_err"
+    #: its Jacobian is read as one array where the model allows (:meth:`diffkin.ik._problem.Kinematics.com_columns`)
+    com_columns: ClassVar[bool] = True
 
     def bind(self, target: jax.Array) -> tuple:
         return target_entries(target, True)
 
     def rows(self, kin, bound: tuple, jacobian: bool) -> Rows:
+        given = getattr(kin, "com_columns", lambda: None)() if jacobian else None
+        if given is not None:  # the velocities as one array (diffkin.ik._problem.Kinematics.com_columns)
+            return error_rows(rg.Rigid(rg.IDENTITY.R, given[0]), given[1], bound[0], None, self.weights, kin.dtype)
         c, velocities = kin.com(jacobian)
         zero = (0.0, 0.0, 0.0)
         columns = [(v, zero) for v in velocities] if jacobian else []

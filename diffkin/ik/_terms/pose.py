@@ -80,8 +80,8 @@ def error_rows(T: rg.Rigid, columns, p_t, R_t, weights: tuple[float, ...], dtype
 
 def jacobian_rows(columns: jax.Array, R_t, weights: tuple[float, ...]) -> jax.Array:
     """``(k, n) + shape``: the Jacobian rows of :func:`error_rows` (the free axes' ``k``) from the point
-    velocities ``columns`` ``(6, n) + shape`` (``[v; w]``, world axes), with the operations the entries
-    take, in the same order (the same numbers)."""
+    velocities ``columns`` ``(6, n) + shape`` (``[v; w]``, world axes; ``(3, n) + shape``: ``v`` alone,
+    a position), with the operations the entries take, in the same order (the same numbers)."""
     lead = (1,) * (columns.ndim - 2)
     if weights != ONES and R_t is not None:  # into the target frame: R_t^T v, R_t^T w (rg.rotate, rg.dot)
         Rt = jnp.stack(
@@ -90,8 +90,10 @@ def jacobian_rows(columns: jax.Array, R_t, weights: tuple[float, ...]) -> jax.Ar
         Rt = jnp.concatenate([Rt, Rt], axis=1)[:, :, None]  # (3, 6, 1) + shape: R_t[i][a % 3]
         blocks = np.asarray([0, 0, 0, 3, 3, 3])
         columns = (Rt[0] * columns[blocks] + Rt[1] * columns[blocks + 1]) + Rt[2] * columns[blocks + 2]
-    scale = np.asarray([1.0] * 3 + [ROT_WEIGHT] * 3).reshape((6, 1) + lead)
-    rows = jnp.where(scale != 1.0, jnp.asarray(scale, columns.dtype) * columns, columns)
+    rows = columns  # (3, n) + shape: a point's velocities alone
+    if len(columns) == 6:
+        scale = np.asarray([1.0] * 3 + [ROT_WEIGHT] * 3).reshape((6, 1) + lead)
+        rows = jnp.where(scale != 1.0, jnp.asarray(scale, columns.dtype) * columns, columns)
     free = np.asarray([a for a in range(3 if R_t is None else 6) if weights[a] != 0.0])  # (a position: v's rows)
     w = np.asarray(weights)[free].reshape((-1, 1) + lead)
     rows = rows if len(free) == 6 else rows[free]
