@@ -103,11 +103,11 @@ class Curves:
         u = np.concatenate([np.arange(segs * SAMPLES) / SAMPLES, [segs]])
         return _spline.basis(jnp.asarray(u, dtype), N).astype(dtype)
 
-    def descend(self, X: jax.Array, iters: int) -> jax.Array:
-        """``X`` ``(C, n, dof)`` after at most ``iters`` Levenberg-Marquardt iterations: fewer once no
-        curve has a clearance row left (or every such curve's damping is at its largest: stalled),
-        since the smoothness rows alone change the curves only slightly and each iteration costs the
-        clearance rows' distances."""
+    def descend(self, X: jax.Array, iters: int) -> tuple[jax.Array, jax.Array]:
+        """``(X, cost)``: ``X`` ``(C, n, dof)`` after at most ``iters`` Levenberg-Marquardt iterations, and
+        its cost ``(C,)``. Fewer iterations once every problem has a curve without a clearance row (or
+        each of its curves with one has stalled: damping at its largest), since the smoothness rows
+        alone change the curves only slightly and each iteration costs the clearance rows' distances."""
         C, n, dof = X.shape
         X = self.project(X)
         W = self.samples(n + 2 * _spline.ENDS, X.dtype)
@@ -127,7 +127,10 @@ class Curves:
 
         def going(state):
             it, blocked, mu = state[0], state[5], state[6]
-            return (it == 0) | ((it <= iters) & jnp.any(blocked & (mu < _MU_MAX)))
+            live = (blocked & (mu < _MU_MAX)).reshape(-1, self.k)  # (B, k)
+            if self.avoid is not None:  # a problem with a curve clear of every row is done
+                live = live & jnp.all(blocked.reshape(-1, self.k), axis=1, keepdims=True)
+            return (it == 0) | ((it <= iters) & jnp.any(live))
 
         # the first iteration evaluates X itself (a zero step from an infinite cost): the residual is
         # compiled once, inside the loop
@@ -135,4 +138,5 @@ class Curves:
         g, H = jnp.zeros((C, n * dof), X.dtype), jnp.broadcast_to(eye, (C, n * dof, n * dof))
         mu = jnp.full((C,), _MU_INIT, X.dtype)
         state = (jnp.int32(0), X, cost, g, H, jnp.ones((C,), bool), mu)
-        return jax.lax.while_loop(going, step, state)[1]
+        out = jax.lax.while_loop(going, step, state)
+        return out[1], out[2]

@@ -22,6 +22,8 @@ from diffkin.traj._trajectory import Trajectory
 
 #: joint-space points per segment that measure the path length
 _LENGTH_SAMPLES = 16
+#: curves per problem timed and certified after the descent: the lowest-cost ones
+CERTIFIED = 2
 
 
 def optimize(
@@ -47,8 +49,8 @@ def optimize(
     runs ``num_seeds`` seeds (the straight line, then curves through via points: with ``avoid``, the
     clearest of 32 random ones, :mod:`diffkin.traj._seeds`) through at most ``max_iters``
     Levenberg-Marquardt iterations on its free control points (smoothness rows and the clearance rows of
-    collision-aware IK at 8 samples per segment, pushed through the spline's basis); each result is then
-    timed and certified:
+    collision-aware IK at 8 samples per segment, pushed through the spline's basis; a problem stops once
+    one of its curves is clear of every row); its two curves of lowest cost are then timed and certified:
 
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
@@ -58,7 +60,7 @@ def optimize(
       shapes can move within it, from the joint speeds and each joint's reach to the shapes it moves:
       :mod:`diffkin.traj._certify`).
 
-    The best seed of each problem is kept: a successful one of the shortest duration, else the one
+    The best of them is kept: a successful one of the shortest duration, else the one
     with the largest certified clearance. Failures stay honest: ``success=False`` with finite values
     and the reason in ``goal_ok``, ``limits_ok``, ``clear``. Problems are independent (a world per
     problem where ``avoid.world`` has problem axes). Compiled once per model, batch shape and static
@@ -237,8 +239,13 @@ def _core(
     X = _seeds.seeds(ends, seeds, free, jax.random.fold_in(key, 1))  # (B, k, free, dof)
     rep = lambda x: None if x is None else jnp.repeat(x, seeds, axis=0)  # noqa: E731
     curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), avoid, base, seeds)
-    X = curves.descend(X.reshape(B * seeds, free, dof), iters)
+    X, cost = curves.descend(X.reshape(B * seeds, free, dof), iters)
     P = curves.control(X).reshape(B, seeds, free + 6, dof)
+    # only the lowest-cost curves of each problem are timed and certified (the certificate's distances
+    # cost about as much as a few descent iterations per curve)
+    k = min(seeds, CERTIFIED)
+    _, kept = jax.lax.top_k(-jnp.where(jnp.isnan(cost), jnp.inf, cost).reshape(B, seeds), k)
+    P = jnp.take_along_axis(P, kept[:, :, None, None], axis=1)  # (B, k, N, dof)
     h = _spline.segment_time(P, velocity, acceleration, jerk)  # (B, k)
     v, a, j = _spline.derivative_bounds(P)
     held = jnp.asarray(locked)  # locked joints may be held beyond their limits (as in IK)
@@ -252,8 +259,8 @@ def _core(
         clearance = jnp.where(jnp.isnan(clearance), -jnp.inf, clearance)
         clear = clearance >= avoid.margin
     else:
-        clearance = jnp.full((B, seeds), jnp.inf, dtype)
-        clear = jnp.ones((B, seeds), bool)
+        clearance = jnp.full((B, k), jnp.inf, dtype)
+        clear = jnp.ones((B, k), bool)
     segs = _spline.segments(free + 6)
     duration = segs * h
     ok = limits_ok & clear
