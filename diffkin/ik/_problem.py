@@ -92,7 +92,9 @@ class Kinematics:
     def point_columns(self, frame: int | None) -> jax.Array | None:
         """``(6, n) + shape``: per column of the state, the velocity of ``frame``'s origin and its angular
         velocity ``[v; w]`` (world axes; :meth:`columns` moved to the frame's origin), as one array;
-        ``None`` for a frame not in ``table``.
+        ``None`` for a frame not in ``table``, and where the frames share no entry of their columns and no
+        centre of mass is asked for (one frame, two arms apart: its entry-wise columns, :meth:`columns`,
+        are as few kernels, and the program stays what it was).
 
         The columns of every frame of ``table`` are put together from their distinct entries (the
         joints' screws, shared along the paths, and the frames' positions), computed once behind one
@@ -104,7 +106,7 @@ class Kinematics:
             return None
         if self._point_columns is None:
             self._point_columns = self._table_columns()
-        return self._point_columns[frame]
+        return self._point_columns.get(frame)
 
     def com_columns(self) -> tuple[rg.Vec3, jax.Array] | None:
         """The centre of mass and its velocity per column of the state ``(3, n) + shape`` (as :meth:`com`),
@@ -191,7 +193,11 @@ class Kinematics:
             screws = [[c[a][i] for c in columns] for a in (0, 1) for i in range(3)]  # (6, n): [v; w]
             p = list(self.pose(frame).p)
             layouts[frame] = (screws, p, [[slot(e) for e in row] for row in screws], [slot(e) for e in p])
+        per_frame = [{k for row in rows for k in row if k >= 0} for _, _, rows, _ in layouts.values()]
+        shared = len(set().union(*per_frame)) < sum(map(len, per_frame))  # a screw on two frames' paths
         com = self._com_entries() if self.com_table else None
+        if com is None and not shared:  # frames that share no joint (one arm, two apart): no entry saved
+            return {}
         if com is not None:
             root = [[*v, *w] for v, w in self.root_columns]
             com = (com[0], com[1], root), tuple([[slot(e) for e in row] for row in part] for part in (*com, root))

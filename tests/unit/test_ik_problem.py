@@ -84,7 +84,8 @@ def test_settle_choosing_takes_array_rows_where_chosen(taken):
 def test_a_pose_term_reads_its_jacobian_as_one_array_with_the_entries_numbers():
     """A pose target's Jacobian from the frames' columns put together once
     (:meth:`Kinematics.point_columns`) equals the entry-wise one, to the bit op by op (the same
-    operations; compiled, XLA may fuse them differently), weights, a locked joint and a solved root included."""
+    operations; compiled, XLA may fuse them differently), weights, a position, a locked joint and a solved
+    root included (two frames of one arm: they share its screws, so the table is used)."""
     from _models import PANDA
 
     import diffkin as dk
@@ -97,11 +98,12 @@ def test_a_pose_term_reads_its_jacobian_as_one_array_with_the_entries_numbers():
     q = rng.uniform(-1.0, 1.0, (P, robot.dof))
     T = np.asarray(dk.fk(robot, q + 0.1, names))
     weights = {"panda_link3": (1.0, 0.5, 0.0, 2.0, 1.0, 0.0)}
-    terms = terms_of(robot, {n: T[:, k] for k, n in enumerate(names)}, {}, weights)
+    terms = terms_of(robot, {names[0]: T[:, 0], names[1]: T[:, 1, :3, 3]}, {}, weights)  # a pose, a position
     spec = Spec(terms.targets, (), tuple(i == 2 for i in range(robot.dof)), (), True, True)
     problem = spec.problem(robot, spec.bind(tuple(terms.data), ()))
     base = np.concatenate([rng.normal(size=(3, P)), np.tile(np.eye(3).reshape(9, 1), (1, P))])
     x = jnp.asarray(np.concatenate([q.T, base]))
+    assert all(not isinstance(rows, list) for rows in problem.residual(x).J)  # both terms' rows as arrays
     arrays = problem.evaluate(x).J
     entries = Kinematics(problem, x)  # no table: the entry-wise columns
     rows = [t.rows(entries, b, True) for t, b in zip(problem.terms, problem.bound, strict=True)]
