@@ -28,7 +28,7 @@ from diffkin.traj import _rows, _spline
 #: pieces per segment
 PIECES = 32
 #: pieces per curve whose bound is refined (the lowest), and the sub-pieces each is cut into
-REFINED, SUB = 16, 8
+REFINED, SUB = 64, 4
 
 
 def _piece_speed(start: jax.Array, mid: jax.Array, end: jax.Array) -> jax.Array:

@@ -56,7 +56,7 @@ def optimize(
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
       hull of the control polygon's differences);
     - **clearance**: a certified lower bound over the whole motion (each segment cut into 32 pieces, the
-      16 lowest of a curve cut 8 times finer; on a piece, the distances at its middle minus how far the
+      64 lowest of a curve cut 4 times finer; on a piece, the distances at its middle minus how far the
       shapes can move within it, from the joint speeds and each joint's reach to the shapes it moves:
       :mod:`diffkin.traj._certify`).
 
