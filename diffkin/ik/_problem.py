@@ -121,11 +121,9 @@ class Kinematics:
 
     def _com_entries(self) -> tuple | None:
         """``(moments (bodies, 3), screws (joints, 6))``: the entries :meth:`com_columns` reads, or ``None``."""
-        from diffkin.models._passes import ScannedPass
-
         p = self.kin
         robot = getattr(p, "robot", None)
-        if robot is None or isinstance(p, ScannedPass) or p.fold or not hasattr(p, "bodies"):
+        if robot is None or robot.scanned or p.fold or not hasattr(p, "bodies"):
             return None
         masses = rg.per_joint(host(robot.masses), snap=False)
         if not all(isinstance(e, float) for e in [*masses, *p.multipliers]):
