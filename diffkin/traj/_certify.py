@@ -60,20 +60,14 @@ def _bounds(model, avoid, reach, P, u, half, base, locked) -> tuple[jax.Array, j
     # lower bound at least that far stands for them (the bound of a piece stays above the margin)
     near = avoid.margin + 2 * jnp.max(delta) + 0.01
     d_self, d_world = _rows.distances(model, avoid, locked, base, K, q.reshape(B * K, Q, dof), near)
-    parts, sampled = [], []
-    if d_self is not None:
-        pairs = avoid.geom.pairs
-        parts.append(jnp.min(d_self - delta[pairs[:, 0]] - delta[pairs[:, 1]], axis=0))
-        sampled.append(jnp.min(d_self, axis=0))
-    if d_world is not None:
-        parts.append(jnp.min(d_world - delta[:, None], axis=(0, 1)))
-        sampled.append(jnp.min(d_world, axis=(0, 1)))
-    if not parts:
-        inf = jnp.full((B, K, Q), jnp.inf, P.dtype)
-        return inf, inf
-    lower = jnp.min(jnp.stack(parts), axis=0).reshape(B, K, Q)
-    lower = jnp.where(jnp.isnan(lower), -jnp.inf, lower)
-    return lower, jnp.min(jnp.stack(sampled), axis=0).reshape(B, K, Q)
+    lower = _rows.smallest(
+        None if d_self is None else d_self - delta[avoid.geom.pairs[:, 0]] - delta[avoid.geom.pairs[:, 1]],
+        None if d_world is None else d_world - delta[:, None],
+        (B * K, Q),
+        P.dtype,
+    )
+    sampled = _rows.smallest(d_self, d_world, (B * K, Q), P.dtype)
+    return lower.reshape(B, K, Q), sampled.reshape(B, K, Q)
 
 
 def certified(

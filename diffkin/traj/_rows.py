@@ -52,3 +52,18 @@ def distances(model, avoid: Avoid, locked, base, k: int, q: jax.Array, reach=jnp
         self_d = jnp.zeros_like(stacked).at[order].set(stacked).reshape(-1, C, Q)
     world_d = None if d_world is None else d_world.reshape(d_world.shape[:2] + (C, Q))
     return self_d, world_d
+
+
+def smallest(d_self, d_world, shape: tuple[int, int], dtype) -> jax.Array:
+    """``shape`` ``(C, Q)``: per configuration, the smallest of the self pairs' distances ``(pairs, C, Q)``
+    and the world's ``(S, W, C, Q)`` (as :func:`distances` gives them, either ``None``); ``inf`` without
+    either, ``-inf`` where a distance is NaN."""
+    parts = []
+    if d_self is not None:
+        parts.append(jnp.min(d_self, axis=0))
+    if d_world is not None:
+        parts.append(jnp.min(d_world, axis=(0, 1)))
+    if not parts:
+        return jnp.full(shape, jnp.inf, dtype)
+    d = jnp.min(jnp.stack(parts), axis=0)
+    return jnp.where(jnp.isnan(d), -jnp.inf, d)

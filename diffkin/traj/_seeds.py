@@ -55,8 +55,8 @@ def seeds(curves, count: int, free: int, key) -> jax.Array:
     if count == 1:
         return line
     if curves.avoid is None:
-        return jnp.concatenate([line, lines(q_start, q_goal, _near_middle(key, q_start, q_goal, lower, upper,
-                                                                          (B, count - 1)), free)], axis=1)  # fmt: skip
+        via = _near_middle(key, q_start, q_goal, lower, upper, (B, count - 1))
+        return jnp.concatenate([line, lines(q_start, q_goal, via, free)], axis=1)
     k_any, k_mid = jax.random.split(key)
     quarter = CANDIDATES // 4
     via = jnp.concatenate(
@@ -76,25 +76,15 @@ def seeds(curves, count: int, free: int, key) -> jax.Array:
     return jnp.concatenate([line, chosen], axis=1)
 
 
-def clearance(curves, X: jax.Array, per_segment: int = SAMPLES) -> jax.Array:
+def clearance(curves, X: jax.Array) -> jax.Array:
     """``(B, V)``: the smallest distance (counted up to ``curves.cap()``) along the curves of free control
-    points ``X`` ``(B, V, n, dof)`` of ``curves``' problems, at ``per_segment`` points per segment and the end."""
+    points ``X`` ``(B, V, n, dof)`` of ``curves``' problems, at :data:`SAMPLES` points per segment and the end."""
     B, V, n, dof = X.shape
     ends = lambda q: jnp.broadcast_to(q[:, None], (B, V, dof))  # noqa: E731
     P = _spline.control_points(ends(curves.q_start), X, ends(curves.q_goal))  # (B, V, N, dof)
     segs = _spline.segments(n + 2 * _spline.ENDS)
-    u = jnp.asarray(np.arange(segs * per_segment + 1) / per_segment, X.dtype)
-    q = _spline.evaluate(P[:, :, None], u)  # (B, V, Q, dof)
-    Q = q.shape[2]
-    d_self, d_world = _rows.distances(
-        curves.model, curves.avoid, curves.locked, curves.base, V, q.reshape(B * V, Q, dof), curves.cap()
-    )
-    parts = []
-    if d_self is not None:
-        parts.append(jnp.min(d_self, axis=(0, 2)))
-    if d_world is not None:
-        parts.append(jnp.min(d_world, axis=(0, 1, 3)))
-    if not parts:
-        return jnp.full((B, V), jnp.inf, X.dtype)
-    d = jnp.min(jnp.stack(parts), axis=0).reshape(B, V)
-    return jnp.where(jnp.isnan(d), -jnp.inf, d)
+    u = jnp.asarray(np.arange(segs * SAMPLES + 1) / SAMPLES, X.dtype)
+    q = _spline.evaluate(P[:, :, None], u).reshape(B * V, -1, dof)  # (B V, Q, dof)
+    d_self, d_world = _rows.distances(curves.model, curves.avoid, curves.locked, curves.base, V, q, curves.cap())
+    d = _rows.smallest(d_self, d_world, (B * V, q.shape[1]), X.dtype)  # (B V, Q)
+    return jnp.min(d, axis=-1).reshape(B, V)
