@@ -8,6 +8,7 @@ The measurements that justify them are in docs/performance.md, "XLA CPU tricks".
 - :func:`materialize`: values that many later kernels read are computed once, behind an
   optimization barrier, instead of being recomputed inside each consumer.
 - :func:`opaque_index`: an index that feeds several scatters is computed once.
+- :func:`entries_last`: an array of many entries that many kernels read, computed once, problems last.
 - :func:`in_steps`: a large batch goes through a function in fixed-size steps, so that each
   step's intermediates stay in cache and the temporary buffer stays small; optionally each step
   as two independent halves (:func:`_in_halves`), so that both CPU threads have work.
@@ -116,6 +117,18 @@ def materialize(values: list) -> jax.Array:
     # XLA folds away a stack of one (and the barrier with it): a single value is stacked twice.
     stacked = jnp.stack(entries * 2 if len(entries) == 1 else entries)
     return jax.lax.optimization_barrier(stacked)[: len(entries)]
+
+
+def entries_last(x: jax.Array) -> jax.Array:
+    """``x`` ``(P, ...)`` as it is, its entries computed once (:func:`materialize`) and stored problems last.
+
+    A value that many kernels read entry by entry (a target pose ``(P, 4, 4)`` with the checks that made
+    it safe) is otherwise recomputed inside each of them, and read across the problems' stride:
+    ``dk.ik.step``'s Panda targets at 4,096, the step 15-30 % faster.
+    """
+    n = x.shape[0]
+    flat = x.reshape(n, -1)
+    return materialize([flat[:, i] for i in range(flat.shape[1])]).T.reshape(x.shape)
 
 
 # A serial forward pass is materialised every this many joints (see :func:`segment_end`).

@@ -31,7 +31,7 @@ import numpy as np
 from diffkin import _rigid as rg
 from diffkin._checks import instance, real_array
 from diffkin._static import ModelKey, is_concrete, partition
-from diffkin._xla import solver_jit, summed_products
+from diffkin._xla import entries_last, solver_jit, summed_products
 from diffkin.ik import _qp
 from diffkin.ik._prepare import prepare
 from diffkin.ik._problem import Eval, Kinematics, Problem, settle
@@ -266,7 +266,7 @@ def _step(
         state = jnp.concatenate([x, root[:, :3, 3].T, root[:, :3, :3].reshape(n, 9).T])
     problem = targets_only.problem(
         model,
-        targets_only.bind(s.targets, ()),
+        targets_only.bind(tuple(entries_last(t) for t in s.targets), ()),
         rg.IDENTITY if root is None or spec.solve_base else rg.from_matrix(root),
         None,
         None,
