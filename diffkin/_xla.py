@@ -311,8 +311,10 @@ def in_steps(
     step: int,
     axis: int = 0,
     halves: bool = False,
+    in_axis: int = 0,
 ):
-    """``fn(*inputs)`` over the leading axis of ``inputs`` (``n >= step`` problems), ``step`` problems at a time.
+    """``fn(*inputs)`` over the leading axis of ``inputs`` (``n >= step`` problems), ``step`` problems at a time
+    (over their last axis with ``in_axis=-1``: problems last, as :mod:`diffkin.ik._qp` holds them).
 
     ``fn`` maps inputs with a leading axis of ``step`` to a tuple of outputs with that axis at
     ``axis`` (an output with the problems last is written by loops that run along them: XLA's CPU
@@ -321,19 +323,24 @@ def in_steps(
     intermediates then stay in cache, and XLA's temporary buffer stays small (a buffer above
     glibc's mmap threshold takes fresh, page-faulted memory on every call): ``dk.srs.ik`` in float64
     about 2x faster; in float32 the steps did not pay, and are kept for the memory bound. With
-    ``halves`` (on the CPU), each step is two independent halves (:func:`_in_halves`).
+    ``halves`` (on the CPU, problems first), each step is two independent halves (:func:`_in_halves`).
 
     Returns:
         The outputs of ``fn``, each with an axis of ``n`` at ``axis``.
     """
-    n = inputs[0].shape[0]
-    if halves and step % 2 == 0 and jax.default_backend() == "cpu":
+    n = inputs[0].shape[in_axis]
+    if halves and in_axis == 0 and step % 2 == 0 and jax.default_backend() == "cpu":
         fn = _in_halves(fn, axis)
-    shapes = jax.eval_shape(fn, *(jax.ShapeDtypeStruct((step,) + x.shape[1:], x.dtype) for x in inputs))
+
+    def sliced(x):  # the shape of x's step
+        at = in_axis % x.ndim
+        return x.shape[:at] + (step,) + x.shape[at + 1 :]
+
+    shapes = jax.eval_shape(fn, *(jax.ShapeDtypeStruct(sliced(x), x.dtype) for x in inputs))
 
     def body(i, out):
         start = jnp.minimum(i * step, n - step)
-        results = fn(*(jax.lax.dynamic_slice_in_dim(x, start, step) for x in inputs))
+        results = fn(*(jax.lax.dynamic_slice_in_dim(x, start, step, in_axis % x.ndim) for x in inputs))
         return tuple(jax.lax.dynamic_update_slice_in_dim(o, r, start, axis) for o, r in zip(out, results, strict=True))
 
     def full(shape):
