@@ -38,17 +38,26 @@ def _wrench(n: jax.Array, p: jax.Array) -> jax.Array:
     return jnp.concatenate([n, jnp.cross(p, n)], axis=-1)
 
 
-def _gathered(bound: jax.Array, reach, measure) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """``(d, W_a, W_b)`` of ``M`` pairs, ``(M,)``, ``(M, 6)`` twice: ``measure(idx)`` (the distance and wrenches
-    of the pairs ``idx``, exact below ``reach``, else a lower bound at least ``reach``) where
-    ``bound < reach``, else the bound; the wrenches zero where ``d >= reach``."""
+def _flat_reach(reach, batch: tuple[int, ...]):
+    """``reach`` as :func:`_gathered` takes it for pairs of ``batch``: a scalar as it is, else broadcast to
+    ``batch`` and flattened."""
+    return reach if jnp.ndim(reach) == 0 else jnp.broadcast_to(reach, batch).reshape(-1)
+
+
+def _gathered(bound: jax.Array, reach, measure, share: int) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """``(d, W_a, W_b)`` of ``M`` pairs, ``(M,)``, ``(M, 6)`` twice: ``measure(idx, reach)`` (the distance and
+    wrenches of the pairs ``idx``, exact below their ``reach``, else a lower bound at least it) where
+    ``bound < reach``, else the bound; the wrenches zero where ``d >= reach``. ``reach``: a scalar or
+    ``(M,)``, one per pair. ``1 / share`` of the pairs are measured at a time."""
     total = bound.shape[0]
-    budget = -(-total // NEAR_SHARE)
+    budget = -(-total // share)
+    per_pair = jnp.ndim(reach) > 0
 
     def step(state):
         left, d, Wa, Wb = state
         idx = jnp.nonzero(left, size=budget, fill_value=total)[0]
-        measured = measure(jnp.minimum(idx, total - 1))
+        safe = jnp.minimum(idx, total - 1)
+        measured = measure(safe, reach[safe] if per_pair else reach)
         put = lambda x, value: x.at[idx].set(value, mode="drop")  # noqa: E731
         return put(left, False), *(put(x, m) for x, m in zip((d, Wa, Wb), measured, strict=True))
 
@@ -65,17 +74,19 @@ def _padded(solid, size: int):
     return solid.replace(vertices=jnp.concatenate([v, extra], axis=-2))
 
 
-def _general(pairs: list, batches: list, reach) -> list[tuple[jax.Array, jax.Array, jax.Array]]:
+def _general(pairs: list, batches: list, reach, share: int) -> list[tuple[jax.Array, jax.Array, jax.Array]]:
     """The general pairs of every kind in one gathered batch (the module docstring)."""
     sizes = [int(np.prod(b)) for b in batches]
     starts = np.cumsum([0, *sizes])
     bound = jnp.concatenate(
         [jnp.broadcast_to(lower_bound(a, b), batch).reshape(-1) for (a, b), batch in zip(pairs, batches, strict=True)]
     )
+    if jnp.ndim(reach):
+        reach = jnp.concatenate([_flat_reach(reach, batch) for batch in batches])
     solids = [(a.solid(), b.solid()) for a, b in pairs]
     width = max(s.vertices.shape[-2] for pair in solids for s in pair)
 
-    def measure(idx):
+    def measure(idx, reach):
         block = jnp.searchsorted(jnp.asarray(starts[1:-1]), idx, side="right")
         sides = None
         for k, ((sa, sb), batch) in enumerate(zip(solids, batches, strict=True)):
@@ -95,25 +106,28 @@ def _general(pairs: list, batches: list, reach) -> list[tuple[jax.Array, jax.Arr
         n, pa, pb, s = _gjk.witnesses(a, b, reach)
         return s - a.radius - b.radius, _wrench(-n, pa), _wrench(n, pb)
 
-    d, Wa, Wb = _gathered(bound, reach, measure)
+    d, Wa, Wb = _gathered(bound, reach, measure, share)
     return [
         (d[i:j].reshape(batch), Wa[i:j].reshape(batch + (6,)), Wb[i:j].reshape(batch + (6,)))
         for i, j, batch in zip(starts[:-1], starts[1:], batches, strict=True)
     ]
 
 
-def near_motions(pairs: list, reach) -> list[tuple[jax.Array, jax.Array, jax.Array]]:
+def near_motions(pairs: list, reach, share: int = NEAR_SHARE) -> list[tuple[jax.Array, jax.Array, jax.Array]]:
     """Per pair of shape batches ``(a, b)`` (their batch axes broadcast to ``B``): ``(d, W_a, W_b)``, ``d`` ``B``
     and the wrenches ``B + (6,)`` of :func:`diffkin.collision._distance.motion`, exact where the
     distance is below ``reach``; elsewhere ``d`` is a lower bound at least ``reach`` and the wrenches
-    are zero (the module docstring)."""
+    are zero (the module docstring). ``reach``: metres, a scalar or an array that broadcasts to every
+    ``B`` (one per configuration, ``(P,)``, where the batches end in ``P``: a search's states). ``share``:
+    ``1 / share`` of the pairs measured exactly at a time (a step costs its whole size, padding included,
+    and a few GJK iterations whatever its size: the fewer pairs are near, the larger ``share`` pays)."""
     batches = [tuple(jnp.broadcast_shapes(batch_shape(a), batch_shape(b))) for a, b in pairs]
     out: list = [None] * len(pairs)
     kinds = [(type(a), type(b)) for a, b in pairs]
     general = [k for k in range(len(pairs)) if kinds[k] in GENERAL and np.prod(batches[k]) > 0]
     if general:  # the closed forms' pairs join the batch: its one GJK serves them too, their code is not compiled
         general += [k for k in range(len(pairs)) if kinds[k] in BOUNDED - GENERAL and np.prod(batches[k]) > 0]
-        joined = _general([pairs[k] for k in general], [batches[k] for k in general], reach)
+        joined = _general([pairs[k] for k in general], [batches[k] for k in general], reach, share)
         for k, result in zip(general, joined, strict=True):
             out[k] = result
     for k, ((a, b), batch) in enumerate(zip(pairs, batches, strict=True)):
@@ -127,8 +141,9 @@ def near_motions(pairs: list, reach) -> list[tuple[jax.Array, jax.Array, jax.Arr
         else:
             d, Wa, Wb = _gathered(
                 jnp.broadcast_to(lower_bound(a, b), batch).reshape(-1),
-                reach,
-                lambda idx, a=a, b=b, batch=batch: motion(taken(a, batch, idx), taken(b, batch, idx)),
+                _flat_reach(reach, batch),
+                lambda idx, _, a=a, b=b, batch=batch: motion(taken(a, batch, idx), taken(b, batch, idx)),
+                share,
             )
             d, Wa, Wb = d.reshape(batch), Wa.reshape(batch + (6,)), Wb.reshape(batch + (6,))
         out[k] = (jnp.broadcast_to(d, batch), *(jnp.broadcast_to(W, batch + (6,)) for W in (Wa, Wb)))

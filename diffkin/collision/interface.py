@@ -8,7 +8,7 @@ draws a convex shape by its hull.
 
 from diffkin.collision._fit import hull
 from diffkin.collision._geometry import moved
-from diffkin.collision._near import near_motions
+from diffkin.collision._near import NEAR_SHARE, near_motions
 from diffkin.collision._robot import (
     batch_last,
     check_geometry,
@@ -20,6 +20,7 @@ from diffkin.collision._robot import (
 )
 
 __all__ = [
+    "NEAR_SHARE",
     "batch_last",
     "check_geometry",
     "expanded",

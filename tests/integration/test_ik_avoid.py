@@ -415,6 +415,40 @@ def _rotation(w):
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
+def test_near_motion_takes_a_reach_per_configuration_and_any_share():
+    """:func:`diffkin.collision._near.near_motions` with a reach per configuration (the batches' last axis,
+    as a trajectory's descent and certificate give it; ``-inf``: nothing measured there) and a share other
+    than the default: exact below each pair's own reach, at least it elsewhere, equal to the scalar reach's
+    results where the reaches agree, the general pairs (GJK) and a closed form's alike."""
+    from diffkin.collision import Capsule, Convex
+    from diffkin.collision._distance import motion
+    from diffkin.collision._near import near_motions
+
+    rng = np.random.default_rng(11)
+    n, configs = 40, 6  # pairs (n, configs): each configuration's shapes the same, the reach its own
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    ends = rng.uniform(-1.0, 1.0, (n, 1, 3)) + np.zeros((1, configs, 3))
+    capsules = Capsule(ends, ends + rng.uniform(-0.2, 0.2, (n, configs, 3)), np.full((n, configs), 0.05))
+    boxes = _random_boxes(rng, n * configs, 1.0)
+    boxes = jax.tree.map(lambda x: x.reshape((n, configs) + x.shape[1:]), boxes)
+    hulls = Convex(boxes.pose, rng.uniform(0.5, 1.0, (n, configs, 8, 1)) * corners * boxes.half_extents[..., None, :])
+    pairs = [(capsules, boxes), (capsules, hulls)]
+    reach = jnp.asarray([0.0, 0.05, 0.3, 1.0, 3.0, -np.inf])  # (configs,)
+    for share in (4, 64):
+        for (a, b), (d, Wa, Wb), (d_all, Wa_all, Wb_all) in zip(
+            pairs, near_motions(pairs, reach, share), near_motions(pairs, jnp.inf, share), strict=True
+        ):
+            d, d_all = np.asarray(d), np.asarray(d_all)
+            d_exact = np.asarray(motion(a, b)[0])
+            close = d_exact < np.asarray(reach)
+            np.testing.assert_allclose(d[close], d_all[close], rtol=0, atol=1e-10)
+            assert np.all(d[~close] >= np.broadcast_to(reach, d.shape)[~close])
+            assert not np.any(np.asarray(Wa)[~close]) and not np.any(np.asarray(Wb)[~close])
+            np.testing.assert_allclose(np.asarray(Wa)[close], np.asarray(Wa_all)[close], rtol=0, atol=1e-8)
+            np.testing.assert_allclose(np.asarray(Wb)[close], np.asarray(Wb_all)[close], rtol=0, atol=1e-8)
+            assert close[:, 0].sum() < close[:, -2].sum() and not close[:, -1].any()
+
+
 def test_near_motion_is_exact_where_the_reach_is():
     """The term's broad phase (:func:`diffkin.collision._near.near_motions`): where the exact distance is
     below the reach, the distance and the wrenches are :func:`motion`'s; elsewhere the distance is at
