@@ -248,11 +248,14 @@ def test_box_qp_falls_back_to_the_interior_point(monkeypatch):
         np.testing.assert_allclose(out.v[:, p], _enumerated(H, g, lo, hi, G, h), atol=1e-8 if p % 6 != 3 else 1e-6)
 
 
-def test_box_qp_in_steps(monkeypatch):
+@pytest.mark.parametrize("box_iters", [_qp.BOX_ITERS, 1])
+def test_box_qp_in_steps(monkeypatch, box_iters):
     """A batch larger than ``2 BOX_STEP`` goes through the active set ``BOX_STEP`` problems at a time (the
-    last step overlapping the one before): each problem's ``v`` and iterations are those of one batch."""
+    last step overlapping the one before): each problem's ``v`` and iterations are those of one batch, also
+    where the interior point takes over (one active-set iteration allowed)."""
     qp = _stacked(BOXES)
-    whole = _solve_qp(qp)
+    monkeypatch.setattr(_qp, "BOX_ITERS", box_iters)
+    whole = jax.jit(lambda qp: _qp.solve(qp))(qp)  # (a new function: jit caches per function)
     monkeypatch.setattr(_qp, "BOX_STEP", 10)  # 48 problems: steps at 0, 10, 20, 30 and 38
     stepped = jax.jit(lambda qp: _qp.solve(qp))(qp)  # (a new function: jit caches per function)
     np.testing.assert_array_equal(stepped.iters, whole.iters)
