@@ -305,6 +305,14 @@ def configurations_in_steps(
     return out.reshape(*batch, *out.shape[1:])
 
 
+def problems_at_once(n: int) -> int:
+    """How many of ``n`` independent problems, each with its own iteration loop (a trajectory's descent and
+    certificate), one compiled step solves at once (:func:`in_steps`): on the CPU one, since one problem
+    already vectorises hundreds of configurations and a batch's loop runs as long as its slowest problem;
+    elsewhere all ``n`` (a GPU wants the width)."""
+    return 1 if jax.default_backend() == "cpu" else n
+
+
 def in_steps(
     fn: Callable[..., tuple[jax.Array, ...]],
     inputs: tuple[jax.Array, ...],

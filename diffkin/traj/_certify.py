@@ -10,7 +10,8 @@ its shapes (``delta_s`` against an obstacle, ``delta_a + delta_b`` between two o
 is then a lower bound over the whole piece, and the motion's is the smallest over its pieces.
 
 Only the pairs that a piece's motion could bring within the margin need their exact distance: the
-others get a cheap lower bound at least ``margin + 2 max delta + 1 cm`` (:func:`diffkin.collision._near`),
+others get a cheap lower bound at least ``margin + 2 max_s delta_s + 1 cm``, the largest motion of the
+piece's shapes (:func:`diffkin.collision._near`),
 which keeps their pieces above the margin. Pieces of one size (rather than a tree of halvings, whose
 coarse pieces move far and so need almost every pair exactly) keep that reach short; then the few pieces
 of each curve whose bound is lowest (where a curve passes close to an obstacle) are cut finer, which
@@ -56,9 +57,9 @@ def _bounds(model, avoid, reach, P, u, half, base, locked) -> tuple[jax.Array, j
     q, delta = motion(reach, P, u, half)  # (B, K, Q, dof), (B, K, Q, S)
     Q = q.shape[2]
     delta = jnp.moveaxis(delta, -1, 0).reshape(-1, B * K, Q)  # (S, C, Q)
-    # pairs farther than any piece's motion can bring within the margin need no exact distance: a
-    # lower bound at least that far stands for them (the bound of a piece stays above the margin)
-    near = avoid.margin + 2 * jnp.max(delta) + 0.01
+    # pairs farther than their piece's motion can bring within the margin need no exact distance: a
+    # lower bound at least that far stands for them (the bound of the piece stays above the margin)
+    near = (avoid.margin + 2 * jnp.max(delta, axis=0) + 0.01).reshape(B * K * Q)
     d_self, d_world = _rows.distances(model, avoid, locked, base, K, q.reshape(B * K, Q, dof), near)
     lower = _rows.smallest(
         None if d_self is None else d_self - delta[avoid.geom.pairs[:, 0]] - delta[avoid.geom.pairs[:, 1]],

@@ -19,8 +19,6 @@ the curve lies in their convex hull) and locked joints at their values.
 
 from __future__ import annotations
 
-import dataclasses
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -66,16 +64,20 @@ class Curves:
     def control(self, X: jax.Array) -> jax.Array:
         return _spline.control_points(self.q_start, X, self.q_goal)
 
-    def _clearance_rows(self, q: jax.Array) -> tuple[jax.Array, jax.Array]:
-        """``r (m, C, Q)`` and ``dr/dq`` ``(m, dof, C, Q)`` at configurations ``q`` ``(C, Q, dof)``, weighted."""
-        avoid = dataclasses.replace(self.avoid, margin=self.cap())
-        r, J = _rows.rows(self.model, avoid, self.locked, self.base, self.k, q)
+    def _clearance_rows(self, q: jax.Array, live: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """``r (m, C, Q)`` and ``dr/dq`` ``(m, dof, C, Q)`` at configurations ``q`` ``(C, Q, dof)``, weighted;
+        zero for the curves not ``live`` ``(C,)`` (their margin is ``-inf``: no pair of theirs is near, so
+        none is measured exactly)."""
+        C, Q, _ = q.shape
+        margin = jnp.broadcast_to(jnp.where(live[:, None], self.cap(), -jnp.inf), (C, Q)).reshape(C * Q)
+        r, J = _rows.rows(self.model, self.avoid, self.locked, self.base, self.k, q, margin)
         return W_CLEAR * r, W_CLEAR * J
 
-    def normal(self, X: jax.Array, W: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+    def normal(self, X: jax.Array, W: jax.Array, live: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
         """``(cost (C,), g (C, n dof), H (C, n dof, n dof), blocked (C,))``: ``|r|^2``, ``J^T r`` and
         ``J^T J`` at ``X`` ``(C, n, dof)``, ``W`` ``(Q, N)`` the basis weights of the clearance samples;
-        ``blocked``: a clearance row is not zero (always, without ``avoid``: only smoothness to descend)."""
+        ``blocked``: a clearance row is not zero (always, without ``avoid``: only smoothness to descend).
+        The clearance rows only of the curves ``live`` ``(C,)`` (the others' results are not read)."""
         C, n, dof = X.shape
         P = self.control(X)
         D_host, D_free_host = _smoothing(P.shape[1], n)
@@ -87,7 +89,7 @@ class Curves:
         blocked = jnp.full((C,), self.avoid is None)
         if self.avoid is not None:
             q = jnp.einsum("qk,ckj->cqj", W, P)  # (C, Q, dof)
-            r, J = self._clearance_rows(q)  # (m, C, Q), (m, dof, C, Q)
+            r, J = self._clearance_rows(q, live)  # (m, C, Q), (m, dof, C, Q)
             Wf = W[:, _spline.ENDS : _spline.ENDS + n]  # (Q, n)
             clearance = jnp.sum(r**2, axis=(0, 2))
             cost, blocked = cost + clearance, clearance > 0
@@ -105,32 +107,39 @@ class Curves:
 
     def descend(self, X: jax.Array, iters: int) -> tuple[jax.Array, jax.Array]:
         """``(X, cost)``: ``X`` ``(C, n, dof)`` after at most ``iters`` Levenberg-Marquardt iterations, and
-        its cost ``(C,)``. Fewer iterations once every problem has a curve without a clearance row (or
-        each of its curves with one has stalled: damping at its largest), since the smoothness rows
-        alone change the curves only slightly and each iteration costs the clearance rows' distances."""
+        its cost ``(C,)``. A problem stops once it has a curve without a clearance row (or each of its
+        curves with one has stalled: damping at its largest), since the smoothness rows alone change the
+        curves only slightly and each iteration costs the clearance rows' distances; its curves are then
+        left as they are (a problem's result does not depend on the others in its batch) and measure no
+        distance exactly (a batch's iterations cost its problems still going)."""
         C, n, dof = X.shape
         X = self.project(X)
         W = self.samples(n + 2 * _spline.ENDS, X.dtype)
         eye = jnp.eye(n * dof, dtype=X.dtype)
 
-        def step(state):
-            it, X, cost, g, H, blocked, mu = state
-            lam = jnp.where(jnp.isfinite(cost), mu * cost, 0.0) + 1e-10
-            dx = jnp.linalg.solve(H + lam[:, None, None] * eye, -g[..., None])[..., 0]
-            X_try = self.project(X + dx.reshape(C, n, dof))
-            cost_try, g_try, H_try, blocked_try = self.normal(X_try, W)
-            take = jnp.isfinite(cost_try) & (cost_try < cost)
-            pick = lambda new, old: jnp.where(take.reshape((C,) + (1,) * (new.ndim - 1)), new, old)  # noqa: E731
-            mu = jnp.where(take, jnp.maximum(mu * _MU_DOWN, _MU_MIN), jnp.minimum(mu * _MU_UP, _MU_MAX))
-            new = (pick(X_try, X), pick(cost_try, cost), pick(g_try, g), pick(H_try, H), pick(blocked_try, blocked))
-            return (it + 1, *new, mu)
-
-        def going(state):
-            it, blocked, mu = state[0], state[5], state[6]
+        def going(blocked, mu) -> jax.Array:
+            """``(C,)`` whether each curve's problem goes on."""
             live = (blocked & (mu < _MU_MAX)).reshape(-1, self.k)  # (B, k)
             if self.avoid is not None:  # a problem with a curve clear of every row is done
                 live = live & jnp.all(blocked.reshape(-1, self.k), axis=1, keepdims=True)
-            return (it == 0) | ((it <= iters) & jnp.any(live))
+            return jnp.repeat(jnp.any(live, axis=1), self.k)
+
+        def step(state):
+            it, X, cost, g, H, blocked, mu = state
+            live = going(blocked, mu) | (it == 0)
+            lam = jnp.where(jnp.isfinite(cost), mu * cost, 0.0) + 1e-10
+            dx = jnp.linalg.solve(H + lam[:, None, None] * eye, -g[..., None])[..., 0]
+            X_try = self.project(X + dx.reshape(C, n, dof))
+            cost_try, g_try, H_try, blocked_try = self.normal(X_try, W, live)
+            take = live & jnp.isfinite(cost_try) & (cost_try < cost)
+            pick = lambda new, old: jnp.where(take.reshape((C,) + (1,) * (new.ndim - 1)), new, old)  # noqa: E731
+            raised = jnp.where(take, jnp.maximum(mu * _MU_DOWN, _MU_MIN), jnp.minimum(mu * _MU_UP, _MU_MAX))
+            new = (pick(X_try, X), pick(cost_try, cost), pick(g_try, g), pick(H_try, H), pick(blocked_try, blocked))
+            return (it + 1, *new, jnp.where(live, raised, mu))
+
+        def more(state):
+            it, blocked, mu = state[0], state[5], state[6]
+            return (it == 0) | ((it <= iters) & jnp.any(going(blocked, mu)))
 
         # the first iteration evaluates X itself (a zero step from an infinite cost): the residual is
         # compiled once, inside the loop
@@ -138,5 +147,5 @@ class Curves:
         g, H = jnp.zeros((C, n * dof), X.dtype), jnp.broadcast_to(eye, (C, n * dof, n * dof))
         mu = jnp.full((C,), _MU_INIT, X.dtype)
         state = (jnp.int32(0), X, cost, g, H, jnp.ones((C,), bool), mu)
-        out = jax.lax.while_loop(going, step, state)
+        out = jax.lax.while_loop(more, step, state)
         return out[1], out[2]

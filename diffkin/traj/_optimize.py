@@ -11,7 +11,7 @@ import numpy as np
 
 from diffkin._checks import positive_int, real_array
 from diffkin._static import combine, is_concrete, partition
-from diffkin._xla import solver_jit
+from diffkin._xla import in_steps, problems_at_once, solver_jit
 from diffkin.ik import Avoid
 from diffkin.ik.interface import cast, check_avoid, check_batched, default_key, detach, finite
 from diffkin.models.robot import Robot
@@ -63,7 +63,9 @@ def optimize(
     The best of them is kept: a successful one of the shortest duration, else the one
     with the largest certified clearance. Failures stay honest: ``success=False`` with finite values
     and the reason in ``goal_ok``, ``limits_ok``, ``clear``. Problems are independent (a world per
-    problem where ``avoid.world`` has problem axes). Compiled once per model, batch shape and static
+    problem where ``avoid.world`` has problem axes): a problem's motion depends on its own data and its
+    place in the batch (its seeds' key) only. On the CPU one compiled loop plans them one after another
+    (a batch costs the sum of its problems, not its slowest times their number); elsewhere all at once. Compiled once per model, batch shape and static
     argument; works inside ``jit`` with the model and ``avoid.geom`` closed over (the certificate
     reads them on the host) and the starts, goals and worlds traced (batch problems by their leading
     axes rather than by ``vmap``).
@@ -226,17 +228,61 @@ def _core(
     static, traced, q_start, q_goal, goal_ok, avoid, base, locked_q, bounds, reach, key, *, locked, free, seeds, iters
 ):
     model = cast(detach(combine(static, traced)), q_start.dtype)
-    dtype, dof = q_start.dtype, q_start.shape[-1]
-    velocity, acceleration, jerk = bounds
-    lower, upper = jnp.asarray(model.lower, dtype), jnp.asarray(model.upper, dtype)
+    dtype = q_start.dtype
     valid = goal_ok & jnp.all(jnp.isfinite(q_start) & jnp.isfinite(q_goal), axis=-1)
     q_start, q_goal = jnp.where(jnp.isfinite(q_start), q_start, 0.0), jnp.where(jnp.isfinite(q_goal), q_goal, 0.0)
     if locked_q is not None:
         held = jnp.asarray(locked)
         q_start, q_goal = jnp.where(held, locked_q, q_start), jnp.where(held, locked_q, q_goal)
     B = q_start.shape[0]
+    per_problem = avoid is not None and avoid.world is not None and bool(avoid.world.batch)
+    mapped = (jnp.arange(B), q_start, q_goal, base, locked_q, avoid.world if per_problem else None)
+    leaves, tree = jax.tree.flatten(mapped)
+    seed_key = jax.random.fold_in(key, 1)
+
+    def plan(*chunk):
+        index, q_start, q_goal, base, locked_q, world = jax.tree.unflatten(tree, chunk)
+        chunk_avoid = avoid.replace(world=world) if per_problem else avoid
+        keys = jax.vmap(lambda i: jax.random.fold_in(seed_key, i))(index)
+        return _plan(
+            model, q_start, q_goal, chunk_avoid, base, locked_q, bounds, reach, keys, locked, free, seeds, iters
+        )
+
+    step = problems_at_once(B)
+    if step >= B:
+        P, h, clearance, clear, limits_ok = plan(*leaves)
+    else:
+        P, h, clearance, clear, limits_ok = in_steps(plan, tuple(leaves), step)
+    segs = _spline.segments(free + 6)
+    u = jnp.asarray(np.arange(segs * _LENGTH_SAMPLES + 1) / _LENGTH_SAMPLES, dtype)
+    dense = _spline.evaluate(P[:, None], u)  # (B, Q, dof)
+    length = jnp.sum(jnp.linalg.norm(jnp.diff(dense, axis=1), axis=-1), axis=1)
+    return Trajectory(
+        q=_spline.knots(P),
+        t=h[:, None] * jnp.arange(segs + 1, dtype=dtype),
+        duration=segs * h,
+        success=valid & limits_ok & clear,
+        goal_ok=valid,
+        limits_ok=limits_ok,
+        clear=clear,
+        clearance=clearance,
+        path_length=length,
+        control=P,
+        segment_time=h,
+    )
+
+
+def _plan(
+    model, q_start, q_goal, avoid, base, locked_q, bounds, reach, keys, locked, free: int, seeds: int, iters: int
+):
+    """``(P (B, N, dof), h (B,), clearance (B,), clear (B,), limits_ok (B,))``: each of ``B`` problems' chosen
+    curve (control points), its segment time, certified clearance and checks; ``keys`` ``(B,)``, one per
+    problem (a problem's result does not depend on the others planned with it)."""
+    lower, upper = jnp.asarray(model.lower, q_start.dtype), jnp.asarray(model.upper, q_start.dtype)
+    velocity, acceleration, jerk = bounds
+    B, dof = q_start.shape
     ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, avoid, base, 1)
-    X = _seeds.seeds(ends, seeds, free, jax.random.fold_in(key, 1))  # (B, k, free, dof)
+    X = _seeds.seeds(ends, seeds, free, keys)  # (B, k, free, dof)
     rep = lambda x: None if x is None else jnp.repeat(x, seeds, axis=0)  # noqa: E731
     curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), avoid, base, seeds)
     X, cost = curves.descend(X.reshape(B * seeds, free, dof), iters)
@@ -259,31 +305,14 @@ def _core(
         clearance = jnp.where(jnp.isnan(clearance), -jnp.inf, clearance)
         clear = clearance >= avoid.margin
     else:
-        clearance = jnp.full((B, k), jnp.inf, dtype)
+        clearance = jnp.full((B, k), jnp.inf, q_start.dtype)
         clear = jnp.ones((B, k), bool)
-    segs = _spline.segments(free + 6)
-    duration = segs * h
+    duration = _spline.segments(free + 6) * h
     ok = limits_ok & clear
     score = jnp.where(ok, 1e9 - duration, jnp.clip(clearance, -1e6, 1e6))
     best = jnp.argmax(score, axis=1)
     pick = lambda x: jnp.take_along_axis(x, best.reshape((B, 1) + (1,) * (x.ndim - 2)), axis=1)[:, 0]  # noqa: E731
-    P, h, clearance, clear, limits_ok = pick(P), pick(h), pick(clearance), pick(clear), pick(limits_ok)
-    u = jnp.asarray(np.arange(segs * _LENGTH_SAMPLES + 1) / _LENGTH_SAMPLES, dtype)
-    dense = _spline.evaluate(P[:, None], u)  # (B, Q, dof)
-    length = jnp.sum(jnp.linalg.norm(jnp.diff(dense, axis=1), axis=-1), axis=1)
-    return Trajectory(
-        q=_spline.knots(P),
-        t=h[:, None] * jnp.arange(segs + 1, dtype=dtype),
-        duration=segs * h,
-        success=valid & limits_ok & clear,
-        goal_ok=valid,
-        limits_ok=limits_ok,
-        clear=clear,
-        clearance=clearance,
-        path_length=length,
-        control=P,
-        segment_time=h,
-    )
+    return pick(P), pick(h), pick(clearance), pick(clear), pick(limits_ok)
 
 
 _solve = solver_jit(_core, static_argnums=(0,), static_argnames=("locked", "free", "seeds", "iters"))

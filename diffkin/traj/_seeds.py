@@ -33,36 +33,41 @@ def lines(q_start: jax.Array, q_goal: jax.Array, via: jax.Array, free: int) -> j
     return jnp.where(s < 0.5, a + (s / 0.5) * (v - a), v + ((s - 0.5) / 0.5) * (b - v))
 
 
-def _near_middle(key, q_start, q_goal, lower, upper, shape) -> jax.Array:
+def _uniform(keys, count: int, lo, hi, dtype) -> jax.Array:
+    """``(B, count, dof)``: uniform in ``[lo, hi]`` ``(dof,)``, each problem from its own key of ``keys`` ``(B,)``."""
+    return jax.vmap(lambda key: jax.random.uniform(key, (count, lo.shape[-1]), dtype, lo, hi))(keys)
+
+
+def _near_middle(keys, q_start, q_goal, lower, upper, count: int) -> jax.Array:
     span = jnp.where(jnp.isfinite(upper - lower), upper - lower, 2 * np.pi)
-    noise = jax.random.uniform(key, shape + (q_start.shape[-1],), q_start.dtype, -1.0, 1.0)
+    noise = _uniform(keys, count, -jnp.ones_like(lower), jnp.ones_like(lower), q_start.dtype)
     mid = (q_start + q_goal) / 2
     return jnp.clip(mid[:, None] + 0.25 * span * noise, lower, upper)
 
 
-def _anywhere(key, lower, upper, shape, dtype) -> jax.Array:
+def _anywhere(keys, lower, upper, count: int, dtype) -> jax.Array:
     lo = jnp.where(jnp.isfinite(lower), lower, -np.pi)
     hi = jnp.where(jnp.isfinite(upper), upper, np.pi)
-    return jax.random.uniform(key, shape + (lower.shape[-1],), dtype, lo, hi)
+    return _uniform(keys, count, lo, hi, dtype)
 
 
-def seeds(curves, count: int, free: int, key) -> jax.Array:
+def seeds(curves, count: int, free: int, keys) -> jax.Array:
     """``(B, count, free, dof)``: the straight line, then ``count - 1`` lines through via points, for the
-    problems of ``curves`` (:class:`diffkin.traj._descent.Curves` of one curve per problem)."""
+    problems of ``curves`` (:class:`diffkin.traj._descent.Curves` of one curve per problem), each problem's
+    drawn from its own PRNG key of ``keys`` ``(B,)``."""
     q_start, q_goal, lower, upper = curves.q_start, curves.q_goal, curves.lower, curves.upper
-    B, dof = q_start.shape
     line = lines(q_start, q_goal, (q_start + q_goal)[:, None] / 2, free)
     if count == 1:
         return line
     if curves.avoid is None:
-        via = _near_middle(key, q_start, q_goal, lower, upper, (B, count - 1))
+        via = _near_middle(keys, q_start, q_goal, lower, upper, count - 1)
         return jnp.concatenate([line, lines(q_start, q_goal, via, free)], axis=1)
-    k_any, k_mid = jax.random.split(key)
+    k_any, k_mid = jax.vmap(jax.random.split, out_axes=1)(keys)
     quarter = CANDIDATES // 4
     via = jnp.concatenate(
         [
-            _anywhere(k_any, lower, upper, (B, CANDIDATES - quarter), q_start.dtype),
-            _near_middle(k_mid, q_start, q_goal, lower, upper, (B, quarter)),
+            _anywhere(k_any, lower, upper, CANDIDATES - quarter, q_start.dtype),
+            _near_middle(k_mid, q_start, q_goal, lower, upper, quarter),
         ],
         axis=1,
     )  # (B, M, dof)

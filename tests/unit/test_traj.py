@@ -98,6 +98,17 @@ def test_a_world_per_problem(planned):
     assert _sampled_clearance(q, swapped).min(axis=0)[2] < own[2]
 
 
+def test_a_problem_s_motion_does_not_depend_on_the_others_in_its_batch(planned):
+    # problem 0 replaced by a copy of problem 2 (same shapes: the same compiled program): problems 1 and
+    # 2 get the same motions (a finished problem's curves are left as they are; each problem draws its
+    # seeds from its own key)
+    worlds = jax.tree.map(lambda x: x.at[0].set(x[2]), WORLDS)
+    other = _plan(START.at[0].set(START[2]), GOAL.at[0].set(GOAL[2]), worlds)
+    for name in ("control", "clearance", "segment_time", "success"):
+        a, b = (np.asarray(getattr(t, name)) for t in (planned, other))
+        np.testing.assert_allclose(b[1:], a[1:], rtol=1e-6, atol=1e-6, err_msg=name)
+
+
 def test_limits_hold_on_the_continuous_motion(planned):
     t, q = _dense(planned, 4001)
     lower, upper = np.asarray(ROBOT.lower), np.asarray(ROBOT.upper)
