@@ -65,10 +65,10 @@ def optimize(
     and the reason in ``goal_ok``, ``limits_ok``, ``clear``. Problems are independent (a world per
     problem where ``avoid.world`` has problem axes): a problem's motion depends on its own data and its
     place in the batch (its seeds' key) only. On the CPU one compiled loop plans them one after another
-    (a batch costs the sum of its problems, not its slowest times their number); elsewhere all at once. Compiled once per model, batch shape and static
-    argument; works inside ``jit`` with the model and ``avoid.geom`` closed over (the certificate
-    reads them on the host) and the starts, goals and worlds traced (batch problems by their leading
-    axes rather than by ``vmap``).
+    (a batch costs the sum of its problems, not its slowest times their number); elsewhere all at once.
+    Compiled once per model, batch shape and static argument; works inside ``jit`` with the model and
+    ``avoid.geom`` closed over (the certificate reads them on the host) and the starts, goals and worlds
+    traced (batch problems by their leading axes rather than by ``vmap``).
 
     Args:
         model: a :class:`~diffkin.Robot`, :class:`~diffkin.DHChain` or :class:`~diffkin.PoEChain` of
