@@ -235,7 +235,8 @@ PARTS = ("/diffkin/collision/", "/diffkin/models/")
 SITES = {
     "_iterate": "iterations",
     "Problem.screen_cost": "seed screening",
-    "Problem.deferred_slack": "clearance check",
+    "Problem.deferred_measure": "clearance check",
+    "Problem.deferred_slack": "clearance check",  # (its name before 2026-11-30: older revisions on PYTHONPATH)
     "constraints_at": "clearance",
 }
 
@@ -290,6 +291,8 @@ def kernels_by_part(text: str) -> list[tuple[str, int, int, int]]:
         calls = stack(int(found.group(1))) if found else []
         functions = [fn for _, fn, _ in calls]
         phase = next((f"later rounds (_retry_unsolved:{n})" for _, fn, n in calls if fn == "_retry_unsolved"), None)
+        if phase is None and "search.phase" in functions:  # one loop: the first round's check, the final value
+            phase = "the first round's check and the final value"
         phase = phase or ("the final check" if "constraints_at" in functions else "the first round")
         what = next((label for fn, label in SITES.items() if fn in functions), None)
         site = f"{phase}: {what}" if what else "the rest"

@@ -6,7 +6,8 @@ given root pose. Moving ``theta`` by ``dtheta`` moves the solution by ``dx = J^+
 d(-r)/dx`` the terms' Jacobian at ``x`` and ``dr`` the change of the residual at fixed ``x``
 (forward mode through the same terms the solver iterates on), ``J^+`` the pseudo-inverse: the
 minimum-norm motion for a redundant robot, least squares for an over-constrained one. It is the
-derivative of a successful, non-singular solution off the joint limits.
+derivative of a successful, non-singular solution off the joint limits. A constraint's value that
+the search measured at the solution has the derivative of measuring it there (:func:`measured`).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import jax.numpy as jnp
 
 from diffkin import _rigid as rg
 from diffkin import se3
-from diffkin.ik._problem import Problem
+from diffkin.ik._problem import Kinematics, Problem
 
 
 def _problem(spec, model, targets: tuple, base) -> Problem:
@@ -68,3 +69,32 @@ def _implicit_jvp(spec, primals, tangents):
     dp = jnp.einsum("nij,nj->in", R, v)
     dR = (R @ se3.skew(w)).reshape(-1, 9).T
     return x, jnp.concatenate([dx[:dof], dp, dR])
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def measured(spec, model, data: tuple, base, x: jax.Array, value: jax.Array) -> jax.Array:
+    """``value`` unchanged: the constraint's value at ``x`` as the search measured it (where nothing is
+    differentiated); its derivative is that of measuring it at ``x``, ``d value / dx dx`` (only traced
+    where differentiated).
+
+    Args:
+        spec: static: its one constraint (:class:`~diffkin.ik._problem.Spec`), whether the root is solved.
+        model: the model the search solved (detached: its numbers have no derivative here).
+        data: per constraint, what it binds (detached).
+        base: ``(n, 4, 4)`` the root pose when not solved, or ``None``.
+        x: ``(n_state, n)`` the returned states.
+        value: ``(n,)`` the constraint's value at ``x`` (``clearance``).
+    """
+    del spec, model, data, base, x
+    return value
+
+
+@measured.defjvp
+def _measured_jvp(spec, primals, tangents):
+    model, data, base, x, value = primals
+    constraints = spec._replace(targets=())
+    root = rg.IDENTITY if base is None else rg.from_matrix(base)
+    problem = constraints.problem(model, constraints.bind((), data), root)
+    ((constraint, bound),) = zip(constraints.constraints, problem.bound, strict=True)
+    _, dvalue = jax.jvp(lambda x: constraint.clearance(Kinematics(problem, x), bound), (x,), (tangents[3],))
+    return value, dvalue

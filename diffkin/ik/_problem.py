@@ -410,7 +410,7 @@ class Problem(NamedTuple):
     def defers(self) -> bool:
         """Whether a term is deferred: its rows cost more than every other term's together (the
         clearance), so a search may first iterate without it (:meth:`undeferred`) and check it after
-        (:meth:`deferred_slack`)."""
+        (:meth:`deferred_measure`)."""
         return any(t.deferred for t in self.terms)
 
     def undeferred(self) -> Problem:
@@ -418,12 +418,13 @@ class Problem(NamedTuple):
         keep = [i for i, t in enumerate(self.terms) if not t.deferred]
         return self._replace(terms=tuple(self.terms[i] for i in keep), bound=tuple(self.bound[i] for i in keep))
 
-    def deferred_slack(self, x: jax.Array) -> jax.Array:
-        """``(P,)`` the least slack of the deferred terms at ``x`` (``slack(kin, bound)``): every one holds
-        where it is ``>= 0``."""
-        kin = Kinematics(self, x)
-        slack = [cast(Constraint, t).slack(kin, b) for t, b in zip(self.terms, self.bound, strict=True) if t.deferred]
-        return jnp.min(jnp.stack(slack), axis=0)
+    def deferred_measure(self, x: jax.Array, exact=False) -> tuple[jax.Array, jax.Array]:
+        """``(P,)`` twice: the deferred term's value at ``x`` (a constraint's ``clearance(kin, bound, exact)``;
+        one deferred term), exact where ``exact`` (a bool, may be traced), else exact only where it is
+        not met, and its slack: it holds where that is ``>= 0``."""
+        ((term, bound),) = [(t, b) for t, b in zip(self.terms, self.bound, strict=True) if t.deferred]
+        value = cast(Constraint, term).clearance(Kinematics(self, x), bound, exact)
+        return value, cast(Constraint, term).slack_of(value, bound)
 
     def padded(self, x: jax.Array, ev: Eval, met: jax.Array) -> Eval:
         """The evaluation ``ev`` of :meth:`undeferred` at ``x`` as one of this problem, without computing

@@ -7,8 +7,8 @@ as ``(copies, targets, dof)`` and enter the flat layout in :func:`_run_from` onl
 
 A *problem* (:class:`diffkin.ik._problem.Problem`) provides ``project(x)``, ``retract(x, dx)``,
 ``evaluate(x) -> Eval``, ``residual(x) -> Entries`` (the same, not yet computed into arrays),
-``screen_cost(x)`` and, for terms it may defer (``defers``), ``undeferred()``, ``deferred_slack(x)``
-and ``padded(x, ev, met)``. The search builds one with
+``screen_cost(x)`` and, for terms it may defer (``defers``), ``undeferred()``,
+``deferred_measure(x, exact)`` and ``padded(x, ev, met)``. The search builds one with
 ``build(idx, copies)`` for the targets ``idx``, each repeated ``copies`` times.
 """
 
@@ -135,7 +135,15 @@ def _seed_configs(key, targets: jax.Array, rounds: jax.Array, lower, upper, coun
 
 
 def _iterate(
-    problem, x, live, method, num_targets: int, has_first: bool, settings: Settings, every_seed: bool = False
+    problem,
+    x,
+    live,
+    method,
+    num_targets: int,
+    has_first: bool,
+    settings: Settings,
+    every_seed: bool = False,
+    draws=None,
 ) -> Seeds:
     """Iterate every seed from ``x`` ``(n, P)`` until its target is done or ``max_iters``; finished targets are frozen.
 
@@ -150,7 +158,14 @@ def _iterate(
     as it is), judges it and proposes the next trial: the residual is traced once per loop. The
     trial's Jacobian is kept or dropped inside the kernels that compute it
     (:func:`diffkin.ik._problem.settle_choosing`).
+
+    ``draws`` ``(k, n, P)`` (or ``None``): the seeds are screened in the loop: its first ``k`` iterations
+    evaluate ``x`` and then each further draw as the trial state, each seed keeping the one of least
+    cost, before the iterations proper (``max_iters`` more; a screening iteration counts in no
+    ``iters``). The screening is then the loop's own evaluation, not another traced copy of the
+    residual (with the clearance, ~300 kernels: docs/performance.md, "Collision-aware IK").
     """
+    screen = 1 if draws is None else draws.shape[0]
 
     def active(s: Seeds):
         success = s.success.reshape(-1, num_targets)
@@ -163,30 +178,37 @@ def _iterate(
     def body(carry):
         i, s = carry
         first = i == 0
+        screening = first if draws is None else i < screen  # the trial is x or a draw, not a step
         move = materialize([active(s)])[0]  # read by many kernels: computed once
 
         def choose(cost_try):
             accept, aux, stalled = method.judge(s.ev.cost, cost_try, s.aux)
+            if draws is not None:  # a draw is taken where it is lower, the damping kept
+                accept = jnp.where(screening, cost_try < s.ev.cost, accept)
             return move & (accept | first), (aux, stalled)
 
         ev, take, (aux, stalled) = settle_choosing(problem.residual(s.x_try), s.ev, choose)
         x = _where(take, s.x_try, s.x)
-        aux = _where(move & ~first, aux, s.aux)
+        aux = _where(move & ~screening, aux, s.aux)
         x_try, aux = method.propose(problem, x, ev, aux)
+        proposed = move
+        if draws is not None:  # the next draw while there is one, else the first step from the best
+            proposed = move & (i + 1 >= screen)
+            x_try = jnp.where(i + 1 < screen, draws[jnp.minimum(i + 1, screen - 1)], x_try)
         new = Seeds(
             x=x,
             ev=ev,
-            aux=_where(move, aux, s.aux),
+            aux=_where(proposed, aux, s.aux),
             x_try=x_try,
             success=s.success | (take & succeeded(ev, settings.pos_tol, settings.rot_tol)),
-            stalled=s.stalled | (move & ~first & stalled),
-            iters=s.iters + (move & ~first).astype(jnp.int32),
+            stalled=s.stalled | (move & ~screening & stalled),
+            iters=s.iters + (move & ~screening).astype(jnp.int32),
         )
         return i + 1, new
 
     def cond(carry):
         i, s = carry
-        return (i <= settings.max_iters) & jnp.any(active(s))
+        return (i <= settings.max_iters + screen - 1) & jnp.any(active(s))
 
     shape = x.shape[1:]
     ev = jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), jax.eval_shape(problem.evaluate, x))
@@ -254,8 +276,11 @@ def search(
     method,
     settings: Settings,
     moves=None,
-) -> Best:
-    """Solve ``n`` targets from seeds in rounds; the best seed of each (leaves end with ``(n,)``).
+    finish=None,
+) -> tuple[Best, jax.Array | None]:
+    """Solve ``n`` targets from seeds in rounds: the best seed of each (leaves end with ``(n,)``) and, with
+    deferred terms, their value at it, exactly (``(n,)``: :meth:`~diffkin.ik._problem.Problem.deferred_measure`;
+    else ``None``).
 
     Args:
         build: ``build(idx, copies)``: the problem of the targets ``idx`` ``(m,)``, each repeated
@@ -279,6 +304,8 @@ def search(
             where seeds must restart both arms). Where a joint moves two of the targets, an
             unsolved target gets twice the random rounds (``num_seeds`` counts those of targets
             that share no joint).
+        finish: ``finish(best, moving)``: the best states after the rounds, those ``moving`` ``(n,)`` (the
+            successes) refined (the secondary objectives), before the deferred terms' final value; or ``None``.
     """
     dtype, dof = lower.dtype, lower.shape[0]
 
@@ -311,32 +338,37 @@ def search(
     def run_from(idx, x, live=None, x_first=None, defer: bool = False, every: bool = False) -> Best:
         """Iterate the states ``x`` ``(copies, m, n_state)`` of the targets ``idx``; the best of each.
 
+        ``x`` may be ``(_SCREEN, copies, m, n_state)``: each seed's draws, screened by the iterations'
+        own evaluation (:func:`_iterate`'s ``draws``).
         ``live`` marks the targets that are not padding of a chunk; ``x_first`` is a warm start.
-        With ``defer``, the seeds iterate without the problem's deferred terms, which are then checked
-        at the best seed of each target (:meth:`~diffkin.ik._problem.Problem.padded`); with ``every``
-        too, every seed iterates until it reaches the pose or stalls and the deferred terms are
-        checked at every seed: one that holds them succeeds, and without a success the seed on the
-        pose that comes nearest to holding them is kept.
+        With ``defer``, the seeds iterate without the problem's deferred terms and the best seed of
+        each target is returned unchecked, its evaluation without them (the caller checks it:
+        :func:`checked`); with ``every`` too, every seed iterates until it reaches the pose or stalls
+        and the deferred terms are checked at every seed: one that holds them succeeds, and without a
+        success the seed on the pose that comes nearest to holding them is kept.
         """
         if x_first is not None:
             x = jnp.concatenate([x_first[None], x], axis=0)
-        copies, m = x.shape[0], idx.shape[0]
+        copies, m = x.shape[-3], idx.shape[0]
         problem = build(idx, copies)
-        x = problem.project(x.reshape(copies * m, -1).T)
+        flat = lambda x: problem.project(x.reshape(copies * m, -1).T)  # noqa: E731
+        draws = jax.vmap(flat)(x) if x.ndim == 4 else None
+        x = flat(x) if draws is None else draws[0]
         live = None if live is None else jnp.tile(live, copies)
         iterated = problem.undeferred() if defer else problem
-        seeds = _iterate(iterated, x, live, method, m, x_first is not None, settings, every_seed=defer and every)
+        first_seed = x_first is not None
+        seeds = _iterate(iterated, x, live, method, m, first_seed, settings, every_seed=defer and every, draws=draws)
         per_target = seeds.x.reshape(seeds.x.shape[0], copies, m)
-        if not defer:
+        if not (defer and every):
             return _best(seeds, m, rank(idx, per_target), missed=missed)
-        whole = build(idx, 1)
-        if every:
-            slack = problem.deferred_slack(seeds.x)
-            on_pose = seeds.success
-            best = _best(seeds._replace(success=on_pose & (slack >= 0)), m, rank(idx, per_target), slack, on_pose)
-        else:
-            best = _best(seeds, m, rank(idx, per_target))
-            best = best._replace(slack=whole.deferred_slack(best.x))
+        slack = problem.deferred_measure(seeds.x)[1]
+        on_pose = seeds.success
+        best = _best(seeds._replace(success=on_pose & (slack >= 0)), m, rank(idx, per_target), slack, on_pose)
+        return checked(build(idx, 1), best)
+
+    def checked(whole, best: Best) -> Best:
+        """``best``, evaluated without the deferred terms and with their ``slack`` measured, as a state of the
+        ``whole`` problem (:meth:`~diffkin.ik._problem.Problem.padded`): a success where it also holds them."""
         on_pose, met = succeeded(best.ev, settings.pos_tol, settings.rot_tol), best.slack >= 0
         return best._replace(
             ev=whole.padded(best.x, best.ev, met),
@@ -344,11 +376,12 @@ def search(
             slack=jnp.where(on_pose, best.slack, -jnp.inf),
         )
 
-    def seeds(idx, round_index, group: int, best=None, defer: bool = False):
+    def seeds(idx, round_index, group: int, best=None, defer: bool = False, in_loop: bool = False):
         """``group`` random seeds per target, ``(group, len(idx), n_state)``, each the best of ``_SCREEN`` draws.
 
         With ``best`` (and ``moves``), the joints :func:`redrawn` leaves keep their best values.
-        With ``defer``, the draws are screened without the deferred terms.
+        With ``defer``, the draws are screened without the deferred terms; with ``in_loop``, not here:
+        every draw is returned, ``(_SCREEN, group, len(idx), n_state)``, for the iterations to screen.
         """
         q = _seed_configs(key, idx, round_index, lower, upper, _SCREEN * group, dtype)
         x = lift(idx, q)
@@ -363,6 +396,8 @@ def search(
                 axis=-1,
             )
             x = jnp.where(keep, near, x)
+        if in_loop:
+            return x.reshape((_SCREEN, group) + x.shape[1:])
         problem = build(idx, _SCREEN * group)
         problem = problem.undeferred() if defer else problem
         cost = problem.screen_cost(problem.project(x.reshape(-1, x.shape[-1]).T)).reshape(_SCREEN, group, -1)
@@ -371,8 +406,9 @@ def search(
 
     first_seeds = seeds(jnp.arange(n), jnp.zeros(n, jnp.int32), first_group, defer=defer)
     best = run_from(jnp.arange(n), first_seeds, x_first=first, defer=defer)
+    chunk = min(n, max(_MIN_CHUNK, -(-n // _CHUNK_DIV)))
     if rounds > 1:
-        chunk = min(n, max(_MIN_CHUNK, -(-n // _CHUNK_DIV)))
+        deferring = defer  # the search's (an attempt's own `defer`: whether its round leaves them out)
 
         def attempt(idx, round_index, live, best, defer: bool = False):
             """Round ``round_index`` (per target) for the targets ``idx``: random or polishing seeds.
@@ -380,23 +416,59 @@ def search(
             A polishing round goes on from the best state and perturbations of it; where that state
             reached some of several targets (and no term is deferred), the perturbations are the
             random seeds, which keep the joints of the reached targets (a small step rarely leaves
-            the local minimum of the others)."""
-            fresh = seeds(idx, round_index, _DEFERRED_GROUP if defer else GROUP, best, defer)
+            the local minimum of the others).
+
+            The rounds with the deferred terms screen their random draws in their iterations (their
+            residual is the loop's evaluation: one traced copy of the clearance serves both), and
+            perturb a polishing round's state towards each seed's first draw."""
+            in_loop = deferring and not defer
+            fresh = seeds(idx, round_index, _DEFERRED_GROUP if defer else GROUP, best, defer, in_loop)
+            drawn = fresh[0] if in_loop else fresh  # (seeds, m, n_state): one per seed
             near = best.x[:, idx].T  # (m, n_state)
-            joints = near[:, :dof] + _JITTER * (fresh[1:, :, :dof] - near[:, :dof])
-            nearby = jnp.concatenate([joints, jnp.broadcast_to(near[:, dof:], fresh[1:, :, dof:].shape)], axis=-1)
+            joints = near[:, :dof] + _JITTER * (drawn[1:, :, :dof] - near[:, :dof])
+            nearby = jnp.concatenate([joints, jnp.broadcast_to(near[:, dof:], drawn[1:, :, dof:].shape)], axis=-1)
             if several:
                 some = jnp.any(on_target(best.ev)[:, idx], axis=0)  # (m,) unsolved: some targets, not all
-                nearby = jnp.where(some[:, None], fresh[1:], nearby)
+                nearby = jnp.where(some[:, None], drawn[1:], nearby)
             nearby = jnp.concatenate([near[None], nearby])
             polishing = round_index > random_rounds + _extra_rounds(best.slack[idx], escalate)
             found = run_from(idx, jnp.where(polishing[:, None], nearby, fresh), live, defer=defer, every=defer)
             return found._replace(iters=found.iters + jnp.where(polishing, best.iters[idx], 0))
 
-        best = _retry_unsolved(
-            attempt, best, rounds, chunk, defer, whole_from=max(1, random_rounds), escalate=escalate, missed=missed
-        )
-    return best
+    def later(best: Best, skip=False) -> Best:
+        """The later rounds (none where ``skip``, a traced bool), then ``finish``."""
+        if rounds > 1:
+            best = _retry_unsolved(
+                attempt,
+                best,
+                rounds,
+                chunk,
+                defer,
+                whole_from=max(1, random_rounds),
+                escalate=escalate,
+                missed=missed,
+                skip=skip,
+            )
+        return best if finish is None else finish(best, best.success & jnp.logical_not(skip))
+
+    if not defer:
+        return later(best), None
+    # The deferred terms are measured twice at every target: the first round's check (exact where they
+    # are broken) and the final value at the returned state (exact). Both are one loop's evaluation (one
+    # traced copy of the clearance, ~300 kernels: docs/performance.md, "Collision-aware IK"); the later
+    # rounds run in its first pass.
+    whole, first_best = build(jnp.arange(n), 1), best
+
+    def phase(carry):
+        i, best, _ = carry
+        final = i == 1
+        value, slack = whole.deferred_measure(best.x, exact=final)
+        best = _where(final, best, checked(whole, first_best._replace(slack=slack)))
+        return i + 1, later(best, skip=final), value
+
+    start = checked(whole, first_best._replace(slack=jnp.zeros(n, dtype)))  # (its shapes; phase 0 measures)
+    _, best, value = jax.lax.while_loop(lambda c: c[0] < 2, phase, (jnp.asarray(0), start, jnp.zeros(n, dtype)))
+    return best, value
 
 
 def follow(problem, x: jax.Array, method, settings: Settings) -> Best:
@@ -420,6 +492,7 @@ def _retry_unsolved(
     whole_from: int = 1,
     escalate: int = 0,
     missed=None,
+    skip=False,
 ) -> Best:
     """Rounds ``1 .. rounds - 1`` for every unsolved target, ``chunk`` targets at a time.
 
@@ -437,7 +510,7 @@ def _retry_unsolved(
     the others take ``_WHOLE`` targets at a time (their iterations cost far more). A target whose
     best state is on its pose but breaks them (its ``slack`` measured, ``> -inf``) has ``escalate``
     more rounds without them before those with them (``rounds + escalate`` in all; ``attempt`` numbers
-    its polishing rounds accordingly).
+    its polishing rounds accordingly). ``skip`` (a traced bool): no rounds, ``best`` as it is.
     """
     n = best.success.shape[0]
 
@@ -466,7 +539,8 @@ def _retry_unsolved(
 
         return jax.lax.while_loop(lambda state: jnp.any(due(*state)), body, state)
 
-    state = (best, jnp.ones(n, jnp.int32), jnp.isinf(best.ev.cost))
+    done = jnp.where(skip, rounds + escalate, 1)  # (rounds + escalate: no target has any left)
+    state = (best, jnp.full(n, done, jnp.int32), jnp.isinf(best.ev.cost))
     if defer:  # (each of these rounds has _DEFERRED_GROUP seeds per target: a pass as many seeds as another)
         state = passes(
             state,

@@ -18,7 +18,7 @@ from diffkin._sharding import automatic_axes
 from diffkin._static import ModelKey, partition
 from diffkin._xla import solver_jit
 from diffkin.ik import _args, _search, _secondary
-from diffkin.ik._implicit import implicit
+from diffkin.ik._implicit import implicit, measured
 from diffkin.ik._keywords import terms_of
 from diffkin.ik._methods import METHODS
 from diffkin.ik._prepare import detach, prepare
@@ -391,7 +391,13 @@ def _solve(
     pos_tol = jnp.maximum(pos_tol - ROUNDING_POS * eps, 0.0).astype(dtype)
     rot_tol = jnp.maximum(rot_tol - ROUNDING_ROT * eps, 0.0).astype(dtype)
     settings = _search.Settings(num_seeds, max_iters, facts.polish, pos_tol, rot_tol)
-    best = _search.search(
+    everything = jnp.arange(n)
+
+    def finish(best: _search.Best, moving) -> _search.Best:  # the secondary objectives, at the solved states
+        x, ev = _secondary.refine(build(everything, 1), best.x, best.ev, moving, h_of(everything), pos_tol, rot_tol)
+        return best._replace(x=x, ev=ev)
+
+    best, value = _search.search(
         build,
         lift,
         rank,
@@ -403,28 +409,31 @@ def _solve(
         facts.steps(optimizer),
         settings,
         moves=moves if len(spec.terms) > 1 else None,
+        finish=finish if spec.secondary else None,
     )
     x, ev = best.x, best.ev
-    if spec.secondary:
-        everything = jnp.arange(n)
-        x, ev = _secondary.refine(build(everything, 1), x, ev, best.success, h_of(everything), pos_tol, rot_tol)
     solved_root = s.base if base is not None and not spec.solve_base else None
     x = implicit(spec, s.differentiable, s.safe, solved_root, x)
     success = best.success & s.valid if s.base_ok is None else best.success & s.valid & s.base_ok
-    values, met = constraints_at(spec, build(jnp.arange(n), 1), x)
+    if value is not None:  # measured by the search at x: the derivative of measuring it at x attached
+        value = measured(spec, s.model, s.data, base_flat, x, value)
+    values, met = constraints_at(spec, build(everything, 1), x, value)
     success = success if met is None else success & met
     return result(spec, x, ev.pos_err[:k], ev.rot_err[:k], s.valid, success, best.iters, batch, values)
 
 
-def constraints_at(spec: Spec, problem: Problem, x: jax.Array) -> tuple[dict[str, jax.Array], jax.Array | None]:
+def constraints_at(
+    spec: Spec, problem: Problem, x: jax.Array, value: jax.Array | None = None
+) -> tuple[dict[str, jax.Array], jax.Array | None]:
     """The constraint's value at the returned states ``x`` ``(n_state, P)``, exactly (``{"clearance": (P,)}``,
-    empty without a constraint), and ``(P,)`` whether it is met (``None`` without one). ``IKResult`` has
-    one field for a constraint's value: one constraint (``avoid``'s) at most."""
+    empty without a constraint), and ``(P,)`` whether it is met (``None`` without one); ``value``: that
+    value where it was measured already (:func:`diffkin.ik._search.search`). ``IKResult`` has one field
+    for a constraint's value: one constraint (``avoid``'s) at most."""
     if not spec.constraints:
         return {}, None
-    kin = Kinematics(problem, x)
     ((constraint, bound),) = zip(spec.constraints, problem.bound[len(spec.targets) :], strict=True)
-    value = constraint.clearance(kin, bound)  # measured once: its slack follows from it
+    if value is None:
+        value = constraint.clearance(Kinematics(problem, x), bound)  # measured once: its slack follows from it
     return {"clearance": value}, constraint.slack_of(value, bound) >= 0
 
 

@@ -129,6 +129,29 @@ def test_solutions_are_clear_on_target_and_a_target_inside_an_obstacle_fails(arm
         dk.ik.solve(robot, {"hand": targets[:-1]}, avoid=dk.ik.Avoid(geom, per_target, margin=margin))
 
 
+def test_the_clearance_has_the_derivative_of_measuring_it_at_the_solution(arm):
+    """``IKResult.clearance`` is measured inside the search (one loop serves the first round's check and
+    the final value) and given the derivative of measuring it at ``q``: along ``q``'s implicit tangent,
+    the central difference of the clearance (float64)."""
+    robot, geom, world = arm
+    rng = np.random.default_rng(2)
+    q = rng.uniform(np.asarray(robot.lower), np.asarray(robot.upper), (200, robot.dof))
+    q = q[np.asarray(dk.collision.clearance(robot, geom, q, world)) > 0.05][:4]
+    targets = jnp.asarray(np.asarray(dk.fk(robot, q, "hand"))[:, :3, 3])
+    avoid = dk.ik.Avoid(geom, world, margin=0.01)
+
+    def solved(p):
+        res = dk.ik.solve(robot, {"hand": p}, avoid=avoid)
+        return res.q, res.clearance, res.success
+
+    (q, c, ok), (dq, dc, _) = jax.jvp(solved, (targets,), (jnp.ones_like(targets),))
+    assert np.all(np.asarray(ok))
+    eps = 1e-6
+    ahead, behind = (dk.collision.clearance(robot, geom, q + s * eps * dq, world) for s in (1, -1))
+    np.testing.assert_allclose(np.asarray(dc), np.asarray((ahead - behind) / (2 * eps)), rtol=1e-5, atol=1e-8)
+    np.testing.assert_allclose(np.asarray(c), np.asarray(dk.collision.clearance(robot, geom, q, world)), atol=1e-12)
+
+
 def test_floating_locked_secondary_with_avoid(arm):
     """A floating root solved with ``avoid``, a locked joint and the rest objective: successes clear,
     on target, the locked joint unmoved (float32)."""

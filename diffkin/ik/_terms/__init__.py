@@ -15,7 +15,7 @@ Every term provides:
 
 - ``frames``: the frames whose motion it reads (which joints can move it, for the seeds).
 - ``deferred``: its rows cost more than every other term's together, so a search may first
-  iterate without it and check :meth:`Constraint.slack` after (:meth:`diffkin.ik._problem.Problem.undeferred`).
+  iterate without it and check :meth:`Constraint.clearance` after (:meth:`diffkin.ik._problem.Problem.undeferred`).
 - ``bind(data)``: its entries, what :meth:`rows` and :meth:`screen` read: a target's from an array
   whose leading axis is the problem (``(P, 4, 4)`` poses or ``(P, 3)`` positions), a constraint's
   from its data in the solver's dtype.
@@ -83,10 +83,10 @@ class Target(Term, Protocol):
 
 
 class Constraint(Term, Protocol):
-    """A term that reports its own value, ``clearance(kin, bound) -> (P,)`` (``IKResult.clearance``),
-    computed exactly at the returned states, and ``slack(kin, bound) -> (P,)``, by how much it holds
-    (in its own unit; ``slack_of(value, bound)`` from a value): it is met where ``slack >= 0``, which
-    success needs.
+    """A term that reports its own value, ``clearance(kin, bound, exact=True) -> (P,)`` (``IKResult.clearance``),
+    computed exactly at the returned states (``exact`` false, a bool that may be traced: exact only where
+    it is not met), and by how much it holds, ``slack_of(value, bound) -> (P,)`` (in its own unit): it is
+    met where the slack is ``>= 0``, which success needs.
 
     ``bind(data)`` takes its data (a pytree in the solver's dtype: :class:`~diffkin.ik.Avoid`), which
     has ``cast(dtype)``, ``flat(lead)`` (parts per problem, of problem axes broadcasting to the
@@ -100,9 +100,7 @@ class Constraint(Term, Protocol):
         radian counting as :data:`diffkin.ik._problem.OFF_PER_RADIAN`), ``None`` without targets."""
         ...
 
-    def clearance(self, kin, bound) -> jax.Array: ...
-
-    def slack(self, kin, bound) -> jax.Array: ...
+    def clearance(self, kin, bound, exact=True) -> jax.Array: ...
 
     def slack_of(self, value: jax.Array, bound) -> jax.Array:
         """The slack of ``value`` ``(P,)``, what :meth:`clearance` returned (no second measure)."""

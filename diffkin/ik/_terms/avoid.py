@@ -180,7 +180,7 @@ class AvoidTerm:
     share: int = NEAR_SHARE
     #: its rows (every pair's distance and motion) cost far more than a pose target's: a search
     #: iterates without them (:meth:`diffkin.ik._problem.Problem.undeferred`) and checks the clearance
-    #: (:meth:`slack`) of its first round's best states and of every seed of its later rounds; a target
+    #: (:meth:`clearance`) of its first round's best states and of every seed of its later rounds; a target
     #: whose states are on its pose but not clear iterates with them in its last rounds
     #: (:func:`diffkin.ik._search._retry_unsolved`).
     deferred = True
@@ -224,17 +224,15 @@ class AvoidTerm:
         d = d_self + ([] if d_world is None else [d_world.reshape(-1, kin.shape[0])])
         return jnp.min(jnp.concatenate(d), axis=0)
 
-    def clearance(self, kin, avoid: Avoid) -> jax.Array:
-        """``(P,)`` the smallest checked distance (exact)."""
-        return self._smallest(kin, avoid, jnp.inf)
-
-    def slack(self, kin, avoid: Avoid) -> jax.Array:
-        """``(P,)`` metres: the clearance less the margin (met where ``>= 0``), exact where negative (only
-        the distances below the margin need computing)."""
-        return self._smallest(kin, avoid, avoid.margin) - avoid.margin
+    def clearance(self, kin, avoid: Avoid, exact=True) -> jax.Array:
+        """``(P,)`` the smallest checked distance: exact where ``exact`` (a bool, may be traced), else exact
+        only below the margin (only the distances below it need computing) and a lower bound at least
+        the margin elsewhere."""
+        return self._smallest(kin, avoid, jnp.where(exact, jnp.inf, avoid.margin))
 
     def slack_of(self, clearance: jax.Array, avoid: Avoid) -> jax.Array:
-        """``(P,)`` the slack of an exact ``clearance`` (:meth:`clearance`): it less the margin."""
+        """``(P,)`` metres: the slack of a ``clearance`` (:meth:`clearance`), it less the margin (met where
+        ``>= 0``)."""
         return clearance - avoid.margin
 
     def rows(self, kin, avoid: Avoid, jacobian: bool, off=None) -> Rows:
