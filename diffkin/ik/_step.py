@@ -31,7 +31,7 @@ import numpy as np
 from diffkin import _rigid as rg
 from diffkin._checks import instance, real_array
 from diffkin._static import ModelKey, is_concrete, partition
-from diffkin._xla import entries_last, solver_jit, summed_products
+from diffkin._xla import entries_last, solver_jit, summed_products, where_any
 from diffkin.ik import _qp
 from diffkin.ik._prepare import prepare
 from diffkin.ik._problem import Eval, Kinematics, Problem, settle
@@ -298,12 +298,8 @@ def _step(
     lo, hi = jnp.broadcast_to(lo, (dof, n)), jnp.broadcast_to(hi, (dof, n))
     lo, hi, value = _pad(lo, nb, -jnp.inf), _pad(hi, nb, jnp.inf), _pad(value, nb, 0.0)
     fixed_v = _pad(jnp.broadcast_to(fixed, (dof, n)), nb, False)  # (nv, P): the root is never fixed
-    # Fixed joints eliminated: their rows of H the identity, v_i = value_i exactly.
-    both = fixed_v[:, None, :] | fixed_v[None, :, :]
-    g = g + summed_products(jnp.where(fixed_v[None, :, :], H, 0.0), value[None], axis=1)
-    eye = jnp.eye(nv, dtype=dtype)[:, :, None]
-    H = jnp.where(both, eye, H)
-    g = jnp.where(fixed_v, -value, g)
+    # Fixed joints eliminated (when a problem of the batch has one): v_i = value_i exactly.
+    H, g = where_any(fixed_v, functools.partial(_eliminate, fixed_v, value), H, g)
 
     G = jnp.zeros((0, nv, n), dtype)
     h = jnp.zeros((0, n), dtype)
@@ -356,6 +352,15 @@ def _step(
         task_err=shaped(jnp.where(ok, jnp.minimum(err, big), big)),
         base=moved,
     )
+
+
+def _eliminate(fixed: jax.Array, value: jax.Array, H: jax.Array, g: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """The QP ``H`` ``(nv, nv, P)``, ``g`` ``(nv, P)`` with the variables where ``fixed`` ``(nv, P)`` held at ``value``
+    ``(nv, P)``: their rows and columns of ``H`` those of the identity, ``g`` theirs ``-value`` and the others' moved
+    by ``H_free,fixed value`` (``H`` and ``g`` as they are where nothing is fixed)."""
+    g = g + summed_products(jnp.where(fixed[None, :, :], H, 0.0), value[None], axis=1)
+    eye = jnp.eye(H.shape[0], dtype=H.dtype)[:, :, None]
+    return jnp.where(fixed[:, None, :] | fixed[None, :, :], eye, H), jnp.where(fixed, -value, g)
 
 
 def _rows(problem: Problem, state: jax.Array) -> Eval:

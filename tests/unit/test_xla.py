@@ -171,6 +171,25 @@ def test_summed_products_are_einsum_s():
     assert summed_products(np.zeros((2, 0, 5)), np.zeros((1, 0, 5)), axis=1).shape == (2, 5)
 
 
+def test_where_any_updates_only_batches_that_need_it():
+    """``fn(*args)`` when some entry is needed, ``args`` as they are otherwise; under ``jit`` and ``vmap``."""
+    from diffkin._xla import where_any
+
+    def fn(needed, a, b):  # leaves a and b as they are where nothing is needed
+        return jnp.where(needed, 0.0, a), jnp.where(needed, -1.0, b)
+
+    a, b = jnp.arange(4.0), jnp.arange(4.0) + 10.0
+    run = jax.jit(lambda needed, a, b: where_any(needed, lambda a, b: fn(needed, a, b), a, b))
+    for needed in ([False, True, False, False], [False] * 4):
+        needed = jnp.asarray(needed)
+        for got, want in zip(run(needed, a, b), fn(needed, a, b), strict=True):
+            np.testing.assert_array_equal(got, want)
+    needed = jnp.asarray([[False, True], [False, False]])
+    batched = jax.vmap(run)(needed, a.reshape(2, 2), b.reshape(2, 2))
+    for got, want in zip(batched, fn(needed, a.reshape(2, 2), b.reshape(2, 2)), strict=True):
+        np.testing.assert_array_equal(got, want)
+
+
 def test_stable_partition_is_a_stable_sort():
     """Every row of 1 to 5 booleans: the slots are those of a stable sort that puts the ``True`` entries first."""
     from diffkin._xla import stable_partition
