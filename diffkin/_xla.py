@@ -14,6 +14,8 @@ The measurements that justify them are in docs/performance.md, "XLA CPU tricks".
 - :func:`in_steps`: a large batch goes through a function in fixed-size steps, so that each
   step's intermediates stay in cache and the temporary buffer stays small; optionally each step
   as two independent halves (:func:`_in_halves`), so that both CPU threads have work.
+- :func:`problems_at_once`: independent problems that each iterate until solved go one at a time
+  through :func:`in_steps` on the CPU, so that none waits for the slowest.
 - :func:`blocks_joined`: blocks of a result with the batch innermost, joined.
 - :data:`LAST_STEPPED`: an output with the configurations last is moved to the front in a kernel
   of its own (through the stepped loop), not fused into the computation, which would then not be
