@@ -16,7 +16,7 @@ from _shapes import planar_capsule_arm
 
 import diffkin as dk
 from diffkin.collision import Sphere, World
-from diffkin.traj import _certify, _limits, _reach, _spline
+from diffkin.traj import _certify, _limits, _optimize, _reach, _spline
 
 URDF = planar_capsule_arm()
 ROBOT = dk.load_robot(URDF)
@@ -98,12 +98,18 @@ def test_a_world_per_problem(planned):
     assert _sampled_clearance(q, swapped).min(axis=0)[2] < own[2]
 
 
-def test_a_problem_s_motion_does_not_depend_on_the_others_in_its_batch(planned):
-    # problem 0 replaced by a copy of problem 2 (same shapes: the same compiled program): problems 1 and
-    # 2 get the same motions (a finished problem's curves are left as they are; each problem draws its
-    # seeds from its own key)
+@pytest.mark.parametrize("at_once", [False, True], ids=["one-at-a-time", "all-at-once"])
+def test_a_problem_s_motion_does_not_depend_on_the_others_in_its_batch(planned, at_once, monkeypatch):
+    # problem 0 replaced by a copy of problem 2: problems 1 and 2 get the same motions (each problem draws
+    # its seeds from its own key), whether the problems are planned one at a time (the CPU's way: the
+    # same compiled program) or all at once (a GPU's way, posed here: a finished problem's curves are
+    # left as they are and measure nothing while the others go on)
     worlds = jax.tree.map(lambda x: x.at[0].set(x[2]), WORLDS)
-    other = _plan(START.at[0].set(START[2]), GOAL.at[0].set(GOAL[2]), worlds)
+    plan = _plan
+    if at_once:
+        monkeypatch.setattr(_optimize, "problems_at_once", lambda n: n)
+        plan = jax.jit(_plan.__wrapped__)  # traced afresh, with the patch
+    other = plan(START.at[0].set(START[2]), GOAL.at[0].set(GOAL[2]), worlds)
     for name in ("control", "clearance", "segment_time", "success"):
         a, b = (np.asarray(getattr(t, name)) for t in (planned, other))
         np.testing.assert_allclose(b[1:], a[1:], rtol=1e-6, atol=1e-6, err_msg=name)
