@@ -19,9 +19,11 @@ Each returned motion is judged independently, in float64, sampled densely along 
   or ``dk.fk`` where it is not installed).
 
 **Solved** = ``success`` confirmed by all three. **Solvable**: MBM's ``goal_q`` clears its obstacles and
-the self pairs by the margin on the real meshes (a witness that the goal is reachable; not that a
-motion exists). Times: the first call (the first scene's batch, compile included) apart, then each
-scene once, warm (its problems batched in one call, each with its own world).
+the self pairs by the margin on the real meshes, and the start and ``goal_q`` lie within the URDF's joint
+limits (a witness that the goal is reachable; not that a motion exists). A few of MBM's ``goal_q`` exceed
+a joint limit of example-robot-data's Panda (joint 4's upper): no motion within the limits reaches them.
+Times: the first call (the first scene's batch, compile included) apart, then each scene once, warm (its
+problems batched in one call, each with its own world).
 
     python experiments/bench_traj.py --quick           # 3 scenes x 3 problems, hulls
     python experiments/bench_traj.py --all --write     # all 700 (long on a CPU)
@@ -180,7 +182,9 @@ def main(argv=None) -> int:
             j = judge_motions(judge, traj, problems, kind, limits, args.samples)
             goal_q = np.stack([np.r_[p["goal_q"], FINGER] for p in problems])
             g_world, g_own = judge.clearance(goal_q, [judge.coal.obstacles(p) for p in problems])
-            solvable = np.minimum(g_world, g_own) >= MARGIN
+            ends = np.stack([np.r_[p["start"], FINGER] for p in problems] + list(goal_q))
+            within = judge.within_limits(ends).reshape(2, -1).all(axis=0)
+            solvable = (np.minimum(g_world, g_own) >= MARGIN) & within
             success = np.asarray(traj.success)
             solved = success & (j["coal"] >= 0) & j["limits"] & j["goal"]
             c = {
