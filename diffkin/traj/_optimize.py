@@ -24,6 +24,9 @@ from diffkin.traj._trajectory import Trajectory
 _LENGTH_SAMPLES = 16
 #: curves per problem timed and certified after the descent: the lowest-cost ones
 CERTIFIED = 2
+#: rounds of seeds for a problem without a successful curve, the first included (on the CPU a problem's
+#: later rounds cost only where it failed: problems are planned one at a time)
+ROUNDS = 4
 
 
 def optimize(
@@ -50,7 +53,8 @@ def optimize(
     clearest of 32 random ones, :mod:`diffkin.traj._seeds`) through at most ``max_iters``
     Levenberg-Marquardt iterations on its free control points (smoothness rows and the clearance rows of
     collision-aware IK at 8 samples per segment, pushed through the spline's basis; a problem stops once
-    one of its curves is clear of every row); its two curves of lowest cost are then timed and certified:
+    one of its curves is clear of every row); its two curves of lowest cost are then timed and certified
+    (a problem with no successful curve gets new seeds through via points, up to :data:`ROUNDS` rounds in all):
 
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
@@ -60,8 +64,8 @@ def optimize(
       shapes can move within it, from the joint speeds and each joint's reach to the shapes it moves:
       :mod:`diffkin.traj._certify`).
 
-    The best of them is kept: a successful one of the shortest duration, else the one
-    with the largest certified clearance. Failures stay honest: ``success=False`` with finite values
+    The best of them is kept: the first successful one (of the shortest duration in its round), else the
+    one with the largest certified clearance. Failures stay honest: ``success=False`` with finite values
     and the reason in ``goal_ok``, ``limits_ok``, ``clear``. Problems are independent (a world per
     problem where ``avoid.world`` has problem axes): a problem's motion depends on its own data and its
     place in the batch (its seeds' key) only. On the CPU one compiled loop plans them one after another
@@ -236,16 +240,16 @@ def _core(
         q_start, q_goal = jnp.where(held, locked_q, q_start), jnp.where(held, locked_q, q_goal)
     B = q_start.shape[0]
     per_problem = avoid is not None and avoid.world is not None and bool(avoid.world.batch)
-    mapped = (jnp.arange(B), q_start, q_goal, base, locked_q, avoid.world if per_problem else None)
+    mapped = (jnp.arange(B), q_start, q_goal, valid, base, locked_q, avoid.world if per_problem else None)
     leaves, tree = jax.tree.flatten(mapped)
     seed_key = jax.random.fold_in(key, 1)
 
     def plan(*chunk):
-        index, q_start, q_goal, base, locked_q, world = jax.tree.unflatten(tree, chunk)
+        index, q_start, q_goal, valid, base, locked_q, world = jax.tree.unflatten(tree, chunk)
         chunk_avoid = avoid.replace(world=world) if per_problem else avoid
         keys = jax.vmap(lambda i: jax.random.fold_in(seed_key, i))(index)
         return _plan(
-            model, q_start, q_goal, chunk_avoid, base, locked_q, bounds, reach, keys, locked, free, seeds, iters
+            model, q_start, q_goal, valid, chunk_avoid, base, locked_q, bounds, reach, keys, locked, free, seeds, iters
         )
 
     step = problems_at_once(B)
@@ -273,16 +277,73 @@ def _core(
 
 
 def _plan(
-    model, q_start, q_goal, avoid, base, locked_q, bounds, reach, keys, locked, free: int, seeds: int, iters: int
+    model, q_start, q_goal, valid, avoid, base, locked_q, bounds, reach, keys, locked, free: int, seeds: int, iters: int
 ):
     """``(P (B, N, dof), h (B,), clearance (B,), clear (B,), limits_ok (B,))``: each of ``B`` problems' chosen
-    curve (control points), its segment time, certified clearance and checks; ``keys`` ``(B,)``, one per
-    problem (a problem's result does not depend on the others planned with it)."""
+    curve (control points), its segment time, certified clearance and checks; ``valid`` ``(B,)`` whether its
+    ends are (a goal IK missed, a non-finite start: no more rounds for it); ``keys`` ``(B,)``, one per problem
+    (a problem's result does not depend on the others planned with it).
+
+    Up to :data:`ROUNDS` rounds (:func:`_round`), while a problem has no successful curve: round ``r > 0``
+    draws its seeds from ``fold_in(key, r)`` and no straight line (round 0 descended it). A problem keeps its
+    first success, else its largest certified clearance (its result does not depend on whether others
+    planned with it needed more rounds)."""
+
+    def attempt(r):
+        round_keys = jax.lax.cond(r == 0, lambda: keys, lambda: jax.vmap(lambda key: jax.random.fold_in(key, r))(keys))
+        return _round(
+            model, q_start, q_goal, avoid, base, locked_q, bounds, reach, round_keys, r == 0, locked, free, seeds, iters
+        )
+
+    def more(state):
+        r, best = state
+        return (r == 0) | ((r < ROUNDS) & ~jnp.all(best[-1] | ~valid))
+
+    def body(state):
+        r, best = state
+        new = attempt(r)
+        better = (r == 0) | (~best[-1] & (_score(new) > _score(best)))
+        keep = lambda n, b: jnp.where(better.reshape((-1,) + (1,) * (n.ndim - 1)), n, b)  # noqa: E731
+        return r + 1, jax.tree.map(keep, new, best)
+
+    B, dof = q_start.shape
+    real, no = jnp.zeros((B,), q_start.dtype), jnp.zeros((B,), bool)
+    start = (jnp.zeros((B, free + 6, dof), q_start.dtype), real, real, no, no, real, no)  # (round 0 replaces it)
+    _, best = jax.lax.while_loop(more, body, (jnp.int32(0), start))
+    return best[:5]
+
+
+def _score(result) -> jax.Array:
+    """``(B,)`` the preference among a problem's results (higher wins): a success of shorter duration, else a
+    larger certified clearance."""
+    _, _, clearance, _, _, duration, ok = result
+    return jnp.where(ok, 1e9 - duration, jnp.clip(clearance, -1e6, 1e6))
+
+
+def _round(
+    model,
+    q_start,
+    q_goal,
+    avoid,
+    base,
+    locked_q,
+    bounds,
+    reach,
+    keys,
+    first,
+    locked,
+    free: int,
+    seeds: int,
+    iters: int,
+):
+    """One round of :func:`_plan`: ``(P, h, clearance, clear, limits_ok, duration, success)``, each problem's
+    best curve of ``seeds`` (the straight line among them where ``first``, a traced bool), descended, its two of
+    lowest cost timed and certified."""
     lower, upper = jnp.asarray(model.lower, q_start.dtype), jnp.asarray(model.upper, q_start.dtype)
     velocity, acceleration, jerk = bounds
     B, dof = q_start.shape
     ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, avoid, base, 1)
-    X = _seeds.seeds(ends, seeds, free, keys)  # (B, k, free, dof)
+    X = _seeds.seeds(ends, seeds, free, keys, first)  # (B, k, free, dof)
     rep = lambda x: None if x is None else jnp.repeat(x, seeds, axis=0)  # noqa: E731
     curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), avoid, base, seeds)
     X, cost = curves.descend(X.reshape(B * seeds, free, dof), iters)
@@ -309,10 +370,10 @@ def _plan(
         clear = jnp.ones((B, k), bool)
     duration = _spline.segments(free + 6) * h
     ok = limits_ok & clear
-    score = jnp.where(ok, 1e9 - duration, jnp.clip(clearance, -1e6, 1e6))
-    best = jnp.argmax(score, axis=1)
+    result = (P, h, clearance, clear, limits_ok, duration, ok)
+    best = jnp.argmax(_score(result), axis=1)
     pick = lambda x: jnp.take_along_axis(x, best.reshape((B, 1) + (1,) * (x.ndim - 2)), axis=1)[:, 0]  # noqa: E731
-    return pick(P), pick(h), pick(clearance), pick(clear), pick(limits_ok)
+    return tuple(pick(x) for x in result)
 
 
 _solve = solver_jit(_core, static_argnums=(0,), static_argnames=("locked", "free", "seeds", "iters"))

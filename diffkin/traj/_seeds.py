@@ -51,34 +51,34 @@ def _anywhere(keys, lower, upper, count: int, dtype) -> jax.Array:
     return _uniform(keys, count, lo, hi, dtype)
 
 
-def seeds(curves, count: int, free: int, keys) -> jax.Array:
+def seeds(curves, count: int, free: int, keys, first=True) -> jax.Array:
     """``(B, count, free, dof)``: the straight line, then ``count - 1`` lines through via points, for the
     problems of ``curves`` (:class:`diffkin.traj._descent.Curves` of one curve per problem), each problem's
-    drawn from its own PRNG key of ``keys`` ``(B,)``."""
+    drawn from its own PRNG key of ``keys`` ``(B,)``; where ``first`` (a bool, traced or not) is false, ``count``
+    lines through via points (a later round: the straight line was descended before)."""
     q_start, q_goal, lower, upper = curves.q_start, curves.q_goal, curves.lower, curves.upper
     line = lines(q_start, q_goal, (q_start + q_goal)[:, None] / 2, free)
-    if count == 1:
-        return line
     if curves.avoid is None:
-        via = _near_middle(keys, q_start, q_goal, lower, upper, count - 1)
-        return jnp.concatenate([line, lines(q_start, q_goal, via, free)], axis=1)
-    k_any, k_mid = jax.vmap(jax.random.split, out_axes=1)(keys)
-    quarter = CANDIDATES // 4
-    via = jnp.concatenate(
-        [
-            _anywhere(k_any, lower, upper, CANDIDATES - quarter, q_start.dtype),
-            _near_middle(k_mid, q_start, q_goal, lower, upper, quarter),
-        ],
-        axis=1,
-    )  # (B, M, dof)
-    if any(curves.locked):
-        via = jnp.where(jnp.asarray(curves.locked), curves.locked_q[:, None], via)
-    X = lines(q_start, q_goal, via, free)  # (B, M, free, dof)
-    length = jnp.linalg.norm(via - q_start[:, None], axis=-1) + jnp.linalg.norm(q_goal[:, None] - via, axis=-1)
-    score = jnp.minimum(clearance(curves, X), curves.cap()) - PER_RADIAN * length
-    _, best = jax.lax.top_k(score, count - 1)  # (B, count - 1)
-    chosen = jnp.take_along_axis(X, best[:, :, None, None], axis=1)
-    return jnp.concatenate([line, chosen], axis=1)
+        chosen = lines(q_start, q_goal, _near_middle(keys, q_start, q_goal, lower, upper, count), free)
+    else:
+        k_any, k_mid = jax.vmap(jax.random.split, out_axes=1)(keys)
+        drawn = max(CANDIDATES, count)
+        quarter = drawn // 4
+        via = jnp.concatenate(
+            [
+                _anywhere(k_any, lower, upper, drawn - quarter, q_start.dtype),
+                _near_middle(k_mid, q_start, q_goal, lower, upper, quarter),
+            ],
+            axis=1,
+        )  # (B, M, dof)
+        if any(curves.locked):
+            via = jnp.where(jnp.asarray(curves.locked), curves.locked_q[:, None], via)
+        X = lines(q_start, q_goal, via, free)  # (B, M, free, dof)
+        length = jnp.linalg.norm(via - q_start[:, None], axis=-1) + jnp.linalg.norm(q_goal[:, None] - via, axis=-1)
+        score = jnp.minimum(clearance(curves, X), curves.cap()) - PER_RADIAN * length
+        _, best = jax.lax.top_k(score, count)  # (B, count)
+        chosen = jnp.take_along_axis(X, best[:, :, None, None], axis=1)
+    return jnp.where(first, jnp.concatenate([line, chosen[:, : count - 1]], axis=1), chosen)
 
 
 def clearance(curves, X: jax.Array) -> jax.Array:

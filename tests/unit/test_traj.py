@@ -115,6 +115,21 @@ def test_a_problem_s_motion_does_not_depend_on_the_others_in_its_batch(planned, 
         np.testing.assert_allclose(b[1:], a[1:], rtol=1e-6, atol=1e-6, err_msg=name)
 
 
+def test_a_later_round_solves_what_the_first_missed():
+    # one seed, no descent: the first round is the straight line, which sweeps through the sphere over the
+    # upright arm (test above); a later round's curve through a via point goes around it, certified clear
+    traj = jax.jit(
+        lambda s, g, w: dk.traj.optimize(
+            ROBOT, s, g, avoid=dk.ik.Avoid(GEOM, w, MARGIN), limits=LIMITS, knots=10, num_seeds=1, max_iters=0
+        )
+    )(START[:1], GOAL[:1], jax.tree.map(lambda x: x[:1], WORLDS))
+    assert bool(traj.success[0]) and float(traj.clearance[0]) >= MARGIN
+    _, q = _dense(traj)
+    world = jax.tree.map(lambda x: x[:1], WORLDS)
+    assert _sampled_clearance(q, world).min() >= float(traj.clearance[0]) - 1e-6
+    assert np.max(np.abs(np.asarray(traj.control[0, :, 1]))) > 0.2  # the elbow bends (straight: 0 throughout)
+
+
 def test_limits_hold_on_the_continuous_motion(planned):
     t, q = _dense(planned, 4001)
     lower, upper = np.asarray(ROBOT.lower), np.asarray(ROBOT.upper)
@@ -190,11 +205,15 @@ def test_chain_joint_and_pose_goals_in_float64():
         # no obstacles: the straight line (its length) at the default limits (1 rad/s, 2 rad/s^2)
         np.testing.assert_allclose(float(joint.path_length), float(jnp.linalg.norm(q1 - q0)), rtol=1e-6)
         assert np.all(np.abs(np.asarray(joint.at(jnp.linspace(0, joint.duration, 999), 1))) <= 1.0 + 1e-9)
-        # a pose goal: solved by IK, the motion ends on the pose
+        # a pose goal: solved by IK, the motion ends on the pose; one out of reach (2 m away, the arm is 1.2 m
+        # long): an honest failure, its numbers finite
         T = dk.fk(model, q1)
-        pose = dk.traj.optimize(model, q0, T, knots=6, num_seeds=1, max_iters=5)
-        assert bool(pose.goal_ok) and bool(pose.success)
-        np.testing.assert_allclose(np.asarray(dk.fk(model, pose.at(pose.duration))), np.asarray(T), atol=1e-9)
+        far = T.at[0, 3].set(2.0).at[1, 3].set(0.0)
+        pose = dk.traj.optimize(model, q0, jnp.stack([T, far]), knots=6, num_seeds=1, max_iters=5)
+        assert pose.goal_ok.tolist() == [True, False] and pose.success.tolist() == [True, False]
+        end = pose.at(pose.duration)
+        np.testing.assert_allclose(np.asarray(dk.fk(model, end[0])), np.asarray(T), atol=1e-9)
+        assert all(np.all(np.isfinite(np.asarray(x))) for x in (pose.control, pose.duration, pose.path_length, end))
 
 
 @pytest.mark.parametrize(
