@@ -6,6 +6,8 @@ jaxls @ 50a58be): one jaxls least-squares problem per target with PyRoki's own c
 0.02 m, weight 5; world collision margin 0.05 m, weight 10), Levenberg-Marquardt with jaxls'
 defaults (at most 100 iterations, one start at the middle of the joint limits), dense Cholesky.
 The batch is ``jax.vmap`` of that solve, jitted once per batch size and obstacle counts.
+:func:`solve_trajectories` follows ``examples/pyroki_snippets/_trajopt.py`` (same commits) from a start
+to a joint goal.
 
 PyRoki has no success flag: ``solve_batch`` returns the configurations and the caller checks them.
 PyRoki has no box either (its world shapes: ``HalfSpace``, ``Sphere``, ``Capsule``, ``Heightmap``);
@@ -30,6 +32,14 @@ LIMIT_WEIGHT, REST_WEIGHT = 100.0, 0.01
 SELF_MARGIN, SELF_WEIGHT = 0.02, 5.0
 WORLD_MARGIN, WORLD_WEIGHT = 0.05, 10.0
 SMOOTH_WEIGHT = 0.1  # consecutive configurations of a path (PyRoki's trajectory example)
+# PyRoki's trajectory example: timesteps; its swept-capsule world collision (activation distance, weight); its
+# start/end constraints (on two timesteps each); its five-point velocity-limit, acceleration and jerk costs
+TRAJ_STEPS = 25
+SWEEP_MARGIN, SWEEP_WEIGHT = 0.1, 20.0
+ENDS_WEIGHT = 100.0
+VELOCITY_WEIGHT, ACCELERATION_WEIGHT, JERK_WEIGHT = 10.0, 0.1, 0.1
+EXAMPLE_DURATION = 24 * 0.02  # the example's (timesteps - 1) x dt, seconds
+GOAL_TOL = (5e-3, 0.05)  # m, rad: its goal reached (the loose tolerance of this project's earlier PyRoki comparisons)
 
 
 def _package_handler(urdf_path: str):
@@ -231,6 +241,140 @@ def solve_paths(robot: Any, target_link: str, waypoints: np.ndarray, q0: np.ndar
     link_index = jnp.asarray(robot.links.names.index(target_link), jnp.int32)
     solve = _path_solver(int(waypoints.shape[1]))
     return np.asarray(solve(robot, link_index, jnp.asarray(waypoints, dt), jnp.asarray(q0, dt)))
+
+
+@functools.cache
+def _trajopt_solver(steps: int):
+    """``jit(vmap(solve one trajectory of steps timesteps))`` of :func:`solve_trajectories`."""
+    import jax
+    import jax.numpy as jnp
+    import jaxlie
+    import jaxls
+    import pyroki as pk
+    from loguru import logger
+    from pyroki.collision import Capsule, HalfSpace, colldist_from_sdf, collide
+
+    logger.disable("jaxls")
+
+    def swept(robot, coll, q_prev, q_next, faces, capsules):
+        # (5 x links, boxes + capsules) signed distances of the swept capsules: a box's the largest over its faces
+        sweep = coll.get_swept_capsules(robot, q_prev, q_next)
+        box = collide(sweep.reshape((-1, 1, 1)), faces.reshape((1, *faces.get_batch_axes()))).max(axis=-1)
+        return jnp.concatenate([box, collide(sweep.reshape((-1, 1)), capsules.reshape((1, -1)))], axis=-1)
+
+    def sweep_cost(vals, robot, coll, prev, nxt, faces, capsules):
+        d = swept(robot, coll, vals[prev], vals[nxt], faces, capsules)
+        return (colldist_from_sdf(d, SWEEP_MARGIN) * SWEEP_WEIGHT).flatten()
+
+    def ends_cost(vals, var, q):
+        return ((vals[var] - q) * ENDS_WEIGHT).flatten()
+
+    def solve_one(robot, coll, start, goal, dt, face_points, face_normals, cylinder_poses, radius, length):
+        faces = HalfSpace.from_point_and_normal(face_points, face_normals)  # (boxes, 6)
+        capsules = Capsule(pose=jaxlie.SE3.from_matrix(cylinder_poses), size=jnp.stack([radius, length], -1))
+        var = lambda a, b: robot.joint_var_cls(jnp.arange(a, steps + b))  # noqa: E731  timesteps a .. steps + b - 1
+        traj = var(0, 0)
+        each, each_coll, faces_1, capsules_1 = (
+            jax.tree.map(lambda x: x[None], x) for x in (robot, coll, faces, capsules)
+        )
+        costs = [
+            pk.costs.rest_cost(traj, traj.default_factory()[None], REST_WEIGHT),
+            pk.costs.limit_cost(each, traj, LIMIT_WEIGHT),
+            jaxls.Cost(sweep_cost, (each, each_coll, var(0, -1), var(1, 0), faces_1, capsules_1)),
+            jaxls.Cost(ends_cost, (var(0, 2 - steps), start[None])),
+            jaxls.Cost(ends_cost, (var(steps - 2, 0), goal[None])),
+            pk.costs.smoothness_cost(var(1, 0), var(0, -1), SMOOTH_WEIGHT),
+            pk.costs.five_point_velocity_cost(each, var(4, 0), var(3, -1), var(1, -3), var(0, -4), dt, VELOCITY_WEIGHT),
+            pk.costs.five_point_acceleration_cost(
+                var(2, -2), var(4, 0), var(3, -1), var(1, -3), var(0, -4), dt, ACCELERATION_WEIGHT
+            ),
+            pk.costs.five_point_jerk_cost(
+                var(6, 0), var(5, -1), var(4, -2), var(2, -4), var(1, -5), var(0, -6), dt, JERK_WEIGHT
+            ),
+        ]
+        start_vals = jaxls.VarValues.make((traj.with_value(jnp.linspace(start, goal, steps)),))
+        q = jaxls.LeastSquaresProblem(costs, [traj]).analyze().solve(start_vals, verbose=False)[traj]
+        own = jax.vmap(lambda a, b: swept(robot, coll, a, b, faces, capsules).min())(q[:-1], q[1:]).min()
+        return q, own
+
+    return jax.jit(jax.vmap(solve_one, in_axes=(None, None, 0, 0, 0, 0, 0, 0, 0, 0)))
+
+
+def solve_trajectories(
+    robot: Any,
+    coll: Any,
+    start: np.ndarray,
+    goal: np.ndarray,
+    boxes: tuple[np.ndarray, np.ndarray],
+    cylinders: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """PyRoki's trajectory optimisation (``examples/pyroki_snippets/_trajopt.py``) from ``start`` to ``goal``.
+
+    Its formulation for each problem, with its costs and weights: 25 timesteps, initialised on the straight
+    line from ``start`` to ``goal`` (the example solves IK for them first; here they are joint configurations);
+    the first two timesteps held at ``start`` and the last two at ``goal`` (weight 100); rest pose (0.01); soft
+    joint limits (100); swept-capsule world collision between consecutive timesteps (activation distance
+    0.1 m, weight 20; no self collision, as in the example); smoothness (0.1); five-point velocity-limit (10),
+    acceleration (0.1) and jerk (0.1) costs at ``dt``; jaxls' defaults (Levenberg-Marquardt, conjugate
+    gradients, at most 100 iterations). ``jax.vmap`` over the problems.
+
+    The example's ``dt`` (0.02 s, 0.48 s in all) is for a short hand motion; here ``dt`` makes the straight line
+    run its most limited joint at half its velocity limit (at least the example's 0.48 s in all).
+
+    Obstacles, each problem the same counts (pad with far-away shapes): a box is the intersection of its six
+    face half-spaces (as :func:`solve_batch`: a swept capsule's distance the largest over the faces, a lower
+    bound); a cylinder is PyRoki's ``Capsule`` of its radius and length (its axis, caps beyond its ends: it
+    covers the cylinder).
+
+    Args:
+        start, goal: ``(P, dof)`` configurations in PyRoki's actuated joint order.
+        boxes: ``T_world_box (P, B, 4, 4)`` and half extents ``(P, B, 3)``.
+        cylinders: ``T_world_cylinder (P, C, 4, 4)`` (axis: local z), radius ``(P, C)`` and length ``(P, C)``.
+
+    Returns:
+        ``(P, 25, dof)`` configurations at the timesteps, ``dt (P,)`` seconds, and ``(P,)`` the smallest signed
+        distance (m) of the swept capsules to the obstacles as PyRoki models them (>= 0: clear by its own
+        model).
+    """
+    import jax.numpy as jnp
+
+    dt_type = jnp.zeros(()).dtype
+    start, goal = np.asarray(start, np.float64), np.asarray(goal, np.float64)
+    straight = np.max(np.abs(goal - start) / np.asarray(robot.joints.velocity_limits), axis=-1)
+    dt = np.maximum(2 * straight, EXAMPLE_DURATION) / (TRAJ_STEPS - 1)
+    faces = [_box_halfspaces(list(zip(T, h, strict=True))) for T, h in zip(*boxes, strict=True)]
+    args = (start, goal, dt, np.stack([p for p, _ in faces]), np.stack([n for _, n in faces]), *cylinders)
+    q, own = _trajopt_solver(TRAJ_STEPS)(robot, coll, *(jnp.asarray(a, dt_type) for a in args))
+    return np.asarray(q), dt, np.asarray(own)
+
+
+def locked(robot: Any, values: dict[str, float]) -> Any:
+    """``robot`` with each actuated joint of ``values`` (and its mimics) given the limits ``[value, value]``.
+
+    PyRoki cannot lock a joint; its limit cost (weight 100) then holds the joint there, as diffkin's ``locked``
+    does (MBM's Panda fingers at 0.065 m, beyond the URDF's 0.04).
+    """
+    import jax.numpy as jnp
+    import jax_dataclasses as jdc
+
+    j = robot.joints
+    value = np.array(j.lower_limits, np.float64)
+    index = [j.actuated_names.index(name) for name in values]
+    value[index] = list(values.values())
+    # the actuated joint each joint is or follows (-1: neither), and every joint held through it
+    follows = np.where(np.asarray(j.actuated_indices) >= 0, j.actuated_indices, j.mimic_act_indices)
+    held = np.isin(follows, index)
+    at = value[follows[held]] * np.asarray(j.mimic_multiplier)[held] + np.asarray(j.mimic_offset)[held]
+    lo_all, hi_all = np.array(j.lower_limits_all), np.array(j.upper_limits_all)
+    lo_all[held], hi_all[held] = at, at
+    lo, hi = np.array(j.lower_limits), np.array(j.upper_limits)
+    lo[index], hi[index] = value[index], value[index]
+    joints = jdc.replace(
+        j,
+        **{k: jnp.asarray(v, j.lower_limits.dtype) for k, v in
+           dict(lower_limits=lo, upper_limits=hi, lower_limits_all=lo_all, upper_limits_all=hi_all).items()},
+    )  # fmt: skip
+    return jdc.replace(robot, joints=joints)
 
 
 def _example_robot_data_panda() -> tuple[str, str]:

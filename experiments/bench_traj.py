@@ -27,6 +27,16 @@ problems batched in one call, each with its own world).
 
     python experiments/bench_traj.py --quick           # 3 scenes x 3 problems, hulls
     python experiments/bench_traj.py --all --write     # all 700 (long on a CPU)
+    python experiments/bench_traj.py --per-scene 3 --goals goal_q --peer pyroki
+
+``--peer pyroki``: PyRoki's trajectory optimisation (``_pyroki_peer.solve_trajectories``: its trajopt
+example's formulation, float32, jax's x64 off while it plans) on the same ``goal_q`` problems, timed the same
+way (the first scene apart, then each scene's batch once), and judged by the same judge: its 25 timesteps
+joined linearly (``--samples`` evenly in time plus the timesteps), each piece's velocity and the second
+differences at the timesteps against the limits, its goal at its own tolerance (the hand at ``goal_q``'s pose
+within 5 mm / 0.05 rad, as the earlier PyRoki comparisons: its ends are soft costs). PyRoki has no success flag:
+its "success" is that tolerance and its swept capsules clear of its own obstacles; every motion it returns is
+judged. A second table puts its rows beside diffkin's.
 """
 
 from __future__ import annotations
@@ -63,6 +73,18 @@ HEADER = [
     "success off goal",
     "motion time (s, mean solved)",
     "path length (rad, mean solved)",
+    "warm (s / problem)",
+]
+PEER_HEADER = [
+    "scene",
+    "planner",
+    "problems",
+    "solvable",
+    "success (own criterion)",
+    "solved (judge)",
+    "judged in contact (coal)",
+    "judged off limits (position / velocity / acceleration)",
+    "goal error (rad, median / max)",
     "warm (s / problem)",
 ]
 
@@ -105,24 +127,12 @@ def plan(robot, geom, problems: list, kind: str, limits, args, dtype):
 
 
 def judge_motions(judge: Judge, traj, problems: list, kind: str, limits, samples: int) -> dict:
-    """Per problem: coal's smallest clearance along the motion, limits along it, the goal reached."""
-    n = len(problems)
+    """Per problem: :func:`judge_samples` along the motion, ``limits`` (all three held), the goal reached."""
     s = np.linspace(0.0, 1.0, samples)
     dur = np.asarray(traj.duration, np.float64)
     t = np.concatenate([s[:, None] * dur[None], np.asarray(traj.t, np.float64).T])  # (M, n)
-    q = np.asarray(traj.at(jnp.asarray(t, traj.t.dtype)), np.float64)  # (M, n, dof)
-    v = np.asarray(traj.at(jnp.asarray(t, traj.t.dtype), 1), np.float64)
-    a = np.asarray(traj.at(jnp.asarray(t, traj.t.dtype), 2), np.float64)
-    coal = np.empty(n)
-    for k, p in enumerate(problems):
-        obstacles = judge.coal.obstacles(p)
-        world, own = judge.clearance(q[:, k], [obstacles] * len(q))
-        coal[k] = min(world.min(), own.min())
-    vel, acc = np.asarray(limits.velocity), np.asarray(limits.acceleration)
-    within = np.array([judge.within_limits(q[:, k]).all() for k in range(n)])
-    slow = np.all(np.abs(v) <= vel * (1 + 1e-5) + 1e-9, axis=(0, 2)) & np.all(
-        np.abs(a) <= acc * (1 + 1e-5) + 1e-9, axis=(0, 2)
-    )
+    q, v, a = (np.asarray(traj.at(jnp.asarray(t, traj.t.dtype), d), np.float64) for d in range(3))  # (M, n, dof)
+    j = judge_samples(judge, q, v, a, problems, limits)
     end = np.asarray(traj.at(traj.duration), np.float64)
     if kind == "goal_q":
         goal = np.array([np.r_[p["goal_q"], FINGER] for p in problems])
@@ -130,7 +140,24 @@ def judge_motions(judge: Judge, traj, problems: list, kind: str, limits, samples
     else:
         pos, rot = judge.pose_errors(end, np.stack([target_of(p) for p in problems]))
         on_goal = (pos <= 1e-5) & (rot <= 1e-4)
-    return {"coal": coal, "limits": within & slow, "goal": on_goal}
+    return {**j, "limits": j["position"] & j["velocity"] & j["acceleration"], "goal": on_goal, "end": end}
+
+
+def judge_samples(judge: Judge, q: np.ndarray, v: np.ndarray, a: np.ndarray, problems: list, limits) -> dict:
+    """Per problem ``k`` of motions sampled as configurations ``q (M, n, dof)``, velocities ``v`` and accelerations
+    ``a`` ``(·, n, dof)``: coal's smallest clearance (m) on the real meshes, and whether the joint limits, the
+    velocity and the acceleration limits (relative slack 1e-5) hold at every sample."""
+    coal = np.empty(len(problems))
+    for k, p in enumerate(problems):
+        world, own = judge.clearance(q[:, k], [judge.coal.obstacles(p)] * len(q))
+        coal[k] = min(world.min(), own.min())
+    within = lambda x, bound: np.all(np.abs(x) <= np.asarray(bound) * (1 + 1e-5) + 1e-9, axis=(0, 2))  # noqa: E731
+    return {
+        "coal": coal,
+        "position": np.array([judge.within_limits(q[:, k]).all() for k in range(len(problems))]),
+        "velocity": within(v, limits.velocity),
+        "acceleration": within(a, limits.acceleration),
+    }
 
 
 def main(argv=None) -> int:
@@ -147,9 +174,12 @@ def main(argv=None) -> int:
     parser.add_argument("--samples", type=int, default=200, help="coal samples per motion (default 200)")
     parser.add_argument("--dtype", choices=("float32", "float64"), default="float32")
     parser.add_argument("--write", action="store_true", help="write experiments/results/<machine>-traj.md")
+    parser.add_argument("--peer", choices=("pyroki",), help="also PyRoki's trajopt example (goal_q only; see above)")
     args = parser.parse_args(argv)
     if not (args.quick or args.all or args.per_scene or args.scenes):
         parser.error("choose --quick, --all, --per-scene N or --scenes (all 700 take long on a CPU)")
+    if args.peer and args.goals != "goal_q":
+        parser.error("--peer plans to the joint goals only: add --goals goal_q")
     command = "python experiments/bench_traj.py " + " ".join(argv if argv is not None else sys.argv[1:])
     busy = busy_note()
     dtype = jnp.dtype(args.dtype)
@@ -170,7 +200,7 @@ def main(argv=None) -> int:
     limits = dk.traj.Limits(velocity=velocity_limits(urdf, robot), acceleration=ACCELERATION[: robot.dof])
     n = sum(len(p) for p in scenes.values())
     print(f"# {n} problems x {kinds}, model {args.model!r}, {args.dtype}; pose judged by {judge.fk_name}", flush=True)
-    rows, firsts, totals = [], {}, {}
+    rows, firsts, totals, mine = [], {}, {}, {}
     for kind in kinds:
         first_scene = next(iter(scenes.values()))
         _, firsts[kind] = plan(robot, geom, first_scene, kind, limits, args, dtype)
@@ -202,6 +232,9 @@ def main(argv=None) -> int:
             for key, value in c.items():
                 total[key] = total[key] + value
             rows.append(_row(scene, kind, c))
+            if args.peer:
+                error = np.max(np.abs(j["end"] - goal_q)[:, judge.arm], axis=-1)
+                mine[scene] = _peer_counts(solvable, success, solved, success, j, error, warm)
             why = [
                 f"#{p['index']}: goal {bool(g)} limits {bool(lo)} clear {bool(cl)} ({1e3 * float(cv):.1f} mm certified)"
                 for p, ok, g, lo, cl, cv in zip(
@@ -226,8 +259,99 @@ def main(argv=None) -> int:
         + ". warm: each scene's call once, per problem.\n",
         table(HEADER, rows),
     ]
+    if args.peer:
+        parts += pyroki_beside(urdf, srdf, robot, judge, scenes, limits, mine, args.samples)
     publish(parts, "traj" if args.write else None)
     return 0
+
+
+def pyroki_beside(urdf: str, srdf: str, robot, judge: Judge, scenes: dict, limits, mine: dict, samples: int) -> list:
+    """PyRoki's trajectory optimisation on each scene's ``goal_q`` problems, judged as diffkin's motions: the
+    report's parts (first call, a table with diffkin's counts ``mine`` beside, per scene, from :func:`_peer_counts`)."""
+    import _pyroki_peer as peer
+
+    with jax.enable_x64(False):  # PyRoki's default float32 (the benchmark's judge enables x64)
+        pk_robot, coll = peer.panda_robot(urdf, srdf)
+        pk_robot = peer.locked(pk_robot, {"panda_finger_joint1": FINGER})
+    names = list(pk_robot.joints.actuated_names)
+    to_pk, to_dk = [robot.joint_names.index(n) for n in names], [names.index(n) for n in robot.joint_names]
+
+    def solve(problems):
+        world = jax.tree.map(lambda *x: np.stack(x), *[world_of(p, PAD) for p in problems])
+        ends = [np.stack([np.r_[p[k], FINGER] for p in problems])[:, to_pk] for k in ("start", "goal_q")]
+        t0 = time.perf_counter()
+        with jax.enable_x64(False):
+            q, dt, own = peer.solve_trajectories(
+                pk_robot, coll, *ends, (world.boxes.pose, world.boxes.half_extents),
+                (world.cylinders.pose, world.cylinders.radius, 2 * world.cylinders.half_length),
+            )  # fmt: skip
+        return np.asarray(q, np.float64)[..., to_dk], dt, own, time.perf_counter() - t0
+
+    first = solve(next(iter(scenes.values())))[-1]
+    rows, total, total_mine = [], {}, {}
+    for scene, problems in scenes.items():
+        q, dt, own, warm = solve(problems)  # (n, T, dof)
+        steps = q.shape[1]
+        u = np.concatenate([np.linspace(0, steps - 1, samples), np.arange(steps)])  # in timesteps
+        i = np.minimum(u.astype(int), steps - 2)
+        f = (u - i)[:, None, None]
+        along = (1 - f) * q[:, i].swapaxes(0, 1) + f * q[:, i + 1].swapaxes(0, 1)  # linear between timesteps
+        v = (np.diff(q, axis=1) / dt[:, None, None]).swapaxes(0, 1)
+        a = (np.diff(q, 2, axis=1) / dt[:, None, None] ** 2).swapaxes(0, 1)
+        j = judge_samples(judge, along, v, a, problems, limits)
+        goal_q = np.stack([np.r_[p["goal_q"], FINGER] for p in problems])
+        pos, rot = judge.pose_errors(q[:, -1], np.asarray(dk.fk(robot, jnp.asarray(goal_q), EE)))
+        on_goal = (pos <= peer.GOAL_TOL[0]) & (rot <= peer.GOAL_TOL[1])
+        solved = on_goal & (j["coal"] >= 0) & j["position"] & j["velocity"] & j["acceleration"]
+        error = np.max(np.abs(q[:, -1] - goal_q)[:, judge.arm], axis=-1)
+        c = _peer_counts(mine[scene]["solvable"], on_goal & (own >= 0), solved, np.ones(len(problems), bool), j,
+                         error, warm)  # fmt: skip
+        rows += [_peer_row(scene, "diffkin", mine[scene]), _peer_row(scene, "PyRoki", c)]
+        print(
+            f"# {scene} PyRoki: {' | '.join(rows[-1][2:])}; hand at most {1e3 * pos.max():.1f} mm / {rot.max():.3f} "
+            f"rad off; clearance at least {1e3 * own.min():.1f} mm (own model), {1e3 * j['coal'].min():.1f} mm (coal); "
+            f"speed and acceleration up to {np.max(np.abs(v) / limits.velocity):.1f}x and "
+            f"{np.max(np.abs(a) / limits.acceleration):.1f}x the limits"
+        )
+        for key, value in c.items():
+            total[key] = total.get(key, 0 * value) + value
+            total_mine[key] = total_mine.get(key, 0 * value) + mine[scene][key]
+    rows += [_peer_row("**all**", "diffkin", total_mine), _peer_row("**all**", "PyRoki", total)]
+    return [
+        f"PyRoki beside diffkin (`goal_q`): PyRoki's first call (the first scene's problems, compile included) "
+        f"**{first:.1f} s**; motions judged in contact or off limits counted among those each offers (diffkin's "
+        f"successes, all of PyRoki's).\n",
+        table(PEER_HEADER, rows),
+    ]
+
+
+def _peer_counts(solvable, success, solved, offered, j: dict, error, warm: float) -> dict:
+    """A scene's counts for the peer table; ``offered``: the motions a planner returns as its answers."""
+    return {
+        "problems": len(success),
+        "solvable": int(np.sum(solvable)),
+        "success": int(success.sum()),
+        "solved": int(solved.sum()),
+        "contact": int((offered & (j["coal"] < 0)).sum()),
+        "limits": np.array([int((offered & ~j[k]).sum()) for k in ("position", "velocity", "acceleration")]),
+        "error": list(error),
+        "warm": warm,
+    }
+
+
+def _peer_row(scene: str, planner: str, c: dict) -> list[str]:
+    return [
+        scene,
+        planner,
+        str(c["problems"]),
+        str(c["solvable"]),
+        str(c["success"]),
+        str(c["solved"]),
+        str(c["contact"]),
+        " / ".join(str(n) for n in c["limits"]),
+        f"{np.median(c['error']):.1e} / {np.max(c['error']):.1e}",
+        f"{c['warm'] / max(c['problems'], 1):.3f}",
+    ]
 
 
 def _row(scene: str, kind: str, c: dict) -> list[str]:
