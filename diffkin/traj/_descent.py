@@ -30,6 +30,8 @@ W_BEND = 0.2  # per rad of a second difference
 SAMPLES = 8  # clearance samples per segment (fewer let a curve pass through a thin board between two)
 EXTRA = 0.02  # metres the clearance rows aim beyond the margin
 W_CLEAR = 30.0  # per metre of a clearance row (rows in metres against smoothness in radians)
+#: a curve whose last step lowered its cost by less than this share of it has converged
+CONVERGED = 0.02
 _MU_INIT, _MU_MIN, _MU_MAX, _MU_UP, _MU_DOWN = 1e-2, 1e-6, 1e6, 8.0, 0.25
 
 
@@ -107,26 +109,28 @@ class Curves:
 
     def descend(self, X: jax.Array, iters: int) -> tuple[jax.Array, jax.Array]:
         """``(X, cost)``: ``X`` ``(C, n, dof)`` after at most ``iters`` Levenberg-Marquardt iterations, and
-        its cost ``(C,)``. A problem stops once it has a curve without a clearance row (or each of its
-        curves with one has stalled: damping at its largest), since the smoothness rows alone change the
-        curves only slightly and each iteration costs the clearance rows' distances; its curves are then
-        left as they are (a problem's result does not depend on the others in its batch) and measure no
-        distance exactly (a batch's iterations cost its problems still going)."""
+        its cost ``(C,)``. A curve stops once it has converged (its last step taken lowered its cost by
+        less than :data:`CONVERGED` of it, or its damping is at its largest), and all of a problem's once
+        one of them is clear of every row, since the last small gains and the smoothness rows alone change
+        the curves only slightly and each iteration costs the clearance rows' distances; a curve stopped is
+        left as it is (a problem's result does not depend on the others in its batch) and measures no
+        distance exactly (a batch's iterations cost its curves still going)."""
         C, n, dof = X.shape
         X = self.project(X)
         W = self.samples(n + 2 * _spline.ENDS, X.dtype)
         eye = jnp.eye(n * dof, dtype=X.dtype)
 
-        def going(blocked, mu) -> jax.Array:
-            """``(C,)`` whether each curve's problem goes on."""
-            live = (blocked & (mu < _MU_MAX)).reshape(-1, self.k)  # (B, k)
+        def going(blocked, mu, slow) -> jax.Array:
+            """``(C,)`` whether each curve goes on: it has a clearance row and has neither stalled nor
+            converged, and no curve of its problem is clear of every row."""
+            live = blocked & (mu < _MU_MAX) & ~slow
             if self.avoid is not None:  # a problem with a curve clear of every row is done
-                live = live & jnp.all(blocked.reshape(-1, self.k), axis=1, keepdims=True)
-            return jnp.repeat(jnp.any(live, axis=1), self.k)
+                live = live & jnp.repeat(jnp.all(blocked.reshape(-1, self.k), axis=1), self.k)
+            return live
 
         def step(state):
-            it, X, cost, g, H, blocked, mu = state
-            live = going(blocked, mu) | (it == 0)
+            it, X, cost, g, H, blocked, mu, slow = state
+            live = going(blocked, mu, slow) | (it == 0)
             lam = jnp.where(jnp.isfinite(cost), mu * cost, 0.0) + 1e-10
             dx = jnp.linalg.solve(H + lam[:, None, None] * eye, -g[..., None])[..., 0]
             X_try = self.project(X + dx.reshape(C, n, dof))
@@ -135,17 +139,18 @@ class Curves:
             pick = lambda new, old: jnp.where(take.reshape((C,) + (1,) * (new.ndim - 1)), new, old)  # noqa: E731
             raised = jnp.where(take, jnp.maximum(mu * _MU_DOWN, _MU_MIN), jnp.minimum(mu * _MU_UP, _MU_MAX))
             new = (pick(X_try, X), pick(cost_try, cost), pick(g_try, g), pick(H_try, H), pick(blocked_try, blocked))
-            return (it + 1, *new, jnp.where(live, raised, mu))
+            slow = jnp.where(take, cost - cost_try < CONVERGED * cost_try, slow)
+            return (it + 1, *new, jnp.where(live, raised, mu), slow)
 
         def more(state):
-            it, blocked, mu = state[0], state[5], state[6]
-            return (it == 0) | ((it <= iters) & jnp.any(going(blocked, mu)))
+            it, blocked, mu, slow = state[0], state[5], state[6], state[7]
+            return (it == 0) | ((it <= iters) & jnp.any(going(blocked, mu, slow)))
 
         # the first iteration evaluates X itself (a zero step from an infinite cost): the residual is
         # compiled once, inside the loop
         cost = jnp.full((C,), jnp.inf, X.dtype)
         g, H = jnp.zeros((C, n * dof), X.dtype), jnp.broadcast_to(eye, (C, n * dof, n * dof))
         mu = jnp.full((C,), _MU_INIT, X.dtype)
-        state = (jnp.int32(0), X, cost, g, H, jnp.ones((C,), bool), mu)
+        state = (jnp.int32(0), X, cost, g, H, jnp.ones((C,), bool), mu, jnp.zeros((C,), bool))
         out = jax.lax.while_loop(more, step, state)
         return out[1], out[2]
