@@ -52,9 +52,10 @@ def optimize(
     runs ``num_seeds`` seeds (the straight line, then curves through via points: with ``avoid``, the
     clearest of 32 random ones, :mod:`diffkin.traj._seeds`) through at most ``max_iters``
     Levenberg-Marquardt iterations on its free control points (smoothness rows and the clearance rows of
-    collision-aware IK at 8 samples per segment, pushed through the spline's basis; a problem stops once
-    one of its curves is clear of every row); its two curves of lowest cost are then timed and certified
-    (a problem with no successful curve gets new seeds through via points, up to :data:`ROUNDS` rounds in all):
+    collision-aware IK at 8 samples per segment, pushed through the spline's basis; a curve stops once it
+    has converged, and a problem once one of its curves is clear of every row); its two curves of lowest
+    cost are then timed and certified (a problem with no successful curve gets new seeds through via points,
+    up to :data:`ROUNDS` rounds in all):
 
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
