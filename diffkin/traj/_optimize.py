@@ -303,7 +303,7 @@ def _plan(
     def body(state):
         r, best = state
         new = attempt(r)
-        better = (r == 0) | (~best[-1] & (_score(new) > _score(best)))
+        better = (r == 0) | (valid & ~best[-1] & (_score(new) > _score(best)))
         keep = lambda n, b: jnp.where(better.reshape((-1,) + (1,) * (n.ndim - 1)), n, b)  # noqa: E731
         return r + 1, jax.tree.map(keep, new, best)
 
