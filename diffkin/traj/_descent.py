@@ -12,7 +12,7 @@ residual stacks
 
 The margin the rows aim for is raised by :data:`EXTRA` so that the certificate
 (:mod:`diffkin.traj._certify`), which subtracts the motion between its samples, holds. Steps solve
-the ``n dof`` normal equations with error-proportional damping (:mod:`diffkin.ik._lm`'s rule); a
+the ``n dof`` normal equations (Cholesky) with error-proportional damping (:mod:`diffkin.ik._lm`'s rule); a
 step is taken only if it lowers the cost; joints stay within their limits (clipped control points:
 the curve lies in their convex hull) and locked joints at their values.
 """
@@ -132,7 +132,9 @@ class Curves:
             it, X, cost, g, H, blocked, mu, slow = state
             live = going(blocked, mu, slow) | (it == 0)
             lam = jnp.where(jnp.isfinite(cost), mu * cost, 0.0) + 1e-10
-            dx = jnp.linalg.solve(H + lam[:, None, None] * eye, -g[..., None])[..., 0]
+            # (positive definite: no pivots, which an LU solve permutes in a loop of n steps)
+            factor = jax.scipy.linalg.cho_factor(H + lam[:, None, None] * eye, lower=True)
+            dx = jax.scipy.linalg.cho_solve(factor, -g[..., None])[..., 0]
             X_try = self.project(X + dx.reshape(C, n, dof))
             cost_try, g_try, H_try, blocked_try = self.normal(X_try, W, live)
             take = live & jnp.isfinite(cost_try) & (cost_try < cost)

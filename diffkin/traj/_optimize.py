@@ -12,6 +12,7 @@ import numpy as np
 from diffkin._checks import positive_int, real_array
 from diffkin._static import combine, is_concrete, partition
 from diffkin._xla import in_steps, problems_at_once, solver_jit
+from diffkin.collision.interface import enclosing_capsules, enclosing_world
 from diffkin.ik import Avoid
 from diffkin.ik.interface import cast, check_avoid, check_batched, default_key, detach, finite
 from diffkin.models.robot import Robot
@@ -53,9 +54,11 @@ def optimize(
     clearest of 32 random ones, :mod:`diffkin.traj._seeds`) through at most ``max_iters``
     Levenberg-Marquardt iterations on its free control points (smoothness rows and the clearance rows of
     collision-aware IK at 8 samples per segment, pushed through the spline's basis; a curve stops once it
-    has converged, and a problem once one of its curves is clear of every row); its two curves of lowest
-    cost are then timed and certified (a problem with no successful curve gets new seeds through via points,
-    up to :data:`ROUNDS` rounds in all):
+    has converged, and a problem once one of its curves is clear of every row; the seeds and the descent
+    measure capsules that contain the robot's polytopes and cylinders and the obstacles' cylinders:
+    closed-form distances, lower bounds of the shapes', :mod:`diffkin.collision._capsules`); its two
+    curves of lowest cost are then timed and certified on the shapes themselves (a problem with no
+    successful curve gets new seeds through via points, up to :data:`ROUNDS` rounds in all):
 
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
@@ -162,12 +165,13 @@ def optimize(
     mask, locked_q = _locked(model, locked, batch)
     B = int(np.prod(batch, dtype=np.int64))
     flat = lambda x, tail: jnp.broadcast_to(x, batch + tail).reshape((B,) + tail)  # noqa: E731
-    avoid_flat = None
+    avoid_flat, capsules = None, None
     reach = np.zeros((dof, 0))
     if avoid is not None:
         _check_concrete(avoid)
         reach = _reach.reach(model, avoid.geom)
         avoid_flat = avoid.cast(dtype).flat(batch)
+        capsules = avoid.replace(geom=enclosing_capsules(avoid.geom)).cast(dtype).geom
     static, traced = partition(model)
     out = _solve(
         static,
@@ -176,6 +180,7 @@ def optimize(
         flat(q_goal, (dof,)),
         flat(goal_ok, ()),
         avoid_flat,
+        capsules,
         None if base is None else flat(base.astype(dtype), (4, 4)),
         None if locked_q is None else flat(locked_q.astype(dtype), (dof,)),
         (velocity, acceleration, jerk),
@@ -230,7 +235,23 @@ def _locked(model, locked, batch) -> tuple[tuple[bool, ...], jax.Array | None]:
 
 
 def _core(
-    static, traced, q_start, q_goal, goal_ok, avoid, base, locked_q, bounds, reach, key, *, locked, free, seeds, iters
+    static,
+    traced,
+    q_start,
+    q_goal,
+    goal_ok,
+    avoid,
+    capsules,
+    base,
+    locked_q,
+    bounds,
+    reach,
+    key,
+    *,
+    locked,
+    free,
+    seeds,
+    iters,
 ):
     model = cast(detach(combine(static, traced)), q_start.dtype)
     dtype = q_start.dtype
@@ -250,7 +271,21 @@ def _core(
         chunk_avoid = avoid.replace(world=world) if per_problem else avoid
         keys = jax.vmap(lambda i: jax.random.fold_in(seed_key, i))(index)
         return _plan(
-            model, q_start, q_goal, valid, chunk_avoid, base, locked_q, bounds, reach, keys, locked, free, seeds, iters
+            model,
+            q_start,
+            q_goal,
+            valid,
+            chunk_avoid,
+            capsules,
+            base,
+            locked_q,
+            bounds,
+            reach,
+            keys,
+            locked,
+            free,
+            seeds,
+            iters,
         )
 
     step = problems_at_once(B)
@@ -278,7 +313,21 @@ def _core(
 
 
 def _plan(
-    model, q_start, q_goal, valid, avoid, base, locked_q, bounds, reach, keys, locked, free: int, seeds: int, iters: int
+    model,
+    q_start,
+    q_goal,
+    valid,
+    avoid,
+    capsules,
+    base,
+    locked_q,
+    bounds,
+    reach,
+    keys,
+    locked,
+    free: int,
+    seeds: int,
+    iters: int,
 ):
     """``(P (B, N, dof), h (B,), clearance (B,), clear (B,), limits_ok (B,))``: each of ``B`` problems' chosen
     curve (control points), its segment time, certified clearance and checks; ``valid`` ``(B,)`` whether its
@@ -293,7 +342,21 @@ def _plan(
     def attempt(r):
         round_keys = jax.lax.cond(r == 0, lambda: keys, lambda: jax.vmap(lambda key: jax.random.fold_in(key, r))(keys))
         return _round(
-            model, q_start, q_goal, avoid, base, locked_q, bounds, reach, round_keys, r == 0, locked, free, seeds, iters
+            model,
+            q_start,
+            q_goal,
+            avoid,
+            capsules,
+            base,
+            locked_q,
+            bounds,
+            reach,
+            round_keys,
+            r == 0,
+            locked,
+            free,
+            seeds,
+            iters,
         )
 
     def more(state):
@@ -326,6 +389,7 @@ def _round(
     q_start,
     q_goal,
     avoid,
+    capsules,
     base,
     locked_q,
     bounds,
@@ -343,10 +407,15 @@ def _round(
     lower, upper = jnp.asarray(model.lower, q_start.dtype), jnp.asarray(model.upper, q_start.dtype)
     velocity, acceleration, jerk = bounds
     B, dof = q_start.shape
-    ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, avoid, base, 1)
+    # the seeds and the descent measure capsules that contain the shapes and the obstacles' cylinders (closed
+    # forms: no GJK), the certificate the shapes themselves
+    rough = None
+    if avoid is not None:
+        rough = avoid.replace(geom=capsules, world=None if avoid.world is None else enclosing_world(avoid.world))
+    ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, rough, base, 1)
     X = _seeds.seeds(ends, seeds, free, keys, first)  # (B, k, free, dof)
     rep = lambda x: None if x is None else jnp.repeat(x, seeds, axis=0)  # noqa: E731
-    curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), avoid, base, seeds)
+    curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), rough, base, seeds)
     X, cost = curves.descend(X.reshape(B * seeds, free, dof), iters)
     P = curves.control(X).reshape(B, seeds, free + 6, dof)
     # only the lowest-cost curves of each problem are timed and certified (the certificate's distances

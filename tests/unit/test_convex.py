@@ -131,6 +131,84 @@ def test_robot_distances_through_hulls(cube_robots):
     np.testing.assert_allclose(d_box[:, 0, 2], 0.2, atol=1e-12)  # the cylinder, beside the other face
 
 
+def test_enclosing_capsules_contain_the_shapes_and_keep_the_pairs(cube_robots):
+    """What a trajectory's descent measures: a geometry with its polytopes and cylinders as capsules that contain
+    them. The cube's hull gets the capsule that ``meshes="capsules"`` fits to the same corners, and the toy's exact
+    cylinder (``meshes="hulls"``) the one fitted to it by default; every corner, and 2,000 points of the
+    cylinder's rims, within the capsule (float64); the other shapes, their frames and the self-collision pairs
+    (by name) kept; the overshoot grown to the capsule's; derived once per geometry."""
+    from _shapes import TOY_COLLISION_URDF
+
+    from diffkin.collision.interface import enclosing_capsules
+
+    _, _, fits = cube_robots
+    caps = enclosing_capsules(fits["hulls"])
+    assert caps is enclosing_capsules(fits["hulls"])
+    assert caps.counts == (0, 1, 0, 0, 0) and caps.shape_names == fits["hulls"].shape_names
+    for field in ("a", "b", "radius"):
+        np.testing.assert_allclose(getattr(caps.capsules, field), getattr(fits["capsules"].capsules, field), atol=1e-12)
+    np.testing.assert_allclose(caps.overshoot, fits["capsules"].overshoot, atol=1e-3)
+    a, b, r = (np.asarray(x[0], np.float64) for x in (caps.capsules.a, caps.capsules.b, caps.capsules.radius))
+    corners = 0.1 * CORNERS
+    t = np.clip((corners - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1)
+    assert np.all(np.linalg.norm(corners - a - t[:, None] * (b - a), axis=1) <= r)
+
+    robot = dk.load_robot(TOY_COLLISION_URDF)
+    tight, loose = (
+        dk.collision.load(TOY_COLLISION_URDF, robot, meshes="hulls"),
+        dk.collision.load(TOY_COLLISION_URDF, robot),
+    )
+    caps = enclosing_capsules(tight)
+    assert tight.counts == (2, 1, 1, 1, 0) and caps.counts == loose.counts == (2, 2, 1, 0, 0)
+    links = lambda g: dict(zip(g.shape_names, g.shape_links, strict=True))  # noqa: E731
+    assert links(caps) == links(loose) == links(tight)
+    named = lambda g: {frozenset(g.shape_names[i] for i in pair) for pair in g.pair_list}  # noqa: E731
+    assert named(caps) == named(tight) == named(loose)
+
+    def capsule_of(g, name: str) -> np.ndarray:
+        k = g.shape_names.index(name) - g.counts[0]
+        return np.concatenate([np.asarray(g.capsules.a[k]), np.asarray(g.capsules.b[k]), [float(g.capsules.radius[k])]])
+
+    for name in ("upper_0", "lower_0"):  # the same capsules (in another order: the new ones after the file's)
+        np.testing.assert_allclose(capsule_of(caps, name), capsule_of(loose, name), atol=1e-7)
+    overshoot = lambda g: dict(zip(g.shape_names, g.overshoot, strict=True))  # noqa: E731
+    assert overshoot(caps) == pytest.approx(overshoot(loose), abs=1e-12)
+    k = caps.shape_names.index("upper_0") - caps.counts[0]
+    a, b, r = (np.asarray(x[k], np.float64) for x in (caps.capsules.a, caps.capsules.b, caps.capsules.radius))
+    angle = np.random.default_rng(3).uniform(0, 2 * np.pi, 1000)
+    rim = np.concatenate(
+        [np.stack([0.05 * np.cos(angle), 0.05 * np.sin(angle), np.full(1000, z)], 1) for z in (0, 0.5)]
+    )
+    t = np.clip((rim - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1)
+    assert np.all(np.linalg.norm(rim - a - t[:, None] * (b - a), axis=1) <= r + 1e-7)  # (float32 geometry)
+
+
+def test_enclosing_world_keeps_the_cylinders_sides_and_bounds_their_distances():
+    """A world per problem (3 problems, 5 random cylinders and a capsule each) with its cylinders as capsules:
+    2,000 random points' distances to each capsule never above the cylinder's (float64), equal for points
+    beside the side (outside, within the length of the axis between the caps), at most the radius below elsewhere."""
+    from diffkin.collision import Capsule, Cylinder, Sphere, World
+    from diffkin.collision.interface import enclosing_world
+
+    rng = np.random.default_rng(5)
+    fields = random_cylinders(rng, 15)
+    cylinders = Cylinder(*(jnp.asarray(fields[k]).reshape((3, 5) + fields[k].shape[1:]) for k in fields))
+    capsule = Capsule(jnp.zeros((3, 1, 3)), jnp.ones((3, 1, 3)), jnp.full((3, 1), 0.1))
+    world = enclosing_world(World(cylinders, capsule))
+    assert world.batch == (3,) and world.cylinders.radius.shape == (3, 0) and world.capsules.radius.shape == (3, 6)
+    np.testing.assert_array_equal(world.capsules.a[:, :1], capsule.a)
+    points = Sphere(jnp.asarray(rng.uniform(-2, 2, (2000, 1, 1, 3))), jnp.zeros((2000, 1, 1)))
+    exact = np.asarray(distance(points, cylinders))  # (2000, 3, 5)
+    bound = np.asarray(distance(points, jax.tree.map(lambda x: x[:, 1:], world.capsules)))
+    offset = np.asarray(points.center) - np.asarray(cylinders.pose[..., :3, 3])  # (2000, 3, 5, 3)
+    z = np.einsum("pbki,bki->pbk", offset, np.asarray(cylinders.pose[..., :3, 2]))
+    rho = np.sqrt(np.maximum(np.sum(offset**2, axis=-1) - z**2, 0))
+    side = (np.abs(z) <= np.asarray(cylinders.half_length)) & (rho >= np.asarray(cylinders.radius))
+    assert np.all(bound <= exact + 1e-12) and np.all(bound >= exact - np.asarray(cylinders.radius) - 1e-12)
+    np.testing.assert_allclose(bound[side], exact[side], atol=1e-12)
+    assert side.mean() > 0.02 and np.mean(bound[~side] < exact[~side] - 1e-3) > 0.5
+
+
 def test_float32_gjk_stops_where_it_cannot_get_nearer(monkeypatch):
     """4,000 random box-cylinder pairs: in float32 a pair can stall a few roundings short of GJK's tolerance
     (a cylinder's rim converges linearly); it stops there instead of holding the batch for every one of

@@ -8,6 +8,8 @@ compiled program per shape of call, shared by the tests (module level).
 
 from __future__ import annotations
 
+import itertools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -182,6 +184,40 @@ def test_sampling_at_the_knots_misses_what_the_bound_rejects():
     assert 0 < float(lower) <= truth
     # the lowest pieces cut finer: a tighter bound than the pieces' own, still below the truth
     assert float(coarse) < float(lower) and truth - float(lower) < 0.5 * (truth - float(coarse))
+
+
+#: a slider carrying a 0.2 m cube given as a mesh (its hull, with ``meshes="hulls"``)
+CUBE = """<mujoco><asset><mesh name="cube" vertex="{}"/></asset><worldbody>
+  <body name="link"><joint name="j" type="slide" axis="0 0 1" range="-1 1"/><geom type="mesh" mesh="cube"/></body>
+</worldbody></mujoco>""".format(
+    " ".join(f"{0.1 * v:g}" for corner in itertools.product((-1, 1), repeat=3) for v in corner)
+)
+
+
+def test_the_certificate_measures_the_shapes_the_descent_their_capsules():
+    # the cube slides past a sphere 3 cm beside its face: the capsule that contains the cube (what the seeds
+    # and the descent measure) passes through the sphere, the cube keeps 3 cm; the motion is certified on
+    # the cube itself: clear, its clearance at most what dense sampling of the cube measures
+    robot = dk.load_robot(CUBE)
+    cube = dk.collision.load(CUBE, robot, meshes="hulls", dtype=jnp.float32)
+    capsule = dk.collision.load(CUBE, robot, meshes="capsules", dtype=jnp.float32)
+    world = World(Sphere(jnp.array([[0.18, 0.0, 0.0]]), jnp.array([0.05])))
+    traj = dk.traj.optimize(
+        robot,
+        jnp.array([-0.3]),
+        jnp.array([0.3]),
+        avoid=dk.ik.Avoid(cube, world, MARGIN),
+        limits=dk.traj.Limits(velocity=jnp.array([1.0]), acceleration=jnp.array([2.0])),
+        knots=5,
+        num_seeds=1,
+        max_iters=2,
+    )
+    q = traj.at(jnp.linspace(0.0, 1.0, 1001) * traj.duration)
+    exact = np.asarray(dk.collision.clearance(robot, cube, q, world))
+    fat = np.asarray(dk.collision.clearance(robot, capsule, q, world))
+    assert bool(traj.success) and MARGIN <= float(traj.clearance) <= exact.min() + 1e-6
+    np.testing.assert_allclose(exact.min(), 0.03, atol=1e-5)
+    assert fat.min() < 0  # (the capsule passes through the sphere)
 
 
 def test_reach_of_each_joint_to_each_shape():
