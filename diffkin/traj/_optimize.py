@@ -171,7 +171,7 @@ def optimize(
         _check_concrete(avoid)
         reach = _reach.reach(model, avoid.geom)
         avoid_flat = avoid.cast(dtype).flat(batch)
-        capsules = avoid.replace(geom=enclosing_capsules(avoid.geom)).cast(dtype).geom
+        capsules = jax.tree.map(lambda x: jnp.asarray(x, dtype), enclosing_capsules(avoid.geom))
     static, traced = partition(model)
     out = _solve(
         static,
