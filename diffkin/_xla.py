@@ -7,6 +7,7 @@ The measurements that justify them are in docs/performance.md, "XLA CPU tricks".
   static/traced rule: :mod:`diffkin._static`); only traced numbers become program inputs.
 - :func:`materialize`: values that many later kernels read are computed once, behind an
   optimization barrier, instead of being recomputed inside each consumer.
+- :func:`computed_once`: one array that many later kernels read, computed once (by :func:`materialize`).
 - :func:`opaque_index`: an index that feeds several scatters is computed once.
 - :func:`where_any`: a batch's update that most batches do not need is skipped when none of its
   problems needs it.
@@ -121,6 +122,16 @@ def materialize(values: list) -> jax.Array:
     # XLA folds away a stack of one (and the barrier with it): a single value is stacked twice.
     stacked = jnp.stack(entries * 2 if len(entries) == 1 else entries)
     return jax.lax.optimization_barrier(stacked)[: len(entries)]
+
+
+def computed_once(x: jax.Array, batch: int) -> jax.Array:
+    """``x`` as it is, computed once for its many consumers (one kernel): :func:`materialize` of its rows
+    ``x.reshape((-1,) + batch_shape)`` (``batch``: the number of trailing batch axes). An optimization barrier
+    on ``x`` alone does not do it (XLA's CPU backend drops it before fusion and duplicates the expression
+    into every consumer: a forward pass by depth, :mod:`diffkin.models._levels`, recomputed its depths
+    above in each), nor does one on a stack of its slices along an axis (folded back into ``x``)."""
+    rows = x.reshape((-1,) + x.shape[x.ndim - batch :])
+    return materialize(list(rows)).reshape(x.shape)
 
 
 def entries_last(x: jax.Array) -> jax.Array:

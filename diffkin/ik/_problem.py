@@ -20,9 +20,9 @@ from diffkin._static import host
 from diffkin._xla import materialize
 from diffkin.ik._terms import Constraint, Term
 from diffkin.models.ranges import into_cones
+from diffkin.models.robot import Robot
 
 BASE_ROWS = 12  # state rows of a solved root pose: p (3), then R row by row (9)
-_LINEAR = np.asarray([True] * 3 + [False] * 3)  # the rows of a twist [v; w] that are v
 
 
 class Eval(NamedTuple):
@@ -67,19 +67,29 @@ class Kinematics:
     space twist of the frame's motion: one per joint (zero for a locked joint), then, when the
     root is solved, the six of the root's body twist; ``com()``: a robot's centre of mass and its
     velocity per column. ``dtype``, ``shape``: the solver's dtype and the problems' shape ``(P,)``.
+
+    Where the problem's Jacobian reads joints' screws twice or more (:attr:`Problem.in_arrays`: the frames
+    share joints, or a centre of mass is asked for), the forward pass is the robot's in arrays
+    (:meth:`diffkin.Robot.forward_by_depth`), and :meth:`point_columns` and :meth:`com_columns` give each
+    frame's and the centre's Jacobian as one array read from it.
     """
 
-    def __init__(self, problem: Problem, x: jax.Array, table: tuple = (), com_table: bool = False):
-        """``table``: the frames whose :meth:`point_columns` are read, ``com_table``: whether
-        :meth:`com_columns` is (computed together, on first use)."""
-        root = problem.root(x)
-        self.kin = problem.model.forward(list(problem.joints(x)), root)
+    def __init__(self, problem: Problem, x: jax.Array, jacobian: bool = True):
+        """``jacobian``: whether a Jacobian is read (without, the unrolled pass: a residual alone reads a few
+        frames, whose entries XLA fuses into their consumers)."""
+        self.arrays = jacobian and problem.in_arrays
         self.locked = problem.locked
-        self.root_columns = rg.root_screws(root) if problem.solve_base else []
         self.dtype = x.dtype
         self.shape = x.shape[1:]
-        self.table, self.com_table = table, com_table
-        self._point_columns: dict | None = None
+        self.solve_base = problem.solve_base
+        joints = problem.joints(x)
+        if self.arrays:
+            self.kin = problem.model.forward_by_depth(joints, _root_matrix(problem, x))
+            self.root_columns: list = []
+            return
+        root = problem.root(x)
+        self.kin = problem.model.forward(list(joints), root)
+        self.root_columns = rg.root_screws(root) if problem.solve_base else []
 
     def pose(self, frame: int | None) -> rg.Rigid:
         return self.kin.pose(frame)
@@ -91,126 +101,24 @@ class Kinematics:
 
     def point_columns(self, frame: int | None) -> jax.Array | None:
         """``(6, n) + shape``: per column of the state, the velocity of ``frame``'s origin and its angular
-        velocity ``[v; w]`` (world axes; :meth:`columns` moved to the frame's origin), as one array;
-        ``None`` for a frame not in ``table``, and where the frames share no entry of their columns and no
-        centre of mass is asked for (one frame, two arms apart: its entry-wise columns, :meth:`columns`,
-        are as few kernels, and the program stays what it was).
+        velocity ``[v; w]`` (world axes; :meth:`columns` moved to the frame's origin), as one array; ``None``
+        without the pass in arrays (:attr:`Problem.in_arrays`: the entry-wise :meth:`columns` are then as few
+        kernels, one arm's or two arms' apart).
 
-        The columns of every frame of ``table`` are put together from their distinct entries (the
-        joints' screws, shared along the paths, and the frames' positions), computed once behind one
-        barrier: XLA's CPU backend compiles each kernel apart (~10 ms each), and the entry-wise
-        Jacobian of a whole robot is hundreds of kernels (Talos' four contacts: 288), its array form
-        one per distinct entry (about two thirds of that) and a few.
+        XLA's CPU backend compiles each kernel apart (~10 ms each): a whole robot's Jacobian entry by entry
+        is hundreds of kernels, its columns read from the pass in arrays one per frame.
         """
-        if frame not in self.table:
+        if not self.arrays:
             return None
-        if self._point_columns is None:
-            self._point_columns = self._table_columns()
-        return self._point_columns.get(frame)
+        return self.kin.point_columns(frame, self.kin.pose(frame).p, self.locked, self.solve_base)
 
     def com_columns(self) -> tuple[rg.Vec3, jax.Array] | None:
         """The centre of mass and its velocity per column of the state ``(3, n) + shape`` (as :meth:`com`),
-        from the table of :meth:`point_columns` (the joints' screws and the bodies' first moments computed
-        once, with the frames' entries); ``None`` without ``com_table`` or for a model it does not cover
-        (closed loops, a scanned pass, traced masses or multipliers: :meth:`com` then)."""
-        if not self.com_table:
+        from the pass in arrays (the bodies' first moments and axes); ``None`` without it."""
+        if not self.arrays:
             return None
-        if self._point_columns is None:
-            self._point_columns = self._table_columns()
-        return self._point_columns.get("com")
-
-    def _com_entries(self) -> tuple | None:
-        """``(moments (bodies, 3), screws (joints, 6))``: the entries :meth:`com_columns` reads, or ``None``."""
-        p = self.kin
-        robot = getattr(p, "robot", None)
-        if robot is None or robot.scanned or p.fold or not hasattr(p, "bodies"):
-            return None
-        masses = rg.per_joint(host(robot.masses), snap=False)
-        if not all(isinstance(e, float) for e in [*masses, *p.multipliers]):
-            return None
-        c = host(robot.body_coms)
-        moments = [
-            list(rg.scale(masses[b], rg.vadd(rg.rotate(T.R, rg.vector(c[b])), T.p))) for b, T in enumerate(p.bodies)
-        ]
-        return moments, [[*v, *w] for v, w in p.screws]
-
-    def _com_from(self, done: jax.Array, slots, entries, lead: tuple) -> tuple[rg.Vec3, jax.Array]:
-        """:meth:`com_columns` from the table ``done``: ``slots``/``entries`` those of :meth:`_com_entries` and
-        the root's columns (:func:`_gathered`). The subtree sums as one product with the subtree incidence
-        (rounding: the sums' order is the product's)."""
-        robot, p = self.kin.robot, self.kin
-        moment_slots, screw_slots, root_slots = slots
-        moments, screws, root = entries
-        nb, nj = len(moments), len(screws)
-        below = np.eye(nb)  # below[k, b]: body b is in the subtree of body k (children follow parents)
-        for j in reversed(range(nj)):
-            below[robot.parents[j]] += below[j + 1]
-        mass = below @ np.asarray(host(robot.masses), np.float64)
-        inverse = 1.0 / float(mass[0]) if mass[0] > 0.0 else 0.0  # (a Python float: weakly typed)
-        M = _gathered(done, np.asarray(moment_slots), moments, lead, self.dtype)  # (nb, 3) + shape
-        S = jnp.moveaxis(jnp.tensordot(jnp.asarray(below, self.dtype), M, axes=1), 1, 0)  # (3, nb) + shape
-        c = inverse * S[:, 0]
-        if nj:
-            T = jnp.moveaxis(_gathered(done, np.asarray(screw_slots), screws, lead, self.dtype), 1, 0)  # (6, nj)
-            k = jnp.asarray(np.asarray([float(m) * inverse for m in p.multipliers]).reshape((1, nj) + lead), self.dtype)
-            subtree = jnp.asarray(mass[1:].reshape((1, nj) + lead), self.dtype)
-            moved = k * (subtree * T[:3] + _cross(T[3:], S[:, 1:]))  # (3, nj) + shape
-            moved = jnp.concatenate([moved, jnp.zeros_like(moved[:, :1])], axis=1)  # a zero column at nj
-            driving: list[list[int]] = [[] for _ in range(robot.dof)]
-            for j in range(nj):
-                if not self.locked[robot.sources[j]]:
-                    driving[robot.sources[j]].append(j)
-            parts = [
-                moved[:, np.asarray([d[i] if i < len(d) else nj for d in driving])]
-                for i in range(max(map(len, driving)))
-            ]
-            joints = sum(parts[1:], parts[0]) if parts else jnp.zeros((3, robot.dof) + self.shape, self.dtype)
-        else:
-            joints = jnp.zeros((3, robot.dof) + self.shape, self.dtype)
-        if not root_slots:
-            return (c[0], c[1], c[2]), joints
-        R = jnp.moveaxis(_gathered(done, np.asarray(root_slots), root, lead, self.dtype), 1, 0)  # (6, 6)
-        return (c[0], c[1], c[2]), jnp.concatenate([joints, R[:3] + _cross(R[3:], c[:, None])], axis=1)
-
-    def _table_columns(self) -> dict:
-        """:meth:`point_columns` of every frame of ``table``."""
-        distinct: list = []
-        index: dict[int, int] = {}
-
-        def slot(e) -> int:  # the entry's row in `distinct`, -1 for a folded constant
-            if isinstance(e, float):
-                return -1
-            if id(e) not in index:
-                index[id(e)] = len(distinct)
-                distinct.append(e)
-            return index[id(e)]
-
-        layouts = {}
-        for frame in dict.fromkeys(self.table):
-            columns = self.columns(frame)
-            screws = [[c[a][i] for c in columns] for a in (0, 1) for i in range(3)]  # (6, n): [v; w]
-            p = list(self.pose(frame).p)
-            layouts[frame] = (screws, p, [[slot(e) for e in row] for row in screws], [slot(e) for e in p])
-        per_frame = [{k for row in rows for k in row if k >= 0} for _, _, rows, _ in layouts.values()]
-        shared = len(set().union(*per_frame)) < sum(map(len, per_frame))  # a screw on two frames' paths
-        com = self._com_entries() if self.com_table else None
-        if com is None and not shared:  # frames that share no joint (one arm, two apart): no entry saved
-            return {}
-        if com is not None:
-            root = [[*v, *w] for v, w in self.root_columns]
-            com = (com[0], com[1], root), tuple([[slot(e) for e in row] for row in part] for part in (*com, root))
-        done = materialize(distinct) if distinct else jnp.zeros((0,) + self.shape, self.dtype)
-        lead = (1,) * len(self.shape)
-        out: dict = {} if com is None else {"com": self._com_from(done, com[1], com[0], lead)}
-        for frame, (screws, p, rows, p_rows) in layouts.items():
-            S, p_f = (_gathered(done, np.asarray(s), e, lead, self.dtype) for s, e in ((rows, screws), (p_rows, p)))
-            # rg.world_from_space: v + w x p on rows 0-2 (the same operations in the same order as on
-            # entries), w on rows 3-5; gathers and a select, not a stack (a kernel per operand)
-            a, b = np.asarray([4, 5, 3] * 2), np.asarray([5, 3, 4] * 2)
-            p_f = p_f[:, None]  # (3, 1) + shape
-            cross = S[a] * p_f[b - 3] + -(S[b] * p_f[a - 3])
-            out[frame] = jnp.where(_LINEAR.reshape((6, 1) + lead), S + cross, S)
-        return out
+        masses, coms = _mass_model(self.kin.robot)
+        return self.kin.com_columns(masses, coms, self.locked, self.solve_base)
 
     def com(self, velocities: bool = True) -> tuple[rg.Vec3, list[rg.Vec3]]:
         """The robot's centre of mass and its velocity per column of the state (empty without ``velocities``)."""
@@ -222,25 +130,18 @@ class Kinematics:
         return c, joints + [v for v, _ in rg.world_from_space(self.root_columns, c)]
 
 
-def _cross(a: jax.Array, b: jax.Array) -> jax.Array:
-    """``a x b`` of vectors on the leading axis (3), as :func:`diffkin._rigid.cross` computes each entry."""
-    i, j = np.asarray([1, 2, 0]), np.asarray([2, 0, 1])
-    return a[i] * b[j] + -(a[j] * b[i])
+def _mass_model(robot) -> tuple[np.ndarray, np.ndarray]:
+    """``(masses (nb,), body_coms (nb, 3))`` of ``robot`` on the host (float64)."""
+    return np.asarray(host(robot.masses), np.float64), np.asarray(host(robot.body_coms), np.float64)
 
 
-def _gathered(done: jax.Array, rows: np.ndarray, entries: list, lead: tuple, dtype) -> jax.Array:
-    """``rows.shape + batch``: the rows ``rows`` of ``done`` (``-1``: the folded constant in ``entries``,
-    nested as ``rows``)."""
-    constant = rows < 0
-    gathered = done[np.where(constant, 0, rows)] if len(done) else None
-    if gathered is not None and not constant.any():
-        return gathered
-    flat = [e for row in entries for e in row] if rows.ndim == 2 else entries
-    values = np.asarray([e if isinstance(e, float) else 0.0 for e in flat], np.float64).reshape(rows.shape + lead)
-    constants = jnp.asarray(values, dtype)
-    if gathered is None:  # every entry a constant: broadcast to the problems' shape, as entries would be
-        return jnp.broadcast_to(constants, rows.shape + done.shape[1:])
-    return jnp.where(constant.reshape(rows.shape + lead), constants, gathered)
+def _root_matrix(problem: Problem, x: jax.Array) -> jax.Array:
+    """``(3, 4) + shape``: ``T_world_root`` ``[R p]`` (:meth:`diffkin.Robot.forward_by_depth`)."""
+    if problem.solve_base:  # the state's rows [p; R row by row], gathered
+        return x[problem.dof + np.asarray([[3, 4, 5, 0], [6, 7, 8, 1], [9, 10, 11, 2]])]
+    B = problem.base
+    entries = [e for i in range(3) for e in (*B.R[i], B.p[i])]
+    return rg.stack(entries, x.shape[1:], x.dtype, axis=0).reshape((3, 4) + x.shape[1:])
 
 
 class Spec(NamedTuple):
@@ -339,6 +240,33 @@ class Problem(NamedTuple):
     def dof(self) -> int:
         return self.model.dof
 
+    @property
+    def pose_frames(self) -> tuple:
+        """The frames whose Jacobian a term reads as one array (:meth:`Kinematics.point_columns`), once each."""
+        return tuple(dict.fromkeys(f for t in self.terms if getattr(t, "point_columns", False) for f in t.frames))
+
+    @property
+    def in_arrays(self) -> bool:
+        """Whether the state's forward pass is the robot's in arrays (:meth:`diffkin.Robot.forward_by_depth`): a tree
+        that pass takes, whose Jacobian reads joints' screws more than once: a centre of mass, or frames
+        (:attr:`pose_frames`) whose paths share a joint that moves or a solved root. Otherwise (a chain, one
+        arm, two arms apart) the unrolled pass's entry-wise Jacobian is as few kernels and faster. Only for
+        terms that read the pass through :meth:`Kinematics.pose`, :meth:`Kinematics.point_columns` and
+        :meth:`Kinematics.com_columns` (pose and centre-of-mass targets)."""
+        model = self.model
+        kinds = all(getattr(t, "point_columns", False) or getattr(t, "com_columns", False) for t in self.terms)
+        if not kinds or not isinstance(model, Robot) or not model.by_depth:
+            return False
+        if any(getattr(t, "com_columns", False) for t in self.terms):
+            return True
+        frames = self.pose_frames
+        if self.solve_base:
+            return len(frames) > 1
+        paths = [
+            {j for j in model.ancestors(model.frame_bodies[f]) if not self.locked[model.sources[j]]} for f in frames
+        ]
+        return len(set().union(*paths)) < sum(map(len, paths))
+
     def joints(self, x: jax.Array) -> jax.Array:
         """The joint rows of the state."""
         return x[: self.dof] if self.solve_base else x
@@ -373,9 +301,7 @@ class Problem(NamedTuple):
 
     def residual(self, x: jax.Array, jacobian: bool = True) -> Entries:
         """The entries of every term's residual, Jacobian and errors at ``x``, from one forward pass."""
-        table = tuple(f for t in self.terms if getattr(t, "point_columns", False) for f in t.frames) if jacobian else ()
-        com_table = jacobian and any(getattr(t, "com_columns", False) for t in self.terms)
-        kin = Kinematics(self, x, table, com_table)
+        kin = Kinematics(self, x, jacobian)
         r: list = []
         J: list = []
         pos_err: list = []
@@ -450,7 +376,7 @@ class Problem(NamedTuple):
 
     def screen_cost(self, x: jax.Array) -> jax.Array:
         """``(P,)`` the terms' cheap costs for choosing seeds (one forward pass without Jacobian)."""
-        kin = Kinematics(self, x)
+        kin = Kinematics(self, x, jacobian=False)
         return jnp.asarray(rg.add(*(t.screen(kin, b) for t, b in zip(self.terms, self.bound, strict=True))))
 
 

@@ -29,7 +29,7 @@ from diffkin import _validate as check
 from diffkin import _xla
 from diffkin._pytree import pytree_dataclass, static
 from diffkin._static import host, is_concrete
-from diffkin.models import _ball, _loops, _scanned
+from diffkin.models import _ball, _levels, _loops, _scanned
 from diffkin.models._passes import RobotPass
 from diffkin.models.poe import PoEChain, _screw_types
 
@@ -233,6 +233,27 @@ class Robot:
         kin = self.tree_pass(list(q) + dependent, base)
         kin.dependent, kin.fold, kin.loop_gap = dependent, fold, _loops.gap(self, kin)  # on these very poses
         return kin
+
+    @property
+    def by_depth(self) -> bool:
+        """Whether :meth:`forward_by_depth` takes the robot: a tree of one-axis joints (no ball joint, no closed
+        loop, no path of more than :data:`~diffkin.models._scanned.LONG` joints) with concrete numbers, each
+        revolute about an axis through its frame's origin (as URDF and MJCF give them) or prismatic."""
+        return _levels.takes(self)
+
+    def forward_by_depth(self, q: jax.Array, base: jax.Array) -> _levels.LevelPass:
+        """The forward pass as arrays, the bodies of one depth of the tree at a time
+        (:mod:`diffkin.models._levels`): for a consumer that reads every joint's screw and many bodies as
+        arrays (the IK's Jacobian of a whole robot), a few kernels where the unrolled pass's entries
+        gathered into arrays are one each. Only where :attr:`by_depth`.
+
+        Args:
+            q: ``(dof,) + batch`` joint values.
+            base: ``(3, 4) + batch`` (or ``(3, 4)``): ``T_world_root`` ``[R p]``.
+        """
+        if not self.by_depth:
+            raise ValueError(f"robot {self.name!r}: the pass by depth takes trees of one-axis joints only")
+        return _levels.forward(self, q, base)
 
     def tree_pass(self, q: Sequence[rg.Entry], base: rg.Rigid = rg.IDENTITY) -> RobotPass:
         """The pass of the tree at the values ``q`` of ``q``'s entries and then of the dependent joints

@@ -335,3 +335,62 @@ def test_long_chain_against_numpy(modified):
         for k in range(20)
     ]
     np.testing.assert_allclose(g, fd, atol=1e-7)
+
+
+@pytest.mark.parametrize("kind", ["tree", "floating base", "panda", "g1"])
+def test_the_pass_by_depth_equals_the_unrolled_pass(kind):
+    """The forward pass of a tree by depth (``Robot.forward_by_depth``: the IK's Jacobians of a whole robot read
+    it) gives the unrolled pass's frame poses, their columns moved to the frames (a locked joint's zero, a solved
+    root's six last) and the centre of mass's columns (float64): a prismatic joint and tilted joint frames (the
+    tree), a moved root, a mimic joint (the Panda's fingers), a humanoid (joints about every coordinate axis)."""
+    import os
+
+    from _models import ERD, PANDA
+
+    from diffkin import _rigid as rg
+
+    if kind == "g1":
+        if ERD is None:
+            pytest.skip("example-robot-data is not installed")
+        robot = dk.load_robot(os.path.join(ERD, "g1_description/urdf/g1_29dof_rev_1_0.urdf"))
+    else:
+        robot = dk.load_robot(PANDA) if kind == "panda" else model_of_kind(kind)
+    assert robot.by_depth
+    rng = np.random.default_rng(1)
+    P = 7
+    q = jnp.asarray(rng.uniform(-1.0, 1.0, (robot.dof, P)))
+    R = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    R = R * np.sign(np.linalg.det(R))
+    p = rng.normal(size=3)
+    base = jnp.asarray(np.concatenate([R, p[:, None]], axis=1))[..., None] * jnp.ones(P)  # (3, 4, P)
+    root = rg.Rigid(tuple(tuple(base[i, j] for j in range(3)) for i in range(3)), tuple(base[i, 3] for i in range(3)))
+    locked = tuple(i == 1 for i in range(robot.dof))
+    unrolled, levels = robot.forward(list(q), root), robot.forward_by_depth(q, base)
+    zero = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+    def dense(columns):  # (k, n, P) from entries per column
+        return np.stack([np.stack([np.broadcast_to(e, (P,)) for e in c], axis=0) for c in columns], axis=1)
+
+    for f in range(len(robot.frame_names)):
+        T, T_ref = levels.pose(f), unrolled.pose(f)
+        for a, b in zip(rg.leaves(T), rg.leaves(T_ref), strict=True):
+            np.testing.assert_allclose(np.broadcast_to(a, (P,)), np.broadcast_to(b, (P,)), rtol=0, atol=1e-12)
+        columns = [zero if lock else c for lock, c in zip(locked, unrolled.columns(f), strict=True)]
+        moved = rg.world_from_space(columns + rg.root_screws(root), T_ref.p)
+        expected = dense([(*v, *w) for v, w in moved])
+        np.testing.assert_allclose(levels.point_columns(f, T.p, locked, True), expected, rtol=0, atol=1e-12)
+    masses, coms = np.asarray(robot.masses, np.float64), np.asarray(robot.body_coms, np.float64)
+    c, J = levels.com_columns(masses, coms, locked, True)
+    c_ref, velocities = unrolled.com()
+    joints = [(0.0, 0.0, 0.0) if lock else v for lock, v in zip(locked, velocities, strict=True)]
+    expected = dense(joints + [v for v, _ in rg.world_from_space(rg.root_screws(root), c_ref)])
+    np.testing.assert_allclose(np.stack(c), np.stack([np.broadcast_to(e, (P,)) for e in c_ref]), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(J, expected, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("kind", ["ball joints", "closed loop", "long chain"])
+def test_the_pass_by_depth_takes_trees_of_one_axis_joints_only(kind):
+    robot = model_of_kind(kind)
+    assert not robot.by_depth
+    with pytest.raises(ValueError, match="one-axis joints"):
+        robot.forward_by_depth(jnp.zeros((robot.dof, 2)), jnp.zeros((3, 4)))

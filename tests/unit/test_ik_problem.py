@@ -81,16 +81,14 @@ def test_settle_choosing_takes_array_rows_where_chosen(taken):
     np.testing.assert_array_equal(ev.J, np.where(taken, _mixed_dense(2.0), _mixed_dense(1.0)))
 
 
-def test_a_pose_term_reads_its_jacobian_as_one_array_with_the_entries_numbers():
-    """A pose target's Jacobian from the frames' columns put together once
-    (:meth:`Kinematics.point_columns`) equals the entry-wise one, to the bit op by op (the same
-    operations; compiled, XLA may fuse them differently), weights, a position, a locked joint and a solved
-    root included (two frames of one arm: they share its screws, so the table is used)."""
+def _floating_panda_problem(com: bool):
+    """The Panda on a solved root, a pose target of its third link and a position of its hand (two frames of
+    one arm: they share its screws), weights, a locked joint; with ``com``, a horizontal centre of mass too."""
     from _models import PANDA
 
     import diffkin as dk
     from diffkin.ik._keywords import terms_of
-    from diffkin.ik._problem import Kinematics, Spec
+    from diffkin.ik._problem import Spec
 
     robot = dk.load_robot(PANDA, floating=True)
     names = ("panda_link3", "panda_hand")
@@ -98,15 +96,46 @@ def test_a_pose_term_reads_its_jacobian_as_one_array_with_the_entries_numbers():
     q = rng.uniform(-1.0, 1.0, (P, robot.dof))
     T = np.asarray(dk.fk(robot, q + 0.1, names))
     weights = {"panda_link3": (1.0, 0.5, 0.0, 2.0, 1.0, 0.0)}
-    terms = terms_of(robot, {names[0]: T[:, 0], names[1]: T[:, 1, :3, 3]}, {}, weights)  # a pose, a position
+    given = {"com": np.asarray(dk.com(robot, q))[:, :2]} if com else {}
+    terms = terms_of(robot, {names[0]: T[:, 0], names[1]: T[:, 1, :3, 3]}, given, weights)  # a pose, a position
     spec = Spec(terms.targets, (), tuple(i == 2 for i in range(robot.dof)), (), True, True)
     problem = spec.problem(robot, spec.bind(tuple(terms.data), ()))
     base = np.concatenate([rng.normal(size=(3, P)), np.tile(np.eye(3).reshape(9, 1), (1, P))])
-    x = jnp.asarray(np.concatenate([q.T, base]))
+    return problem, jnp.asarray(np.concatenate([q.T, base]))
+
+
+def test_the_jacobian_in_arrays_equals_the_entry_wise_one():
+    """Frames that share joints read their Jacobian as one array each, from the forward pass in arrays
+    (:meth:`Kinematics.point_columns`, :mod:`diffkin.models._levels`); it equals each term's entry-wise
+    Jacobian from the unrolled pass (float64), weights, a position, a locked joint and a solved root included."""
+    from diffkin.ik._problem import Kinematics
+
+    problem, x = _floating_panda_problem(com=False)
+    assert problem.in_arrays
     assert all(not isinstance(rows, list) for rows in problem.residual(x).J)  # both terms' rows as arrays
-    arrays = problem.evaluate(x).J
-    entries = Kinematics(problem, x)  # no table: the entry-wise columns
-    rows = [t.rows(entries, b, True) for t, b in zip(problem.terms, problem.bound, strict=True)]
-    assert all(isinstance(r.J, list) for r in rows)
-    dense = np.stack([np.stack([jnp.broadcast_to(e, (P,)) for e in row]) for r in rows for row in r.J])
-    np.testing.assert_array_equal(np.asarray(arrays), dense)
+    arrays, at = problem.evaluate(x), 0
+    for term, bound in zip(problem.terms, problem.bound, strict=True):
+        alone = problem._replace(terms=(term,), bound=(bound,))  # one frame: the unrolled pass, entry by entry
+        assert not alone.in_arrays
+        rows = term.rows(Kinematics(alone, x), bound, True)
+        dense = np.stack([np.stack([jnp.broadcast_to(e, (P,)) for e in row]) for row in rows.J])
+        np.testing.assert_allclose(arrays.J[at : at + len(dense)], dense, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(arrays.r[at : at + len(dense)], np.stack(rows.r), rtol=0, atol=1e-12)
+        at += len(dense)
+    assert at == len(arrays.J)
+
+
+def test_the_centre_of_mass_jacobian_in_arrays_equals_the_entry_wise_one():
+    """:meth:`Kinematics.com_columns` (the bodies' first moments and the joints' screws as arrays) equals the
+    unrolled pass's :meth:`Kinematics.com` (float64), a locked joint, a mimic joint and a solved root included."""
+    from diffkin.ik._problem import Kinematics
+
+    problem, x = _floating_panda_problem(com=True)
+    assert problem.in_arrays
+    c, J = Kinematics(problem, x).com_columns()
+    alone = problem._replace(terms=problem.terms[:1], bound=problem.bound[:1])
+    assert not alone.in_arrays
+    c_ref, columns = Kinematics(alone, x).com()
+    np.testing.assert_allclose(np.stack(c), np.stack(c_ref), rtol=0, atol=1e-12)
+    dense = np.stack([np.stack([jnp.broadcast_to(e, (P,)) for e in v]) for v in columns], axis=1)  # (3, n, P)
+    np.testing.assert_allclose(J, dense, rtol=0, atol=1e-12)
