@@ -62,6 +62,7 @@ def enclosing_world(world: World) -> World:
 
 
 def _derive(geom: Geometry) -> Geometry:
+    """:func:`enclosing_capsules` without the cache."""
     counts = geom.counts
     starts = np.cumsum((0, *counts))
     kind_of = np.repeat(np.arange(len(KINDS)), counts)  # per shape, its index in KINDS

@@ -10,8 +10,10 @@ residual stacks
   world, zero beyond ``margin + band``, with the motion Jacobians of the distances), pushed to the
   control points through the curve's basis weights (``dq(u)/dX_k = basis_k(u)``).
 
-The margin the rows aim for is raised by :data:`EXTRA` so that the certificate
-(:mod:`diffkin.traj._certify`), which subtracts the motion between its samples, holds. Steps solve
+The rows aim for the margin itself: the descent measures capsules that contain the shapes
+(:func:`diffkin.collision.interface.enclosing_capsules`), whose slack covers most of what the certificate
+(:mod:`diffkin.traj._certify`, on the shapes) subtracts for the motion between its samples (aiming 2 cm
+beyond it, as the descent on the shapes did, made motions about half as long again). Steps solve
 the ``n dof`` normal equations (Cholesky) with error-proportional damping (:mod:`diffkin.ik._lm`'s rule); a
 step is taken only if it lowers the cost; joints stay within their limits (clipped control points:
 the curve lies in their convex hull) and locked joints at their values.
@@ -28,7 +30,6 @@ from diffkin.traj import _rows, _spline
 W_LENGTH = 0.05  # per rad of a control-polygon step
 W_BEND = 0.2  # per rad of a second difference
 SAMPLES = 8  # clearance samples per segment (fewer let a curve pass through a thin board between two)
-EXTRA = 0.02  # metres the clearance rows aim beyond the margin
 W_CLEAR = 30.0  # per metre of a clearance row (rows in metres against smoothness in radians)
 #: a curve whose last step lowered its cost by less than this share of it has converged
 CONVERGED = 0.02
@@ -60,8 +61,8 @@ class Curves:
         return X
 
     def cap(self) -> jax.Array:
-        """The clearance the clearance rows aim for: the margin plus :data:`EXTRA`."""
-        return self.avoid.margin + EXTRA
+        """The clearance the clearance rows aim for: the margin."""
+        return self.avoid.margin
 
     def control(self, X: jax.Array) -> jax.Array:
         return _spline.control_points(self.q_start, X, self.q_goal)
