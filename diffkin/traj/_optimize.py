@@ -28,6 +28,9 @@ CERTIFIED = 2
 #: rounds of seeds for a problem without a successful curve, the first included (on the CPU a problem's
 #: later rounds cost only where it failed: problems are planned one at a time)
 ROUNDS = 4
+#: metres beyond the margin the clearance rows of the rounds after the first aim for: the first aims for the
+#: margin (the shortest motions); a problem it left just under the margin in a few places gets a wider berth
+RETRY_BEYOND = 0.02
 
 
 def optimize(
@@ -58,7 +61,8 @@ def optimize(
     measure capsules that contain the robot's polytopes and cylinders and the obstacles' cylinders:
     closed-form distances, lower bounds of the shapes', :mod:`diffkin.collision._capsules`); its two
     curves of lowest cost are then timed and certified on the shapes themselves (a problem with no
-    successful curve gets new seeds through via points, up to :data:`ROUNDS` rounds in all):
+    successful curve gets new seeds through via points, up to :data:`ROUNDS` rounds in all, whose clearance
+    rows aim :data:`RETRY_BEYOND` beyond the margin):
 
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
@@ -408,10 +412,14 @@ def _round(
     velocity, acceleration, jerk = bounds
     B, dof = q_start.shape
     # the seeds and the descent measure capsules that contain the shapes and the obstacles' cylinders (closed
-    # forms: no GJK), the certificate the shapes themselves
+    # forms: no GJK), the certificate the shapes themselves; later rounds aim RETRY_BEYOND past the margin
     rough = None
     if avoid is not None:
-        rough = avoid.replace(geom=capsules, world=None if avoid.world is None else enclosing_world(avoid.world))
+        rough = avoid.replace(
+            geom=capsules,
+            world=None if avoid.world is None else enclosing_world(avoid.world),
+            margin=avoid.margin + jnp.where(first, 0.0, RETRY_BEYOND),
+        )
     ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, rough, base, 1)
     X = _seeds.seeds(ends, seeds, free, keys, first)  # (B, k, free, dof)
     rep = lambda x: None if x is None else jnp.repeat(x, seeds, axis=0)  # noqa: E731
