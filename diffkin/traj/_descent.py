@@ -10,10 +10,10 @@ residual stacks
   world, zero beyond ``margin + band``, with the motion Jacobians of the distances), pushed to the
   control points through the curve's basis weights (``dq(u)/dX_k = basis_k(u)``).
 
-The rows aim for the margin of ``avoid`` (a first round's: the problem's margin; a later round's beyond
-it, :data:`diffkin.traj._optimize.RETRY_BEYOND`): the descent measures capsules that contain the shapes
-(:func:`diffkin.collision.interface.enclosing_capsules`), whose slack covers most of what the certificate
-(:mod:`diffkin.traj._certify`, on the shapes) subtracts for the motion between its samples. Steps solve
+The rows aim for the margin of ``avoid``: a first round's the problem's margin, on capsules that contain
+the shapes (:func:`diffkin.collision.interface.enclosing_capsules`), whose slack covers most of what the
+certificate (:mod:`diffkin.traj._certify`, on the shapes) subtracts for the motion between its samples; a
+later round's :data:`diffkin.traj._optimize.RETRY_BEYOND` beyond it, on the shapes. Steps solve
 the ``n dof`` normal equations (Cholesky) with error-proportional damping (:mod:`diffkin.ik._lm`'s rule); a
 step is taken only if it lowers the cost; joints stay within their limits (clipped control points:
 the curve lies in their convex hull) and locked joints at their values.

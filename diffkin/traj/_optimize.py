@@ -29,7 +29,8 @@ CERTIFIED = 2
 #: later rounds cost only where it failed: problems are planned one at a time)
 ROUNDS = 4
 #: metres beyond the margin the clearance rows of the rounds after the first aim for: the first aims for the
-#: margin (the shortest motions); a problem it left just under the margin in a few places gets a wider berth
+#: margin on capsules that contain the shapes (the shortest motions); a problem it left unsolved, the
+#: shapes themselves with a wider berth
 RETRY_BEYOND = 0.02
 
 
@@ -57,12 +58,12 @@ def optimize(
     clearest of 32 random ones, :mod:`diffkin.traj._seeds`) through at most ``max_iters``
     Levenberg-Marquardt iterations on its free control points (smoothness rows and the clearance rows of
     collision-aware IK at 8 samples per segment, pushed through the spline's basis; a curve stops once it
-    has converged, and a problem once one of its curves is clear of every row; the seeds and the descent
-    measure capsules that contain the robot's polytopes and cylinders and the obstacles' cylinders:
+    has converged, and a problem once one of its curves is clear of every row; the first round's seeds and
+    descent measure capsules that contain the robot's polytopes and cylinders and the obstacles' cylinders:
     closed-form distances, lower bounds of the shapes', :mod:`diffkin.collision._capsules`); its two
     curves of lowest cost are then timed and certified on the shapes themselves (a problem with no
-    successful curve gets new seeds through via points, up to :data:`ROUNDS` rounds in all, whose clearance
-    rows aim :data:`RETRY_BEYOND` beyond the margin):
+    successful curve gets new seeds through via points, up to :data:`ROUNDS` rounds in all, which measure
+    the shapes themselves and aim :data:`RETRY_BEYOND` beyond the margin):
 
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
@@ -411,21 +412,27 @@ def _round(
     lower, upper = jnp.asarray(model.lower, q_start.dtype), jnp.asarray(model.upper, q_start.dtype)
     velocity, acceleration, jerk = bounds
     B, dof = q_start.shape
-    # the seeds and the descent measure capsules that contain the shapes and the obstacles' cylinders (closed
-    # forms: no GJK), the certificate the shapes themselves; later rounds aim RETRY_BEYOND past the margin
-    rough = None
-    if avoid is not None:
-        rough = avoid.replace(
-            geom=capsules,
-            world=None if avoid.world is None else enclosing_world(avoid.world),
-            margin=avoid.margin + jnp.where(first, 0.0, RETRY_BEYOND),
-        )
-    ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, rough, base, 1)
-    X = _seeds.seeds(ends, seeds, free, keys, first)  # (B, k, free, dof)
     rep = lambda x: None if x is None else jnp.repeat(x, seeds, axis=0)  # noqa: E731
-    curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), rough, base, seeds)
-    X, cost = curves.descend(X.reshape(B * seeds, free, dof), iters)
-    P = curves.control(X).reshape(B, seeds, free + 6, dof)
+
+    def descended(clear_of) -> tuple[jax.Array, jax.Array]:
+        """The seeds' curves ``X`` ``(B seeds, free, dof)`` after the descent, kept clear of ``clear_of`` (an
+        ``Avoid``), and their costs."""
+        ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, clear_of, base, 1)
+        X = _seeds.seeds(ends, seeds, free, keys, first)  # (B, k, free, dof)
+        curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), clear_of, base, seeds)
+        return curves.descend(X.reshape(B * seeds, free, dof), iters)
+
+    if avoid is None:
+        X, cost = descended(None)
+    else:
+        # the first round measures capsules that contain the shapes and the obstacles' cylinders (closed forms,
+        # no GJK) and aims for the margin; a later round (a problem the first left unsolved: a passage the
+        # capsules close, or a motion just under the margin) the shapes themselves, RETRY_BEYOND past it
+        capsuled = avoid.replace(geom=capsules, world=None if avoid.world is None else enclosing_world(avoid.world))
+        wider = avoid.replace(margin=avoid.margin + RETRY_BEYOND)
+        X, cost = jax.lax.cond(first, lambda: descended(capsuled), lambda: descended(wider))
+    P = _spline.control_points(jnp.repeat(q_start, seeds, axis=0), X, jnp.repeat(q_goal, seeds, axis=0))
+    P = P.reshape(B, seeds, free + 6, dof)
     # only the lowest-cost curves of each problem are timed and certified (the certificate's distances
     # cost about as much as a few descent iterations per curve)
     k = min(seeds, CERTIFIED)
