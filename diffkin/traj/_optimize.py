@@ -340,7 +340,8 @@ def _plan(
     (a problem's result does not depend on the others planned with it).
 
     Up to :data:`ROUNDS` rounds (:func:`_round`), while a problem has no successful curve: round ``r > 0``
-    draws its seeds from ``fold_in(key, r)`` and no straight line (round 0 descended it). A problem keeps its
+    draws its seeds from ``fold_in(key, r)``, the straight line among them in round 1 only (round 0 descended it
+    on capsules, round 1 on the shapes: :func:`_round`). A problem keeps its
     first success, else its largest certified clearance (its result does not depend on whether others
     planned with it needed more rounds)."""
 
@@ -357,7 +358,7 @@ def _plan(
             bounds,
             reach,
             round_keys,
-            r == 0,
+            r,
             locked,
             free,
             seeds,
@@ -400,15 +401,15 @@ def _round(
     bounds,
     reach,
     keys,
-    first,
+    r,
     locked,
     free: int,
     seeds: int,
     iters: int,
 ):
-    """One round of :func:`_plan`: ``(P, h, clearance, clear, limits_ok, duration, success)``, each problem's
-    best curve of ``seeds`` (the straight line among them where ``first``, a traced bool), descended, its two of
-    lowest cost timed and certified."""
+    """Round ``r`` (traced) of :func:`_plan`: ``(P, h, clearance, clear, limits_ok, duration, success)``, each
+    problem's best curve of ``seeds`` (the straight line among them in rounds 0 and 1: the first on capsules, the
+    first on the shapes), descended, its two of lowest cost timed and certified."""
     lower, upper = jnp.asarray(model.lower, q_start.dtype), jnp.asarray(model.upper, q_start.dtype)
     velocity, acceleration, jerk = bounds
     B, dof = q_start.shape
@@ -418,7 +419,7 @@ def _round(
         """The seeds' curves ``X`` ``(B seeds, free, dof)`` after the descent, kept clear of ``clear_of`` (an
         ``Avoid``), and their costs."""
         ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, clear_of, base, 1)
-        X = _seeds.seeds(ends, seeds, free, keys, first)  # (B, k, free, dof)
+        X = _seeds.seeds(ends, seeds, free, keys, r <= 1)  # (B, k, free, dof)
         curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), clear_of, base, seeds)
         return curves.descend(X.reshape(B * seeds, free, dof), iters)
 
@@ -430,7 +431,7 @@ def _round(
         # capsules close, or a motion just under the margin) the shapes themselves, RETRY_BEYOND past it
         capsuled = avoid.replace(geom=capsules, world=None if avoid.world is None else enclosing_world(avoid.world))
         wider = avoid.replace(margin=avoid.margin + RETRY_BEYOND)
-        X, cost = jax.lax.cond(first, lambda: descended(capsuled), lambda: descended(wider))
+        X, cost = jax.lax.cond(r == 0, lambda: descended(capsuled), lambda: descended(wider))
     P = _spline.control_points(jnp.repeat(q_start, seeds, axis=0), X, jnp.repeat(q_goal, seeds, axis=0))
     P = P.reshape(B, seeds, free + 6, dof)
     # only the lowest-cost curves of each problem are timed and certified (the certificate's distances
