@@ -6,7 +6,6 @@ robot (``diffkin.ik.interface.check_avoid``, which every function taking ``avoid
 draws a convex shape by its hull.
 """
 
-from diffkin.collision._capsules import enclosing_capsules, enclosing_world
 from diffkin.collision._fit import hull
 from diffkin.collision._geometry import moved
 from diffkin.collision._near import NEAR_SHARE, near_motions
@@ -24,8 +23,6 @@ __all__ = [
     "NEAR_SHARE",
     "batch_last",
     "check_geometry",
-    "enclosing_capsules",
-    "enclosing_world",
     "expanded",
     "hull",
     "moved",

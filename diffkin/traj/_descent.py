@@ -10,11 +10,9 @@ residual stacks
   world, zero beyond ``margin + band``, with the motion Jacobians of the distances), pushed to the
   control points through the curve's basis weights (``dq(u)/dX_k = basis_k(u)``).
 
-The rows aim for the margin of ``avoid``: a first round's the problem's margin, on capsules that contain
-the shapes (:func:`diffkin.collision.interface.enclosing_capsules`), whose slack covers most of what the
-certificate (:mod:`diffkin.traj._certify`, on the shapes) subtracts for the motion between its samples; a
-later round's :data:`diffkin.traj._optimize.RETRY_BEYOND` beyond it, on the shapes. Steps solve
-the ``n dof`` normal equations (Cholesky) with error-proportional damping (:mod:`diffkin.ik._lm`'s rule); a
+The margin the rows aim for is raised by :data:`EXTRA` so that the certificate
+(:mod:`diffkin.traj._certify`), which subtracts the motion between its samples, holds. Steps solve
+the ``n dof`` normal equations with error-proportional damping (:mod:`diffkin.ik._lm`'s rule); a
 step is taken only if it lowers the cost; joints stay within their limits (clipped control points:
 the curve lies in their convex hull) and locked joints at their values.
 """
@@ -30,6 +28,7 @@ from diffkin.traj import _rows, _spline
 W_LENGTH = 0.05  # per rad of a control-polygon step
 W_BEND = 0.2  # per rad of a second difference
 SAMPLES = 8  # clearance samples per segment (fewer let a curve pass through a thin board between two)
+EXTRA = 0.02  # metres the clearance rows aim beyond the margin
 W_CLEAR = 30.0  # per metre of a clearance row (rows in metres against smoothness in radians)
 #: a curve whose last step lowered its cost by less than this share of it has converged
 CONVERGED = 0.02
@@ -61,8 +60,8 @@ class Curves:
         return X
 
     def cap(self) -> jax.Array:
-        """The clearance the clearance rows aim for: the margin."""
-        return self.avoid.margin
+        """The clearance the clearance rows aim for: the margin plus :data:`EXTRA`."""
+        return self.avoid.margin + EXTRA
 
     def control(self, X: jax.Array) -> jax.Array:
         return _spline.control_points(self.q_start, X, self.q_goal)
@@ -133,9 +132,7 @@ class Curves:
             it, X, cost, g, H, blocked, mu, slow = state
             live = going(blocked, mu, slow) | (it == 0)
             lam = jnp.where(jnp.isfinite(cost), mu * cost, 0.0) + 1e-10
-            # (positive definite: no pivots, which an LU solve permutes in a loop of n steps)
-            factor = jax.scipy.linalg.cho_factor(H + lam[:, None, None] * eye, lower=True)
-            dx = jax.scipy.linalg.cho_solve(factor, -g[..., None])[..., 0]
+            dx = jnp.linalg.solve(H + lam[:, None, None] * eye, -g[..., None])[..., 0]
             X_try = self.project(X + dx.reshape(C, n, dof))
             cost_try, g_try, H_try, blocked_try = self.normal(X_try, W, live)
             take = live & jnp.isfinite(cost_try) & (cost_try < cost)

@@ -12,7 +12,6 @@ import numpy as np
 from diffkin._checks import positive_int, real_array
 from diffkin._static import combine, is_concrete, partition
 from diffkin._xla import in_steps, problems_at_once, solver_jit
-from diffkin.collision.interface import enclosing_capsules, enclosing_world
 from diffkin.ik import Avoid
 from diffkin.ik.interface import cast, check_avoid, check_batched, default_key, detach, finite
 from diffkin.models.robot import Robot
@@ -28,10 +27,6 @@ CERTIFIED = 2
 #: rounds of seeds for a problem without a successful curve, the first included (on the CPU a problem's
 #: later rounds cost only where it failed: problems are planned one at a time)
 ROUNDS = 4
-#: metres beyond the margin the clearance rows of the rounds after the first aim for: the first aims for the
-#: margin on capsules that contain the shapes (the shortest motions); a problem it left unsolved, the
-#: shapes themselves with a wider berth
-RETRY_BEYOND = 0.02
 
 
 def optimize(
@@ -58,12 +53,9 @@ def optimize(
     clearest of 32 random ones, :mod:`diffkin.traj._seeds`) through at most ``max_iters``
     Levenberg-Marquardt iterations on its free control points (smoothness rows and the clearance rows of
     collision-aware IK at 8 samples per segment, pushed through the spline's basis; a curve stops once it
-    has converged, and a problem once one of its curves is clear of every row; the first round's seeds and
-    descent measure capsules that contain the robot's polytopes and cylinders and the obstacles' cylinders:
-    closed-form distances, lower bounds of the shapes', :mod:`diffkin.collision._capsules`); its two
-    curves of lowest cost are then timed and certified on the shapes themselves (a problem with no
-    successful curve gets new seeds through via points, up to :data:`ROUNDS` rounds in all, which measure
-    the shapes themselves and aim :data:`RETRY_BEYOND` beyond the margin):
+    has converged, and a problem once one of its curves is clear of every row); its two curves of lowest
+    cost are then timed and certified (a problem with no successful curve gets new seeds through via points,
+    up to :data:`ROUNDS` rounds in all):
 
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
@@ -170,13 +162,12 @@ def optimize(
     mask, locked_q = _locked(model, locked, batch)
     B = int(np.prod(batch, dtype=np.int64))
     flat = lambda x, tail: jnp.broadcast_to(x, batch + tail).reshape((B,) + tail)  # noqa: E731
-    avoid_flat, capsules = None, None
+    avoid_flat = None
     reach = np.zeros((dof, 0))
     if avoid is not None:
         _check_concrete(avoid)
         reach = _reach.reach(model, avoid.geom)
         avoid_flat = avoid.cast(dtype).flat(batch)
-        capsules = jax.tree.map(lambda x: jnp.asarray(x, dtype), enclosing_capsules(avoid.geom))
     static, traced = partition(model)
     out = _solve(
         static,
@@ -185,7 +176,6 @@ def optimize(
         flat(q_goal, (dof,)),
         flat(goal_ok, ()),
         avoid_flat,
-        capsules,
         None if base is None else flat(base.astype(dtype), (4, 4)),
         None if locked_q is None else flat(locked_q.astype(dtype), (dof,)),
         (velocity, acceleration, jerk),
@@ -240,23 +230,7 @@ def _locked(model, locked, batch) -> tuple[tuple[bool, ...], jax.Array | None]:
 
 
 def _core(
-    static,
-    traced,
-    q_start,
-    q_goal,
-    goal_ok,
-    avoid,
-    capsules,
-    base,
-    locked_q,
-    bounds,
-    reach,
-    key,
-    *,
-    locked,
-    free,
-    seeds,
-    iters,
+    static, traced, q_start, q_goal, goal_ok, avoid, base, locked_q, bounds, reach, key, *, locked, free, seeds, iters
 ):
     model = cast(detach(combine(static, traced)), q_start.dtype)
     dtype = q_start.dtype
@@ -276,21 +250,7 @@ def _core(
         chunk_avoid = avoid.replace(world=world) if per_problem else avoid
         keys = jax.vmap(lambda i: jax.random.fold_in(seed_key, i))(index)
         return _plan(
-            model,
-            q_start,
-            q_goal,
-            valid,
-            chunk_avoid,
-            capsules,
-            base,
-            locked_q,
-            bounds,
-            reach,
-            keys,
-            locked,
-            free,
-            seeds,
-            iters,
+            model, q_start, q_goal, valid, chunk_avoid, base, locked_q, bounds, reach, keys, locked, free, seeds, iters
         )
 
     step = problems_at_once(B)
@@ -318,21 +278,7 @@ def _core(
 
 
 def _plan(
-    model,
-    q_start,
-    q_goal,
-    valid,
-    avoid,
-    capsules,
-    base,
-    locked_q,
-    bounds,
-    reach,
-    keys,
-    locked,
-    free: int,
-    seeds: int,
-    iters: int,
+    model, q_start, q_goal, valid, avoid, base, locked_q, bounds, reach, keys, locked, free: int, seeds: int, iters: int
 ):
     """``(P (B, N, dof), h (B,), clearance (B,), clear (B,), limits_ok (B,))``: each of ``B`` problems' chosen
     curve (control points), its segment time, certified clearance and checks; ``valid`` ``(B,)`` whether its
@@ -340,29 +286,14 @@ def _plan(
     (a problem's result does not depend on the others planned with it).
 
     Up to :data:`ROUNDS` rounds (:func:`_round`), while a problem has no successful curve: round ``r > 0``
-    draws its seeds from ``fold_in(key, r)``, the straight line among them in round 1 only (round 0 descended it
-    on capsules, round 1 on the shapes: :func:`_round`). A problem keeps its
+    draws its seeds from ``fold_in(key, r)`` and no straight line (round 0 descended it). A problem keeps its
     first success, else its largest certified clearance (its result does not depend on whether others
     planned with it needed more rounds)."""
 
     def attempt(r):
         round_keys = jax.lax.cond(r == 0, lambda: keys, lambda: jax.vmap(lambda key: jax.random.fold_in(key, r))(keys))
         return _round(
-            model,
-            q_start,
-            q_goal,
-            avoid,
-            capsules,
-            base,
-            locked_q,
-            bounds,
-            reach,
-            round_keys,
-            r,
-            locked,
-            free,
-            seeds,
-            iters,
+            model, q_start, q_goal, avoid, base, locked_q, bounds, reach, round_keys, r == 0, locked, free, seeds, iters
         )
 
     def more(state):
@@ -395,45 +326,29 @@ def _round(
     q_start,
     q_goal,
     avoid,
-    capsules,
     base,
     locked_q,
     bounds,
     reach,
     keys,
-    r,
+    first,
     locked,
     free: int,
     seeds: int,
     iters: int,
 ):
-    """Round ``r`` (traced) of :func:`_plan`: ``(P, h, clearance, clear, limits_ok, duration, success)``, each
-    problem's best curve of ``seeds`` (the straight line among them in rounds 0 and 1: the first on capsules, the
-    first on the shapes), descended, its two of lowest cost timed and certified."""
+    """One round of :func:`_plan`: ``(P, h, clearance, clear, limits_ok, duration, success)``, each problem's
+    best curve of ``seeds`` (the straight line among them where ``first``, a traced bool), descended, its two of
+    lowest cost timed and certified."""
     lower, upper = jnp.asarray(model.lower, q_start.dtype), jnp.asarray(model.upper, q_start.dtype)
     velocity, acceleration, jerk = bounds
     B, dof = q_start.shape
+    ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, avoid, base, 1)
+    X = _seeds.seeds(ends, seeds, free, keys, first)  # (B, k, free, dof)
     rep = lambda x: None if x is None else jnp.repeat(x, seeds, axis=0)  # noqa: E731
-
-    def descended(clear_of) -> tuple[jax.Array, jax.Array]:
-        """The seeds' curves ``X`` ``(B seeds, free, dof)`` after the descent, kept clear of ``clear_of`` (an
-        ``Avoid``), and their costs."""
-        ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, clear_of, base, 1)
-        X = _seeds.seeds(ends, seeds, free, keys, r <= 1)  # (B, k, free, dof)
-        curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), clear_of, base, seeds)
-        return curves.descend(X.reshape(B * seeds, free, dof), iters)
-
-    if avoid is None:
-        X, cost = descended(None)
-    else:
-        # the first round measures capsules that contain the shapes and the obstacles' cylinders (closed forms,
-        # no GJK) and aims for the margin; a later round (a problem the first left unsolved: a passage the
-        # capsules close, or a motion just under the margin) the shapes themselves, RETRY_BEYOND past it
-        capsuled = avoid.replace(geom=capsules, world=None if avoid.world is None else enclosing_world(avoid.world))
-        wider = avoid.replace(margin=avoid.margin + RETRY_BEYOND)
-        X, cost = jax.lax.cond(r == 0, lambda: descended(capsuled), lambda: descended(wider))
-    P = _spline.control_points(jnp.repeat(q_start, seeds, axis=0), X, jnp.repeat(q_goal, seeds, axis=0))
-    P = P.reshape(B, seeds, free + 6, dof)
+    curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), avoid, base, seeds)
+    X, cost = curves.descend(X.reshape(B * seeds, free, dof), iters)
+    P = curves.control(X).reshape(B, seeds, free + 6, dof)
     # only the lowest-cost curves of each problem are timed and certified (the certificate's distances
     # cost about as much as a few descent iterations per curve)
     k = min(seeds, CERTIFIED)
