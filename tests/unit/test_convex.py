@@ -206,3 +206,57 @@ def test_bounding_boxes_contain_their_shapes_and_bound_distances():
         bound, exact = (np.asarray(f(by_type[a], other)) for f in (lower_bound, distance))
         assert np.all(bound <= exact + 1e-9), (a.__name__, b.__name__, float(np.max(bound - exact)))
         assert np.mean(bound > 0) > 0.2, (a.__name__, b.__name__)  # not a vacuous bound
+
+
+def _distance_to_hull(points: np.ndarray, p: np.ndarray) -> float:
+    """The distance from ``p`` to the convex hull of ``points`` (``(V, 3)``), by non-negative least squares
+    on the weights of a convex combination (their sum held at 1 by a heavily weighted row)."""
+    from scipy.optimize import nnls
+
+    A = np.vstack([points.T, 1e4 * np.ones(len(points))])
+    weights, _ = nnls(A, np.r_[p, 1e4])
+    return float(np.linalg.norm(points.T @ weights - p))
+
+
+def test_inner_polytopes_lie_within_their_originals():
+    """Five clouds of 150 points (ellipsoids, flattened or stretched), 24 of their vertices chosen: each an
+    original point; the distances of 500 random balls to their hull never below the distance to the
+    original's, and above it by at most the Hausdorff distance of the two hulls (the farthest original point
+    from the inner hull, by least squares; less than half that of 24 points taken as they come) (GJK both)."""
+    from diffkin.collision._inner import chosen
+
+    rng = np.random.default_rng(5)
+    for axes in ([0.05, 0.05, 0.25], [0.1, 0.08, 0.02], [0.1, 0.1, 0.1], [0.2, 0.03, 0.07], [0.06, 0.12, 0.09]):
+        u = rng.normal(size=(150, 3))
+        cloud = u / np.linalg.norm(u, axis=1, keepdims=True) * axes * rng.uniform(0.8, 1.0, (150, 1))
+        points = chosen(cloud, 24)
+        assert points.shape == (24, 3)
+        assert all(np.any(np.all(cloud == p, axis=1)) for p in points)
+        hausdorff = max(_distance_to_hull(points, p) for p in cloud)
+        arbitrary = max(_distance_to_hull(cloud[:24], p) for p in cloud)  # 24 of the points, not chosen
+        assert hausdorff < 0.5 * arbitrary
+        centres = rng.normal(size=(500, 3)) * 0.3
+        ball = dk.collision.Sphere(jnp.asarray(centres), jnp.asarray(rng.uniform(0.01, 0.05, 500)))
+        d_full = np.asarray(distance(ball, Convex(jnp.eye(4), jnp.asarray(cloud))))
+        d_inner = np.asarray(distance(ball, Convex(jnp.eye(4), jnp.asarray(points))))
+        apart = d_full > 0
+        assert apart.mean() > 0.5
+        assert np.all(d_inner[apart] >= d_full[apart] - 1e-12)
+        assert np.all(d_inner[apart] <= d_full[apart] + hausdorff + 1e-6)
+
+
+def test_inner_geometry_keeps_small_polytopes_and_other_shapes(cube_robots):
+    """A geometry whose polytopes have no more vertices than asked is returned as it is; a mesh of 100 points
+    gets 16, the shape's frame, pose and name unchanged."""
+    from diffkin.collision._inner import inner
+
+    robot, _, fits = cube_robots
+    assert inner(fits["hulls"], 16) is fits["hulls"]
+    u = np.random.default_rng(2).normal(size=(100, 3))
+    sphere_mesh = " ".join(f"{v:g}" for v in (0.1 * u / np.linalg.norm(u, axis=1, keepdims=True)).reshape(-1))
+    mjcf = MJCF.format(corners=sphere_mesh, name="ball", geom='type="mesh" mesh="cube"')
+    geom = dk.collision.load(mjcf, dk.load_robot(mjcf), meshes="hulls")
+    fewer = inner(geom, 16)
+    assert fewer.convexes.vertices.shape[-2] == 16 and geom.convexes.vertices.shape[-2] >= 90
+    assert fewer.shape_names == geom.shape_names and fewer.shape_frames == geom.shape_frames
+    np.testing.assert_array_equal(np.asarray(fewer.convexes.pose), np.asarray(geom.convexes.pose))
