@@ -10,7 +10,7 @@ residual stacks
   world, zero beyond ``margin + band``, with the motion Jacobians of the distances), pushed to the
   control points through the curve's basis weights (``dq(u)/dX_k = basis_k(u)``).
 
-The margin the rows aim for is raised by :data:`EXTRA` so that the certificate
+The margin the rows aim for is raised by :data:`EXTRA` (or a given ``extra``) so that the certificate
 (:mod:`diffkin.traj._certify`), which subtracts the motion between its samples, holds. Steps solve
 the ``n dof`` normal equations with error-proportional damping (:mod:`diffkin.ik._lm`'s rule); a
 step is taken only if it lowers the cost; joints stay within their limits (clipped control points:
@@ -47,11 +47,12 @@ class Curves:
     """The curves of a flat batch: ``C`` curves, ``B`` problems (``C = B k``, curves of one problem
     consecutive), their ends, limits, locked joints and what keeps them clear."""
 
-    def __init__(self, model, q_start, q_goal, lower, upper, locked, locked_q, avoid, base, k: int):
+    def __init__(self, model, q_start, q_goal, lower, upper, locked, locked_q, avoid, base, k: int, extra=EXTRA):
         self.model, self.q_start, self.q_goal = model, q_start, q_goal  # (C, dof)
         self.lower, self.upper = lower, upper  # (dof,)
         self.locked, self.locked_q = locked, locked_q  # static mask, (C, dof)
         self.avoid, self.base, self.k = avoid, base, k  # avoid: flat (B, ...) world or shared
+        self.extra = extra  # metres the clearance rows aim beyond the margin (a scalar, traced or not)
 
     def project(self, X: jax.Array) -> jax.Array:
         X = jnp.clip(X, self.lower, self.upper)
@@ -60,8 +61,8 @@ class Curves:
         return X
 
     def cap(self) -> jax.Array:
-        """The clearance the clearance rows aim for: the margin plus :data:`EXTRA`."""
-        return self.avoid.margin + EXTRA
+        """The clearance the clearance rows aim for: the margin plus ``extra`` (:data:`EXTRA` unless given)."""
+        return self.avoid.margin + self.extra
 
     def control(self, X: jax.Array) -> jax.Array:
         return _spline.control_points(self.q_start, X, self.q_goal)
@@ -132,7 +133,9 @@ class Curves:
             it, X, cost, g, H, blocked, mu, slow = state
             live = going(blocked, mu, slow) | (it == 0)
             lam = jnp.where(jnp.isfinite(cost), mu * cost, 0.0) + 1e-10
-            dx = jnp.linalg.solve(H + lam[:, None, None] * eye, -g[..., None])[..., 0]
+            # Cholesky: the damped normal matrix is positive definite (an LU solve permutes its pivots in a loop)
+            factor = jax.scipy.linalg.cho_factor(H + lam[:, None, None] * eye, lower=True)
+            dx = jax.scipy.linalg.cho_solve(factor, -g[..., None])[..., 0]
             X_try = self.project(X + dx.reshape(C, n, dof))
             cost_try, g_try, H_try, blocked_try = self.normal(X_try, W, live)
             take = live & jnp.isfinite(cost_try) & (cost_try < cost)

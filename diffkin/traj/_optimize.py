@@ -3,6 +3,7 @@ collision-aware IK, then one compiled program: seeds, descent, certificate, timi
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 
 import jax
@@ -12,12 +13,13 @@ import numpy as np
 from diffkin._checks import positive_int, real_array
 from diffkin._static import combine, is_concrete, partition
 from diffkin._xla import in_steps, problems_at_once, solver_jit
+from diffkin.collision._inner import inner
 from diffkin.ik import Avoid
 from diffkin.ik.interface import cast, check_avoid, check_batched, default_key, detach, finite
 from diffkin.models.robot import Robot
 from diffkin.traj import _limits, _reach, _seeds, _spline
 from diffkin.traj._certify import certified
-from diffkin.traj._descent import Curves
+from diffkin.traj._descent import EXTRA, Curves
 from diffkin.traj._trajectory import Trajectory
 
 #: joint-space points per segment that measure the path length
@@ -27,6 +29,11 @@ CERTIFIED = 2
 #: rounds of seeds for a problem without a successful curve, the first included (on the CPU a problem's
 #: later rounds cost only where it failed: problems are planned one at a time)
 ROUNDS = 4
+#: metres a later round's clearance rows aim beyond the margin (the first's: :data:`diffkin.traj._descent.EXTRA`):
+#: its problem's first curves came short of the certificate, most often by a few millimetres
+LATER_EXTRA = 0.03
+#: vertices of each polytope the seeds and the descent measure (:func:`_searched`; the certificate measures all)
+SEARCH_VERTICES = 32
 
 
 def optimize(
@@ -53,9 +60,11 @@ def optimize(
     clearest of 32 random ones, :mod:`diffkin.traj._seeds`) through at most ``max_iters``
     Levenberg-Marquardt iterations on its free control points (smoothness rows and the clearance rows of
     collision-aware IK at 8 samples per segment, pushed through the spline's basis; a curve stops once it
-    has converged, and a problem once one of its curves is clear of every row); its two curves of lowest
+    has converged, and a problem once one of its curves is clear of every row; the seeds and the descent
+    measure each convex polytope through at most :data:`SEARCH_VERTICES` of its vertices, the certificate the
+    geometry itself: :func:`_searched`); its two curves of lowest
     cost are then timed and certified (a problem with no successful curve gets new seeds through via points,
-    up to :data:`ROUNDS` rounds in all):
+    descended to :data:`LATER_EXTRA` beyond the margin, up to :data:`ROUNDS` rounds in all):
 
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
@@ -162,12 +171,13 @@ def optimize(
     mask, locked_q = _locked(model, locked, batch)
     B = int(np.prod(batch, dtype=np.int64))
     flat = lambda x, tail: jnp.broadcast_to(x, batch + tail).reshape((B,) + tail)  # noqa: E731
-    avoid_flat = None
+    avoid_flat = searched_flat = None
     reach = np.zeros((dof, 0))
     if avoid is not None:
         _check_concrete(avoid)
         reach = _reach.reach(model, avoid.geom)
         avoid_flat = avoid.cast(dtype).flat(batch)
+        searched_flat = _searched(avoid).cast(dtype).flat(batch)
     static, traced = partition(model)
     out = _solve(
         static,
@@ -176,6 +186,7 @@ def optimize(
         flat(q_goal, (dof,)),
         flat(goal_ok, ()),
         avoid_flat,
+        searched_flat,
         None if base is None else flat(base.astype(dtype), (4, 4)),
         None if locked_q is None else flat(locked_q.astype(dtype), (dof,)),
         (velocity, acceleration, jerk),
@@ -208,6 +219,14 @@ def _check_concrete(avoid: Avoid) -> None:
         raise TypeError("avoid.geom: must be concrete (close over it in jit): the certificate reads it on the host")
 
 
+def _searched(avoid: Avoid) -> Avoid:
+    """What the seeds and the descent keep clear: ``avoid`` with each polytope the hull of at most
+    :data:`SEARCH_VERTICES` of its vertices (:func:`diffkin.collision._inner.inner`): GJK's support scans every
+    vertex, on both sides of a pair, and a mesh's hull has many. Inside the originals, they fall a little short of
+    them, which the rows' aim beyond the margin (:data:`diffkin.traj._descent.EXTRA`) covers."""
+    return dataclasses.replace(avoid, geom=inner(avoid.geom, SEARCH_VERTICES))
+
+
 def _locked(model, locked, batch) -> tuple[tuple[bool, ...], jax.Array | None]:
     names = tuple(model.joint_names)
     if locked is None:
@@ -230,7 +249,23 @@ def _locked(model, locked, batch) -> tuple[tuple[bool, ...], jax.Array | None]:
 
 
 def _core(
-    static, traced, q_start, q_goal, goal_ok, avoid, base, locked_q, bounds, reach, key, *, locked, free, seeds, iters
+    static,
+    traced,
+    q_start,
+    q_goal,
+    goal_ok,
+    avoid,
+    searched,
+    base,
+    locked_q,
+    bounds,
+    reach,
+    key,
+    *,
+    locked,
+    free,
+    seeds,
+    iters,
 ):
     model = cast(detach(combine(static, traced)), q_start.dtype)
     dtype = q_start.dtype
@@ -247,10 +282,24 @@ def _core(
 
     def plan(*chunk):
         index, q_start, q_goal, valid, base, locked_q, world = jax.tree.unflatten(tree, chunk)
-        chunk_avoid = avoid.replace(world=world) if per_problem else avoid
+        own = lambda a: a.replace(world=world) if per_problem else a  # noqa: E731
         keys = jax.vmap(lambda i: jax.random.fold_in(seed_key, i))(index)
         return _plan(
-            model, q_start, q_goal, valid, chunk_avoid, base, locked_q, bounds, reach, keys, locked, free, seeds, iters
+            model,
+            q_start,
+            q_goal,
+            valid,
+            own(avoid),
+            own(searched),
+            base,
+            locked_q,
+            bounds,
+            reach,
+            keys,
+            locked,
+            free,
+            seeds,
+            iters,
         )
 
     step = problems_at_once(B)
@@ -278,7 +327,21 @@ def _core(
 
 
 def _plan(
-    model, q_start, q_goal, valid, avoid, base, locked_q, bounds, reach, keys, locked, free: int, seeds: int, iters: int
+    model,
+    q_start,
+    q_goal,
+    valid,
+    avoid,
+    searched,
+    base,
+    locked_q,
+    bounds,
+    reach,
+    keys,
+    locked,
+    free: int,
+    seeds: int,
+    iters: int,
 ):
     """``(P (B, N, dof), h (B,), clearance (B,), clear (B,), limits_ok (B,))``: each of ``B`` problems' chosen
     curve (control points), its segment time, certified clearance and checks; ``valid`` ``(B,)`` whether its
@@ -288,12 +351,27 @@ def _plan(
     Up to :data:`ROUNDS` rounds (:func:`_round`), while a problem has no successful curve: round ``r > 0``
     draws its seeds from ``fold_in(key, r)`` and no straight line (round 0 descended it). A problem keeps its
     first success, else its largest certified clearance (its result does not depend on whether others
-    planned with it needed more rounds)."""
+    planned with it needed more rounds). ``avoid`` is what the certificate measures, ``searched`` what the
+    seeds and the descent do (:func:`_searched`)."""
 
     def attempt(r):
         round_keys = jax.lax.cond(r == 0, lambda: keys, lambda: jax.vmap(lambda key: jax.random.fold_in(key, r))(keys))
         return _round(
-            model, q_start, q_goal, avoid, base, locked_q, bounds, reach, round_keys, r == 0, locked, free, seeds, iters
+            model,
+            q_start,
+            q_goal,
+            avoid,
+            searched,
+            base,
+            locked_q,
+            bounds,
+            reach,
+            round_keys,
+            r == 0,
+            locked,
+            free,
+            seeds,
+            iters,
         )
 
     def more(state):
@@ -326,6 +404,7 @@ def _round(
     q_start,
     q_goal,
     avoid,
+    searched,
     base,
     locked_q,
     bounds,
@@ -338,15 +417,17 @@ def _round(
     iters: int,
 ):
     """One round of :func:`_plan`: ``(P, h, clearance, clear, limits_ok, duration, success)``, each problem's
-    best curve of ``seeds`` (the straight line among them where ``first``, a traced bool), descended, its two of
-    lowest cost timed and certified."""
+    best curve of ``seeds`` (the straight line among them where ``first``, a traced bool), descended on
+    ``searched`` (aiming :data:`~diffkin.traj._descent.EXTRA` beyond the margin in the first round,
+    :data:`LATER_EXTRA` in later ones), its two of lowest cost timed and certified on ``avoid``."""
     lower, upper = jnp.asarray(model.lower, q_start.dtype), jnp.asarray(model.upper, q_start.dtype)
     velocity, acceleration, jerk = bounds
     B, dof = q_start.shape
-    ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, avoid, base, 1)
+    extra = jnp.where(first, EXTRA, LATER_EXTRA)
+    ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, searched, base, 1, extra)
     X = _seeds.seeds(ends, seeds, free, keys, first)  # (B, k, free, dof)
     rep = lambda x: None if x is None else jnp.repeat(x, seeds, axis=0)  # noqa: E731
-    curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), avoid, base, seeds)
+    curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), searched, base, seeds, extra)
     X, cost = curves.descend(X.reshape(B * seeds, free, dof), iters)
     P = curves.control(X).reshape(B, seeds, free + 6, dof)
     # only the lowest-cost curves of each problem are timed and certified (the certificate's distances

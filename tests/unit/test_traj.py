@@ -308,3 +308,43 @@ def test_default_limits_are_the_files_velocities():
     speed = np.max(np.abs(np.asarray(traj.at(jnp.linspace(0, traj.duration, 999), 1))), axis=0)
     assert bool(traj.success) and np.all(speed <= np.array([2.5, 1.0, 1.0]) * (1 + 1e-6))
     assert speed[0] > 1.0  # faster than the old 1 rad/s default: the file's limit is used
+
+
+def _capsule_cloud(radius: float, length: float, count: int, rng) -> np.ndarray:
+    """``(count, 3)`` random points on a capsule along z from 0 to ``length`` (its two hemispheres): a mesh whose
+    hull has every point as a vertex."""
+    u = rng.normal(size=(count, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return radius * u + np.outer(np.where(u[:, 2] > 0, length - radius, radius), [0.0, 0.0, 1.0])
+
+
+def test_mesh_links_searched_on_fewer_vertices_certified_on_their_own():
+    """The arm's links as meshes of 80 points (hulls of more vertices than the seeds and the descent measure,
+    :data:`diffkin.traj._optimize.SEARCH_VERTICES`): the motion around the sphere over the upright arm is
+    certified on the hulls themselves (never above what dense sampling of them measures, clear by the margin)."""
+    rng = np.random.default_rng(3)
+    meshes = {
+        name: _capsule_cloud(r, length, 80, rng) for name, r, length in (("upper", 0.05, 0.5), ("lower", 0.04, 0.4))
+    }
+    vertex = {name: " ".join(f"{v:.6f}" for v in points.reshape(-1)) for name, points in meshes.items()}
+    assets = "".join(f'<mesh name="{name}" vertex="{points}"/>' for name, points in vertex.items())
+    mjcf = f"""<mujoco><compiler angle="radian"/><asset>{assets}</asset><worldbody>
+      <body name="upper" pos="0 0 0.05"><joint name="j1" type="hinge" axis="0 1 0" range="-3 3"/>
+        <geom type="mesh" mesh="upper"/><body name="lower" pos="0 0 0.5">
+        <joint name="j2" type="hinge" axis="0 1 0" range="-3 3"/><geom type="mesh" mesh="lower"/></body></body>
+      </worldbody></mujoco>"""
+    robot = dk.load_robot(mjcf)
+    geom = dk.collision.load(mjcf, robot, meshes="hulls")
+    world = World(Sphere(jnp.array([[0.0, 0.0, 1.0]]), jnp.array([0.1])))
+    avoid = dk.ik.Avoid(geom, world, MARGIN)
+    searched = _optimize._searched(avoid)
+    assert geom.convexes.vertices.shape[-2] > _optimize.SEARCH_VERTICES == searched.geom.convexes.vertices.shape[-2]
+    traj = jax.jit(lambda s, g: dk.traj.optimize(robot, s, g, avoid=avoid, limits=LIMITS, knots=10, num_seeds=3))(
+        START[:1], GOAL[:1]
+    )
+    assert bool(traj.success[0])
+    _, q = _dense(traj)
+    sampled = np.asarray(jax.jit(lambda q: dk.collision.clearance(robot, geom, q, world))(q)).min()
+    assert float(traj.clearance[0]) <= sampled + 1e-6 and sampled >= MARGIN
+    straight = jnp.linspace(0.0, 1.0, 201)[:, None] * (GOAL[0] - START[0]) + START[0]
+    assert float(dk.collision.clearance(robot, geom, straight, world).min()) < 0
