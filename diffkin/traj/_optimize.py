@@ -27,8 +27,9 @@ _LENGTH_SAMPLES = 16
 #: curves per problem timed and certified after the descent: the lowest-cost ones
 CERTIFIED = 2
 #: rounds of seeds for a problem without a successful curve, the first included (on the CPU a problem's
-#: later rounds cost only where it failed: problems are planned one at a time)
-ROUNDS = 4
+#: later rounds cost only where it failed: problems are planned one at a time; a round's keys do not depend on
+#: how many there are, so more rounds only add successes)
+ROUNDS = 6
 #: metres a later round's clearance rows aim beyond the margin (the first's: :data:`diffkin.traj._descent.EXTRA`):
 #: its problem's first curves came short of the certificate, most often by a few millimetres
 LATER_EXTRA = 0.03
