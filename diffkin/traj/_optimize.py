@@ -13,7 +13,7 @@ import numpy as np
 from diffkin._checks import positive_int, real_array
 from diffkin._static import combine, is_concrete, partition
 from diffkin._xla import in_steps, problems_at_once, solver_jit
-from diffkin.collision._inner import inner
+from diffkin.collision.interface import inner
 from diffkin.ik import Avoid
 from diffkin.ik.interface import cast, check_avoid, check_batched, default_key, detach, finite
 from diffkin.models.robot import Robot
