@@ -26,6 +26,7 @@ The measurements that justify them are in docs/performance.md, "XLA CPU tricks".
   then runs one entry at a time).
 - :data:`SOLVER_COMPILE` and :func:`solver_jit`: the IK solvers are compiled by XLA's classic CPU
   kernel emitter, which compiles in two thirds of the time of the newer MLIR emitters (see there).
+- :data:`TRAJ_COMPILE`: the trajectory solver, whose time is GJK's loops, also without YNNPACK fusions.
 - :func:`segment_end`: a long serial forward pass is materialised every :data:`SEGMENT` joints, so
   that XLA's fusion does not copy the pass into every output of a Jacobian.
 - :func:`gpu_outputs`: float32 outputs are computed once behind a barrier on a GPU, whose
@@ -63,6 +64,12 @@ from diffkin import _trig
 #: option names a CPU setting only: other backends compile as they would without it. It applies to
 #: the ``jit`` it is given to; a solver traced inside a user's own ``jit`` gets that ``jit``'s options.
 SOLVER_COMPILE = {"xla_cpu_use_fusion_emitters": False}
+#: Compiler options of the trajectory solver (:func:`diffkin.traj.optimize`): :data:`SOLVER_COMPILE`, and no
+#: YNNPACK fusions. XLA's CPU backend hands batched dot products to the YNNPACK library; inside GJK's loops
+#: they are products of 3-vectors with 3x3 rotations, where a library call costs more than the arithmetic
+#: (the trajectories about 1.3x faster; docs/performance.md). The IK solver's products are larger and gain
+#: from them. Older jaxlibs have no such option, and are given none (:func:`supported`).
+TRAJ_COMPILE = {**SOLVER_COMPILE, "xla_cpu_experimental_ynn_fusion_type": ""}
 
 
 def _default_backend() -> str:
@@ -70,22 +77,41 @@ def _default_backend() -> str:
     return jax.default_backend()
 
 
-def solver_jit(fn: Callable, **kwargs) -> Callable:
-    """``jax.jit(fn, **kwargs)``, compiled with :data:`SOLVER_COMPILE` when called outside any trace
-    and compiled for the CPU.
+def solver_jit(fn: Callable, options: dict | None = None, **kwargs) -> Callable:
+    """``jax.jit(fn, **kwargs)``, compiled with ``options`` (default :data:`SOLVER_COMPILE`), those this
+    jaxlib knows (:func:`supported`), when called outside any trace and compiled for the CPU.
 
     JAX accepts compiler options only on a top-level ``jit``: inside a transformation (a user's
     ``jit``, ``vmap`` or ``grad``) the plain ``jit`` is used, and the outer one decides. The options
     are the CPU backend's: a GPU's compiler rejects them ("No such compile option").
     """
     plain = jax.jit(fn, **kwargs)
-    top = jax.jit(fn, compiler_options=SOLVER_COMPILE, **kwargs)
+
+    @functools.cache
+    def top() -> Callable:  # at the first call: which options this jaxlib knows takes a compile
+        return jax.jit(fn, compiler_options=supported(SOLVER_COMPILE if options is None else options), **kwargs)
 
     @functools.wraps(fn)
     def call(*args, **kw):
-        return (top if _default_backend() == "cpu" and top_level(args, kw) else plain)(*args, **kw)
+        return (top() if _default_backend() == "cpu" and top_level(args, kw) else plain)(*args, **kw)
 
     return call
+
+
+def supported(options: dict) -> dict:
+    """The entries of ``options`` (XLA CPU compiler options) that this jaxlib's compiler takes: options come
+    and go between versions, and an unknown one fails the compile."""
+    return {name: value for name, value in options.items() if _known(name, value)}
+
+
+@functools.cache
+def _known(name: str, value) -> bool:
+    """Whether the CPU compiler takes the option ``name`` set to ``value`` (a compile of the identity)."""
+    try:
+        jax.jit(lambda x: x, compiler_options={name: value}).lower(np.float32(0)).compile()
+    except Exception:  # XLA's error for an unknown option is not a documented type
+        return False
+    return True
 
 
 def top_level(*args) -> bool:

@@ -12,7 +12,7 @@ import numpy as np
 
 from diffkin._checks import positive_int, real_array
 from diffkin._static import combine, is_concrete, partition
-from diffkin._xla import in_steps, problems_at_once, solver_jit
+from diffkin._xla import TRAJ_COMPILE, in_steps, problems_at_once, solver_jit
 from diffkin.collision.interface import inner
 from diffkin.ik import Avoid
 from diffkin.ik.interface import cast, check_avoid, check_batched, default_key, detach, finite
@@ -459,4 +459,4 @@ def _round(
     return tuple(pick(x) for x in result)
 
 
-_solve = solver_jit(_core, static_argnums=(0,), static_argnames=("locked", "free", "seeds", "iters"))
+_solve = solver_jit(_core, TRAJ_COMPILE, static_argnums=(0,), static_argnames=("locked", "free", "seeds", "iters"))

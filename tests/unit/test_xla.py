@@ -247,8 +247,39 @@ def test_solver_jit_gives_its_options_to_the_cpu_backend_only(monkeypatch):
     from diffkin import _xla
 
     monkeypatch.setattr(_xla, "SOLVER_COMPILE", {"no_such_option_anywhere": True})
+    monkeypatch.setattr(_xla, "supported", lambda options: options)  # as a jaxlib that knew it
     monkeypatch.setattr(_xla, "_default_backend", lambda: "gpu")
     np.testing.assert_array_equal(np.asarray(_xla.solver_jit(lambda x: x + 1.0)(np.zeros(3))), np.ones(3))
     monkeypatch.setattr(_xla, "_default_backend", lambda: "cpu")
     with pytest.raises(Exception, match="no_such_option_anywhere"):
         _xla.solver_jit(lambda x: x + 2.0)(np.zeros(3))
+
+
+def test_supported_keeps_the_options_this_jaxlib_knows():
+    """Options come and go between jaxlib versions, and an unknown one fails the compile: a solver is given
+    those its jaxlib knows."""
+    from diffkin import _xla
+
+    mixed = {"xla_cpu_use_fusion_emitters": False, "no_such_option_anywhere": True}
+    assert _xla.supported(mixed) == {"xla_cpu_use_fusion_emitters": False}
+    g = _xla.solver_jit(lambda x: x + 1.0, mixed)
+    np.testing.assert_array_equal(np.asarray(g(np.zeros(3))), np.ones(3))
+
+
+def test_traj_compile_keeps_gjk_free_of_ynnpack_fusions():
+    """TRAJ_COMPILE's reason: XLA hands GJK's small products to YNNPACK unless told not to; with it, none is,
+    and the distances are those of the default compile (up to float32 rounding)."""
+    from diffkin import _xla
+    from diffkin.collision import _gjk, _shapes
+
+    options = _xla.supported(_xla.TRAJ_COMPILE)
+    if "xla_cpu_experimental_ynn_fusion_type" not in options:
+        pytest.skip("this jaxlib has no YNNPACK fusion option")
+    rng = np.random.default_rng(3)
+    pose = np.tile(np.eye(4, dtype=np.float32), (64, 1, 1))
+    pose[:, :3, 3] = rng.normal(size=(64, 3))
+    a = _shapes.Convex(pose, rng.normal(scale=0.3, size=(64, 24, 3)).astype(np.float32))
+    b = _shapes.Box(np.tile(np.eye(4, dtype=np.float32), (64, 1, 1)), np.full((64, 3), 0.2, np.float32))
+    plain, traj = jax.jit(_gjk.distance), jax.jit(_gjk.distance, compiler_options=options)
+    assert "__ynn_fusion" not in traj.lower(a, b).compile().as_text()
+    np.testing.assert_allclose(np.asarray(traj(a, b)), np.asarray(plain(a, b)), rtol=0, atol=2e-6)
