@@ -67,8 +67,8 @@ SOLVER_COMPILE = {"xla_cpu_use_fusion_emitters": False}
 #: Compiler options of the trajectory solver (:func:`diffkin.traj.optimize`): :data:`SOLVER_COMPILE`, and no
 #: YNNPACK fusions. XLA's CPU backend hands batched dot products to the YNNPACK library; inside GJK's loops
 #: they are products of 3-vectors with 3x3 rotations, where a library call costs more than the arithmetic
-#: (the trajectories about 1.3x faster; docs/performance.md). The IK solver's products are larger and gain
-#: from them. Older jaxlibs have no such option, and are given none (:func:`supported`).
+#: (measured in docs/performance.md, "XLA CPU tricks"). The IK solver's products are larger and gain from
+#: them. Older jaxlibs have no such option, and are given none (:func:`supported`).
 TRAJ_COMPILE = {**SOLVER_COMPILE, "xla_cpu_experimental_ynn_fusion_type": ""}
 
 
