@@ -44,7 +44,7 @@ FLOAT32_TOLERANCE = 1e-6
 STEPS = 128
 #: GJK stops a pair whose point nearest the origin has not got nearer in more than this many steps
 IDLE = 4
-#: projected-ascent steps refining an overlapping pair's direction (by default: :func:`witnesses` takes fewer)
+#: projected-ascent steps refining an overlapping pair's direction
 ASCENT_STEPS = 24
 #: the overlap search runs on the overlapping pairs, 1 / OVERLAP_SHARE of a batch at a time
 OVERLAP_SHARE = 8
@@ -237,9 +237,8 @@ def _axes(shape) -> list[jax.Array]:
     return []
 
 
-def _overlap_direction(a, b, hint: jax.Array, dtype, steps: int) -> jax.Array:
-    """The best separating direction of overlapping shapes among candidates, refined by ``steps`` steps of
-    projected ascent."""
+def _overlap_direction(a, b, hint: jax.Array, dtype) -> jax.Array:
+    """The best separating direction of overlapping shapes among candidates, refined by projected ascent."""
     batch = jnp.broadcast_shapes(hint.shape, a.centre().shape, b.centre().shape)
     spread = jnp.asarray(_SPREAD, dtype).reshape((len(_SPREAD),) + (1,) * (len(batch) - 1) + (3,))
     own = [hint, b.centre() - a.centre()] + _axes(a) + _axes(b)
@@ -267,11 +266,11 @@ def _overlap_direction(a, b, hint: jax.Array, dtype, steps: int) -> jax.Array:
         )
 
     step = jnp.ones_like(best_s) * 2.0
-    n, _, _ = jax.lax.fori_loop(0, steps, ascend, (best_n, best_s, step))
+    n, _, _ = jax.lax.fori_loop(0, ASCENT_STEPS, ascend, (best_n, best_s, step))
     return n
 
 
-def _overlap_directions(a, b, n: jax.Array, overlap: jax.Array, dtype, steps: int) -> jax.Array:
+def _overlap_directions(a, b, n: jax.Array, overlap: jax.Array, dtype) -> jax.Array:
     """``n`` ``batch + (3,)`` with the direction of every ``overlap``-ping pair found by
     :func:`_overlap_direction`, for those pairs only, ``1 / OVERLAP_SHARE`` of the batch at a time
     (gathered: no step when none overlaps, one when few do)."""
@@ -283,25 +282,23 @@ def _overlap_directions(a, b, n: jax.Array, overlap: jax.Array, dtype, steps: in
         left, flat = state
         idx = jnp.nonzero(left, size=budget, fill_value=total)[0]
         safe = jnp.minimum(idx, total - 1)
-        found = _overlap_direction(taken(a, batch, safe), taken(b, batch, safe), flat[safe], dtype, steps)
+        found = _overlap_direction(taken(a, batch, safe), taken(b, batch, safe), flat[safe], dtype)
         return left.at[idx].set(False, mode="drop"), flat.at[idx].set(found, mode="drop")
 
     start = (overlap.reshape(total), n.reshape(total, 3))
     return jax.lax.while_loop(lambda state: jnp.any(state[0]), step, start)[1].reshape(batch + (3,))
 
 
-def witnesses(a, b, reach=jnp.inf, ascent: int = ASCENT_STEPS) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+def witnesses(a, b, reach=jnp.inf) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
     """``(n, p_a, p_b, s)`` without gradients: the unit direction from ``a`` to ``b`` whose separation is the
     signed distance, the cores' witness points (apart, their closest points; overlapping, their support
     points along ``n`` (``a``) and ``-n`` (``b``)) and the cores' separation along ``n``. Where the
     distance is at least ``reach`` (``(...,)``, rounding included), GJK may stop short: ``s`` less the
-    roundings is then a lower bound at least ``reach`` and ``n`` and the points are not the closest.
-    ``ascent``: the projected-ascent steps refining an overlapping pair's direction (fewer cost less and
-    may report the overlap deeper, never shallower)."""
+    roundings is then a lower bound at least ``reach`` and ``n`` and the points are not the closest."""
     a, b = jax.lax.stop_gradient((a, b))
     dtype = jnp.result_type(*jax.tree.leaves((a, b)))
     pa, pb, apart = _gjk(a, b, dtype, reach + a.rounding() + b.rounding())
-    n = _overlap_directions(a, b, _unit(pb - pa, jnp.array([1.0, 0.0, 0.0], dtype)), ~apart, dtype, ascent)
+    n = _overlap_directions(a, b, _unit(pb - pa, jnp.array([1.0, 0.0, 0.0], dtype)), ~apart, dtype)
     sa, sb = core_supports(a, b, n)
     return n, jnp.where(apart[..., None], pa, sa), jnp.where(apart[..., None], pb, sb), _dot(n, sb - sa)
 

@@ -8,7 +8,6 @@ draws a convex shape by its hull; the trajectories' search measures polytopes of
 
 from diffkin.collision._fit import hull
 from diffkin.collision._geometry import moved
-from diffkin.collision._gjk import ASCENT_STEPS
 from diffkin.collision._inner import inner
 from diffkin.collision._near import NEAR_SHARE, near_motions
 from diffkin.collision._robot import (
@@ -22,7 +21,6 @@ from diffkin.collision._robot import (
 )
 
 __all__ = [
-    "ASCENT_STEPS",
     "NEAR_SHARE",
     "batch_last",
     "check_geometry",

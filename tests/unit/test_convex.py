@@ -50,28 +50,6 @@ def test_a_cube_of_corners_is_the_box(other):
         np.testing.assert_allclose(np.asarray(d_swapped), d_convex, rtol=0, atol=1e-12)
 
 
-def test_fewer_ascent_steps_report_an_overlap_deeper_never_shallower():
-    """The overlap search's projected ascent takes only steps that raise the separation: over 1,000 random
-    placements of a box's corners against a box, 0, 8 and 24 steps give overlaps in that order of depth, the
-    24 steps' never shallower than the exact one (separating axes); apart, the steps change nothing."""
-    from diffkin.collision import _gjk
-
-    rng = np.random.default_rng(5)
-    fa, fb = random_fields("box", rng, 1000), random_fields("box", rng, 1000)
-    convex, b = _as_convex(fa), shape("box", fb)
-    s0, s8, s24 = (
-        np.asarray(jax.jit(lambda a, b, k=k: _gjk.witnesses(a, b, ascent=k)[3])(convex, b)) for k in (0, 8, 24)
-    )
-    exact = np.asarray(jax.jit(distance)(shape("box", fa), b))
-    overlap = exact < -1e-9
-    assert 0.1 < overlap.mean() < 0.9
-    assert np.all(s0[overlap] <= s8[overlap]) and np.all(s8[overlap] <= s24[overlap])
-    assert np.all(s24[overlap] <= exact[overlap] + 1e-9)
-    assert np.any(s8[overlap] < s24[overlap] - 1e-6)  # the last steps do refine some
-    np.testing.assert_array_equal(s0[~overlap], s24[~overlap])
-    np.testing.assert_allclose(s24[exact > 1e-9], exact[exact > 1e-9], rtol=0, atol=1e-9)
-
-
 def test_gradient_through_a_polytope():
     """A sphere above a cube's top face: the distance grows one for one with its height and with the sphere's
     radius it falls; the cube's vertices are leaves too (raising the top face's corners closes the gap)."""
