@@ -9,9 +9,10 @@ gives the distances per pair block). Every function that takes ``avoid=`` checks
 from diffkin.ik._args import check_batched, default_key, finite
 from diffkin.ik._prepare import cast, detach
 from diffkin.ik._problem import Kinematics, Problem, Spec
-from diffkin.ik._terms.avoid import AvoidTerm, check_avoid
+from diffkin.ik._terms.avoid import BAND, AvoidTerm, check_avoid
 
 __all__ = [
+    "BAND",
     "AvoidTerm",
     "Kinematics",
     "Problem",

@@ -19,10 +19,13 @@ the curve lies in their convex hull) and locked joints at their values.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffkin.ik.interface import BAND
 from diffkin.traj import _rows, _spline
 
 W_LENGTH = 0.05  # per rad of a control-polygon step
@@ -41,6 +44,20 @@ def _smoothing(N: int, n: int) -> tuple[np.ndarray, np.ndarray]:
     D2 = np.diff(np.eye(N), n=2, axis=0)
     D = np.concatenate([W_LENGTH * D1, W_BEND * D2])
     return D, D[:, _spline.ENDS : _spline.ENDS + n]
+
+
+class Descent(NamedTuple):
+    """The state of the curves' descent (:meth:`Curves.descend`), per curve of ``C``."""
+
+    it: jax.Array  # the iterations run (0: not yet evaluated)
+    X: jax.Array  # (C, n, dof) free control points
+    cost: jax.Array  # (C,) |r|^2 at X
+    g: jax.Array  # (C, n dof) J^T r
+    H: jax.Array  # (C, n dof, n dof) J^T J
+    blocked: jax.Array  # (C,) a clearance row is not zero
+    mu: jax.Array  # (C,) damping
+    slow: jax.Array  # (C,) converged
+    low: jax.Array  # (C,) metres: a lower bound of the smallest distance at the clearance samples (of searched)
 
 
 class Curves:
@@ -76,10 +93,13 @@ class Curves:
         r, J = _rows.rows(self.model, self.avoid, self.locked, self.base, self.k, q, margin)
         return W_CLEAR * r, W_CLEAR * J
 
-    def normal(self, X: jax.Array, W: jax.Array, live: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
-        """``(cost (C,), g (C, n dof), H (C, n dof, n dof), blocked (C,))``: ``|r|^2``, ``J^T r`` and
+    def normal(self, X: jax.Array, W: jax.Array, live: jax.Array) -> tuple[jax.Array, ...]:
+        """``(cost (C,), g (C, n dof), H (C, n dof, n dof), blocked (C,), low (C,))``: ``|r|^2``, ``J^T r`` and
         ``J^T J`` at ``X`` ``(C, n, dof)``, ``W`` ``(Q, N)`` the basis weights of the clearance samples;
-        ``blocked``: a clearance row is not zero (always, without ``avoid``: only smoothness to descend).
+        ``blocked``: a clearance row is not zero (always, without ``avoid``: only smoothness to descend);
+        ``low``: a lower bound of the smallest distance at the samples, from the largest row (a row vanishes
+        at ``cap() + BAND``; a shape's row against the world is at least each obstacle's), ``inf`` without
+        ``avoid``.
         The clearance rows only of the curves ``live`` ``(C,)`` (the others' results are not read)."""
         C, n, dof = X.shape
         P = self.control(X)
@@ -89,18 +109,19 @@ class Curves:
         cost = jnp.sum(rs**2, axis=(1, 2))
         g = jnp.einsum("rk,crj->ckj", D_free, rs).reshape(C, n * dof)
         H = jnp.broadcast_to(jnp.kron(D_free.T @ D_free, jnp.eye(dof, dtype=X.dtype)), (C, n * dof, n * dof))
-        blocked = jnp.full((C,), self.avoid is None)
+        blocked, low = jnp.full((C,), self.avoid is None), jnp.full((C,), jnp.inf, X.dtype)
         if self.avoid is not None:
             q = jnp.einsum("qk,ckj->cqj", W, P)  # (C, Q, dof)
             r, J = self._clearance_rows(q, live)  # (m, C, Q), (m, dof, C, Q)
             Wf = W[:, _spline.ENDS : _spline.ENDS + n]  # (Q, n)
             clearance = jnp.sum(r**2, axis=(0, 2))
             cost, blocked = cost + clearance, clearance > 0
+            low = self.cap() + BAND - jnp.max(r, axis=(0, 2)) / W_CLEAR
             Jr = jnp.einsum("mjcq,mcq->cqj", J, r)  # (C, Q, dof)
             g = g + jnp.einsum("qk,cqj->ckj", Wf, Jr).reshape(C, n * dof)
             G = jnp.einsum("mjcq,mlcq->cqjl", J, J)  # (C, Q, dof, dof)
             H = H + jnp.einsum("qk,qi,cqjl->ckjil", Wf, Wf, G).reshape(C, n * dof, n * dof)
-        return cost, g, H, blocked
+        return cost, g, H, blocked, low
 
     def samples(self, N: int, dtype) -> jax.Array:
         """``(Q, N)`` the basis weights of the clearance samples: :data:`SAMPLES` per segment and the end."""
@@ -108,52 +129,63 @@ class Curves:
         u = np.concatenate([np.arange(segs * SAMPLES) / SAMPLES, [segs]])
         return _spline.basis(jnp.asarray(u, dtype), N).astype(dtype)
 
-    def descend(self, X: jax.Array, iters: int) -> tuple[jax.Array, jax.Array]:
-        """``(X, cost)``: ``X`` ``(C, n, dof)`` after at most ``iters`` Levenberg-Marquardt iterations, and
-        its cost ``(C,)``. A curve stops once it has converged (its last step taken lowered its cost by
-        less than :data:`CONVERGED` of it, or its damping is at its largest), and all of a problem's once
-        one of them is clear of every row, since the last small gains and the smoothness rows alone change
-        the curves only slightly and each iteration costs the clearance rows' distances; a curve stopped is
-        left as it is (a problem's result does not depend on the others in its batch) and measures no
-        distance exactly (a batch's iterations cost its curves still going)."""
+    def start(self, X: jax.Array) -> Descent:
+        """The state of a descent from the free control points ``X`` ``(C, n, dof)``, before its first iteration
+        (which evaluates ``X`` itself: a zero step from an infinite cost)."""
         C, n, dof = X.shape
-        X = self.project(X)
-        W = self.samples(n + 2 * _spline.ENDS, X.dtype)
-        eye = jnp.eye(n * dof, dtype=X.dtype)
+        eye = jnp.broadcast_to(jnp.eye(n * dof, dtype=X.dtype), (C, n * dof, n * dof))
+        real = lambda value: jnp.full((C,), value, X.dtype)  # noqa: E731
+        no = jnp.zeros((C,), bool)
+        return Descent(jnp.int32(0), self.project(X), real(jnp.inf), jnp.zeros((C, n * dof), X.dtype), eye,
+                       ~no, real(_MU_INIT), no, real(-jnp.inf))  # fmt: skip
 
-        def going(blocked, mu, slow) -> jax.Array:
-            """``(C,)`` whether each curve goes on: it has a clearance row and has neither stalled nor
-            converged, and no curve of its problem is clear of every row."""
-            live = blocked & (mu < _MU_MAX) & ~slow
-            if self.avoid is not None:  # a problem with a curve clear of every row is done
-                live = live & jnp.repeat(jnp.all(blocked.reshape(-1, self.k), axis=1), self.k)
-            return live
+    def going(self, state: Descent, stopped=None) -> jax.Array:
+        """``(C,)`` whether each curve goes on: it has a clearance row and has neither stalled nor converged, no
+        curve of its problem is clear of every row, and its problem is not ``stopped`` ``(C,)`` (where given)."""
+        live = state.blocked & (state.mu < _MU_MAX) & ~state.slow
+        if self.avoid is not None:  # a problem with a curve clear of every row is done
+            live = live & jnp.repeat(jnp.all(state.blocked.reshape(-1, self.k), axis=1), self.k)
+        return live if stopped is None else live & ~stopped
 
-        def step(state):
-            it, X, cost, g, H, blocked, mu, slow = state
-            live = going(blocked, mu, slow) | (it == 0)
+    def descend(self, state: Descent, iters, stopped=None) -> Descent:
+        """``state`` after its Levenberg-Marquardt iterations up to the ``iters``-th (an int, may be traced:
+        a descent goes on from where it was, in as many calls as it likes). A curve stops once it has
+        converged (its last step taken lowered its cost by less than :data:`CONVERGED` of it, or its
+        damping is at its largest), and all of a problem's once one of them is clear of every row or
+        where ``stopped`` ``(C,)``: the last small gains and the smoothness rows alone change the curves
+        only slightly and each iteration costs the clearance rows' distances; a curve stopped is left as
+        it is (a problem's result does not depend on the others in its batch) and measures no distance
+        exactly (a batch's iterations cost its curves still going)."""
+        C, n, dof = state.X.shape
+        W = self.samples(n + 2 * _spline.ENDS, state.X.dtype)
+        eye = jnp.eye(n * dof, dtype=state.X.dtype)
+
+        def step(state: Descent) -> Descent:
+            live = self.going(state, stopped) | (state.it == 0)
+            mu, cost = state.mu, state.cost
             lam = jnp.where(jnp.isfinite(cost), mu * cost, 0.0) + 1e-10
             # Cholesky: the damped normal matrix is positive definite (an LU solve permutes its pivots in a loop)
-            factor = jax.scipy.linalg.cho_factor(H + lam[:, None, None] * eye, lower=True)
-            dx = jax.scipy.linalg.cho_solve(factor, -g[..., None])[..., 0]
-            X_try = self.project(X + dx.reshape(C, n, dof))
-            cost_try, g_try, H_try, blocked_try = self.normal(X_try, W, live)
+            factor = jax.scipy.linalg.cho_factor(state.H + lam[:, None, None] * eye, lower=True)
+            dx = jax.scipy.linalg.cho_solve(factor, -state.g[..., None])[..., 0]
+            X_try = self.project(state.X + dx.reshape(C, n, dof))
+            cost_try, g_try, H_try, blocked_try, low_try = self.normal(X_try, W, live)
             take = live & jnp.isfinite(cost_try) & (cost_try < cost)
             pick = lambda new, old: jnp.where(take.reshape((C,) + (1,) * (new.ndim - 1)), new, old)  # noqa: E731
             raised = jnp.where(take, jnp.maximum(mu * _MU_DOWN, _MU_MIN), jnp.minimum(mu * _MU_UP, _MU_MAX))
-            new = (pick(X_try, X), pick(cost_try, cost), pick(g_try, g), pick(H_try, H), pick(blocked_try, blocked))
-            slow = jnp.where(take, cost - cost_try < CONVERGED * cost_try, slow)
-            return (it + 1, *new, jnp.where(live, raised, mu), slow)
+            slow = jnp.where(take, cost - cost_try < CONVERGED * cost_try, state.slow)
+            return Descent(
+                state.it + 1,
+                pick(X_try, state.X),
+                pick(cost_try, cost),
+                pick(g_try, state.g),
+                pick(H_try, state.H),
+                pick(blocked_try, state.blocked),
+                jnp.where(live, raised, mu),
+                slow,
+                pick(low_try, state.low),
+            )
 
-        def more(state):
-            it, blocked, mu, slow = state[0], state[5], state[6], state[7]
-            return (it == 0) | ((it <= iters) & jnp.any(going(blocked, mu, slow)))
+        def more(state: Descent) -> jax.Array:
+            return (state.it == 0) | ((state.it <= iters) & jnp.any(self.going(state, stopped)))
 
-        # the first iteration evaluates X itself (a zero step from an infinite cost): the residual is
-        # compiled once, inside the loop
-        cost = jnp.full((C,), jnp.inf, X.dtype)
-        g, H = jnp.zeros((C, n * dof), X.dtype), jnp.broadcast_to(eye, (C, n * dof, n * dof))
-        mu = jnp.full((C,), _MU_INIT, X.dtype)
-        state = (jnp.int32(0), X, cost, g, H, jnp.ones((C,), bool), mu, jnp.zeros((C,), bool))
-        out = jax.lax.while_loop(more, step, state)
-        return out[1], out[2]
+        return jax.lax.while_loop(more, step, state)

@@ -24,8 +24,9 @@ from diffkin.traj._trajectory import Trajectory
 
 #: joint-space points per segment that measure the path length
 _LENGTH_SAMPLES = 16
-#: curves per problem timed and certified after the descent: the lowest-cost ones
-CERTIFIED = 2
+#: curves per problem timed and certified at a check: the lowest-cost ones (a second one certified solved no more
+#: problems, and each costs about as much as a few descent iterations)
+CERTIFIED = 1
 #: rounds of seeds for a problem without a successful curve, the first included (on the CPU a problem's
 #: later rounds cost only where it failed: problems are planned one at a time; a round's keys do not depend on
 #: how many there are, so more rounds only add successes)
@@ -33,6 +34,9 @@ ROUNDS = 6
 #: metres a later round's clearance rows aim beyond the margin (the first's: :data:`diffkin.traj._descent.EXTRA`):
 #: its problem's first curves came short of the certificate, most often by a few millimetres
 LATER_EXTRA = 0.03
+#: descent iterations after which a problem's best curves are certified (and where its descent ends), while none
+#: has succeeded: most curves clear the certificate after a few
+CHECKS = (4, 12)
 #: vertices of each polytope the seeds and the descent measure (:func:`_searched`; the certificate measures all)
 SEARCH_VERTICES = 32
 
@@ -63,9 +67,10 @@ def optimize(
     collision-aware IK at 8 samples per segment, pushed through the spline's basis; a curve stops once it
     has converged, and a problem once one of its curves is clear of every row; the seeds and the descent
     measure each convex polytope through at most :data:`SEARCH_VERTICES` of its vertices, the certificate the
-    geometry itself: :func:`_searched`); its two curves of lowest
-    cost are then timed and certified (a problem with no successful curve gets new seeds through via points,
-    descended to :data:`LATER_EXTRA` beyond the margin, up to :data:`ROUNDS` rounds in all):
+    geometry itself: :func:`_searched`). After 4 and 12 iterations (:data:`CHECKS`) and where the descent
+    ends, the curve of lowest cost (of those whose samples clear the margin, if any) is timed and certified, and
+    the problem stops at its first success (a problem with none gets new seeds through via points, descended to
+    :data:`LATER_EXTRA` beyond the margin, up to :data:`ROUNDS` rounds in all):
 
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
@@ -75,9 +80,9 @@ def optimize(
       shapes can move within it, from the joint speeds and each joint's reach to the shapes it moves:
       :mod:`diffkin.traj._certify`).
 
-    The best of them is kept: the first successful one (of the shortest duration in its round), else the
-    one with the largest certified clearance. Failures stay honest: ``success=False`` with finite values
-    and the reason in ``goal_ok``, ``limits_ok``, ``clear``. Problems are independent (a world per
+    The first successful curve is kept, else the one with the largest certified clearance. Failures stay
+    honest: ``success=False`` with finite values and the reason in ``goal_ok``, ``limits_ok``, ``clear``.
+    Problems are independent (a world per
     problem where ``avoid.world`` has problem axes): a problem's motion depends on its own data and its
     place in the batch (its seeds' key) only. On the CPU one compiled loop plans them one after another
     (a batch costs the sum of its problems, not its slowest times their number); elsewhere all at once.
@@ -420,21 +425,61 @@ def _round(
     """One round of :func:`_plan`: ``(P, h, clearance, clear, limits_ok, duration, success)``, each problem's
     best curve of ``seeds`` (the straight line among them where ``first``, a traced bool), descended on
     ``searched`` (aiming :data:`~diffkin.traj._descent.EXTRA` beyond the margin in the first round,
-    :data:`LATER_EXTRA` in later ones), its two of lowest cost timed and certified on ``avoid``."""
+    :data:`LATER_EXTRA` in later ones), its best curve timed and certified on ``avoid`` (:func:`_judged`) after
+    :data:`CHECKS` iterations and where its descent ends: a problem stops at its first success (most curves clear
+    the certificate after a few iterations; the rest of the descent would only smooth them). A check before the
+    end certifies only a problem with a curve whose samples clear the margin (a curve through it fails)."""
     lower, upper = jnp.asarray(model.lower, q_start.dtype), jnp.asarray(model.upper, q_start.dtype)
-    velocity, acceleration, jerk = bounds
     B, dof = q_start.shape
     extra = jnp.where(first, EXTRA, LATER_EXTRA)
     ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, searched, base, 1, extra)
     X = _seeds.seeds(ends, seeds, free, keys, first)  # (B, k, free, dof)
     rep = lambda x: None if x is None else jnp.repeat(x, seeds, axis=0)  # noqa: E731
     curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), searched, base, seeds, extra)
-    X, cost = curves.descend(X.reshape(B * seeds, free, dof), iters)
-    P = curves.control(X).reshape(B, seeds, free + 6, dof)
-    # only the lowest-cost curves of each problem are timed and certified (the certificate's distances
-    # cost about as much as a few descent iterations per curve)
+    judged = lambda state: _judged(model, curves, state, avoid, bounds, reach, base, locked, lower, upper)  # noqa: E731
+    until = jnp.asarray(sorted({min(c, iters) for c in CHECKS} | {iters}), jnp.int32)
+
+    def more(carry):
+        c, state, _, done = carry
+        return (c == 0) | ((c < until.shape[0]) & ~jnp.all(done) & jnp.any(curves.going(state, rep(done))))
+
+    def body(carry):
+        c, state, best, done = carry
+        state = curves.descend(state, until[c], rep(done))
+        # a problem is judged where its descent has ended (its last check) or, among obstacles, where a curve's
+        # samples clear the margin (the certificate of a curve through it would fail)
+        ended = ~jnp.any(curves.going(state).reshape(B, seeds), axis=1) | (c == until.shape[0] - 1)
+        judge = ~done & ended
+        if avoid is not None:
+            judge = judge | (~done & jnp.any(state.low.reshape(B, seeds) >= avoid.margin, axis=1))
+        new = jax.lax.cond(jnp.any(judge), judged, lambda _: best, state)
+        keep = lambda n, b: jnp.where(judge.reshape((-1,) + (1,) * (n.ndim - 1)), n, b)  # noqa: E731
+        best = jax.tree.map(keep, new, best)
+        return c + 1, state, best, done | best[-1]
+
+    state = curves.start(X.reshape(B * seeds, free, dof))
+    real, no = jnp.zeros((B,), q_start.dtype), jnp.zeros((B,), bool)
+    start = (jnp.zeros((B, free + 6, dof), q_start.dtype), real, real, no, no, real, no)  # (a check replaces it)
+    _, _, best, _ = jax.lax.while_loop(more, body, (jnp.int32(0), state, start, no))
+    return best
+
+
+def _judged(model, curves: Curves, state, avoid, bounds, reach, base, locked, lower, upper):
+    """``(P, h, clearance, clear, limits_ok, duration, success)`` per problem: of its :data:`CERTIFIED` curves of
+    lowest cost in the descent's ``state`` (those whose samples clear the margin first), timed and certified on
+    ``avoid``, the best (:func:`_score`)."""
+    velocity, acceleration, jerk = bounds
+    margin = -jnp.inf if avoid is None else avoid.margin
+    C, free, dof = state.X.shape
+    seeds = curves.k
+    B = C // seeds
+    P = curves.control(state.X).reshape(B, seeds, free + 6, dof)
+    # only the lowest-cost curves of each problem are timed and certified, those whose samples clear the margin
+    # first (the certificate's distances cost about as much as a few descent iterations per curve)
     k = min(seeds, CERTIFIED)
-    _, kept = jax.lax.top_k(-jnp.where(jnp.isnan(cost), jnp.inf, cost).reshape(B, seeds), k)
+    cost = jnp.where(jnp.isnan(state.cost), jnp.inf, state.cost).reshape(B, seeds)
+    through = (state.low < margin).reshape(B, seeds)
+    kept = jnp.lexsort((cost, through))[:, :k]
     P = jnp.take_along_axis(P, kept[:, :, None, None], axis=1)  # (B, k, N, dof)
     h = _spline.segment_time(P, velocity, acceleration, jerk)  # (B, k)
     v, a, j = _spline.derivative_bounds(P)
@@ -449,7 +494,7 @@ def _round(
         clearance = jnp.where(jnp.isnan(clearance), -jnp.inf, clearance)
         clear = clearance >= avoid.margin
     else:
-        clearance = jnp.full((B, k), jnp.inf, q_start.dtype)
+        clearance = jnp.full((B, k), jnp.inf, P.dtype)
         clear = jnp.ones((B, k), bool)
     duration = _spline.segments(free + 6) * h
     ok = limits_ok & clear

@@ -3,7 +3,8 @@
 A problem stops once its curves have converged (a step lowers the cost by less than ``CONVERGED`` of
 it), not at the iteration cap: more iterations allowed change nothing. Without obstacles the residual
 is the control polygon's weighted differences, linear in the free control points, so the curve it
-stops at is checked against numpy's least squares; among obstacles, it is pushed away from them.
+stops at is checked against numpy's least squares; among obstacles, it is pushed away from them. A descent
+resumed from its state runs the iterations of one uninterrupted.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ def _curves(avoid) -> Curves:
 
 
 def _descend(curves: Curves, iters: int) -> np.ndarray:
-    return np.asarray(jax.jit(curves.descend, static_argnums=1)(X, iters)[0])
+    return np.asarray(jax.jit(lambda X: curves.descend(curves.start(X), iters).X)(X))
 
 
 def _smoothest() -> np.ndarray:
@@ -70,3 +71,21 @@ def test_among_obstacles_it_stops_converged_clearer(radius):
     out = _descend(curves, 30)
     np.testing.assert_array_equal(out, _descend(curves, 300))
     assert _smallest(curves, out) > max(_smallest(curves, X), 0.0) + 0.01
+
+
+def test_a_descent_goes_on_from_where_it_stopped():
+    # dk.traj certifies its curves at checks and resumes the descent after a failed one: the iterations in
+    # two calls are those of one
+    world = World(Sphere(jnp.array([[(0.0, 0.0, 1.3)]], jnp.float32), jnp.array([[0.3]], jnp.float32)))
+    curves = _curves(dk.ik.Avoid(GEOM, world, 0.01).cast(jnp.float32).flat((1,)))
+
+    @jax.jit
+    def both(X):
+        whole = curves.descend(curves.start(X), 30)
+        parts = curves.descend(curves.descend(curves.start(X), 4), 30)
+        return whole, parts
+
+    whole, parts = both(X)
+    assert 4 < int(whole.it) <= 31
+    for a, b in zip(whole, parts, strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
