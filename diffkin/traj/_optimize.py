@@ -70,7 +70,8 @@ def optimize(
     geometry itself: :func:`_searched`). After 4 and 12 iterations (:data:`CHECKS`) and where the descent
     ends, the curve of lowest cost (of those whose samples clear the margin, if any) is timed and certified, and
     the problem stops at its first success (a problem with none gets new seeds through via points, descended to
-    :data:`LATER_EXTRA` beyond the margin, up to :data:`ROUNDS` rounds in all):
+    :data:`LATER_EXTRA` beyond the margin, up to :data:`ROUNDS` rounds in all; one whose start or goal is
+    off the joint limits or within the margin of ``avoid``, where no motion succeeds, only the first):
 
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
@@ -354,7 +355,9 @@ def _plan(
     ends are (a goal IK missed, a non-finite start: no more rounds for it); ``keys`` ``(B,)``, one per problem
     (a problem's result does not depend on the others planned with it).
 
-    Up to :data:`ROUNDS` rounds (:func:`_round`), while a problem has no successful curve: round ``r > 0``
+    Up to :data:`ROUNDS` rounds (:func:`_round`), while a problem has no successful curve and could have one (its
+    ends within the limits and clear of ``searched``, as its first round measured them; else one round): round
+    ``r > 0``
     draws its seeds from ``fold_in(key, r)`` and no straight line (round 0 descended it). A problem keeps its
     first success, else its largest certified clearance (its result does not depend on whether others
     planned with it needed more rounds). ``avoid`` is what the certificate measures, ``searched`` what the
@@ -381,20 +384,21 @@ def _plan(
         )
 
     def more(state):
-        r, best = state
-        return (r == 0) | ((r < ROUNDS) & ~jnp.all(best[-1] | ~valid))
+        r, best, hopeful = state
+        return (r == 0) | ((r < ROUNDS) & ~jnp.all(best[-1] | ~hopeful))
 
     def body(state):
-        r, best = state
-        new = attempt(r)
-        better = (r == 0) | (valid & ~best[-1] & (_score(new) > _score(best)))
+        r, best, hopeful = state
+        new, possible = attempt(r)
+        hopeful = jnp.where(r == 0, valid & possible, hopeful)
+        better = (r == 0) | (hopeful & ~best[-1] & (_score(new) > _score(best)))
         keep = lambda n, b: jnp.where(better.reshape((-1,) + (1,) * (n.ndim - 1)), n, b)  # noqa: E731
-        return r + 1, jax.tree.map(keep, new, best)
+        return r + 1, jax.tree.map(keep, new, best), hopeful
 
     B, dof = q_start.shape
     real, no = jnp.zeros((B,), q_start.dtype), jnp.zeros((B,), bool)
     start = (jnp.zeros((B, free + 6, dof), q_start.dtype), real, real, no, no, real, no)  # (round 0 replaces it)
-    _, best = jax.lax.while_loop(more, body, (jnp.int32(0), start))
+    _, best, _ = jax.lax.while_loop(more, body, (jnp.int32(0), start, no))
     return best[:5]
 
 
@@ -422,18 +426,23 @@ def _round(
     seeds: int,
     iters: int,
 ):
-    """One round of :func:`_plan`: ``(P, h, clearance, clear, limits_ok, duration, success)``, each problem's
-    best curve of ``seeds`` (the straight line among them where ``first``, a traced bool), descended on
+    """One round of :func:`_plan`: ``((P, h, clearance, clear, limits_ok, duration, success), possible)``, each
+    problem's best curve of ``seeds`` (the straight line among them where ``first``, a traced bool), descended on
     ``searched`` (aiming :data:`~diffkin.traj._descent.EXTRA` beyond the margin in the first round,
     :data:`LATER_EXTRA` in later ones), its best curve timed and certified on ``avoid`` (:func:`_judged`) after
     :data:`CHECKS` iterations and where its descent ends: a problem stops at its first success (most curves clear
     the certificate after a few iterations; the rest of the descent would only smooth them). A check before the
-    end certifies only a problem with a curve whose samples clear the margin (a curve through it fails)."""
+    end certifies only a problem with a curve whose samples clear the margin (a curve through it fails).
+    ``possible`` ``(B,)``: whether the problem's ends lie within the limits and clear ``searched`` by the margin
+    (else no motion succeeds: a certified clearance is at most the ends' distances, which ``searched``'s are at
+    least)."""
     lower, upper = jnp.asarray(model.lower, q_start.dtype), jnp.asarray(model.upper, q_start.dtype)
     B, dof = q_start.shape
     extra = jnp.where(first, EXTRA, LATER_EXTRA)
     ends = Curves(model, q_start, q_goal, lower, upper, locked, locked_q, searched, base, 1, extra)
-    X = _seeds.seeds(ends, seeds, free, keys, first)  # (B, k, free, dof)
+    X, ends_clear = _seeds.seeds(ends, seeds, free, keys, first)  # (B, k, free, dof), (B,)
+    held = jnp.asarray(locked)
+    within = jnp.all(((q_start >= lower) & (q_start <= upper) & (q_goal >= lower) & (q_goal <= upper)) | held, axis=1)
     rep = lambda x: None if x is None else jnp.repeat(x, seeds, axis=0)  # noqa: E731
     curves = Curves(model, rep(q_start), rep(q_goal), lower, upper, locked, rep(locked_q), searched, base, seeds, extra)
     judged = lambda state: _judged(model, curves, state, avoid, bounds, reach, base, locked, lower, upper)  # noqa: E731
@@ -461,7 +470,7 @@ def _round(
     real, no = jnp.zeros((B,), q_start.dtype), jnp.zeros((B,), bool)
     start = (jnp.zeros((B, free + 6, dof), q_start.dtype), real, real, no, no, real, no)  # (a check replaces it)
     _, _, best, _ = jax.lax.while_loop(more, body, (jnp.int32(0), state, start, no))
-    return best
+    return best, within & ends_clear
 
 
 def _judged(model, curves: Curves, state, avoid, bounds, reach, base, locked, lower, upper):

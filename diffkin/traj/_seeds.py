@@ -51,15 +51,18 @@ def _anywhere(keys, lower, upper, count: int, dtype) -> jax.Array:
     return _uniform(keys, count, lo, hi, dtype)
 
 
-def seeds(curves, count: int, free: int, keys, first=True) -> jax.Array:
-    """``(B, count, free, dof)``: the straight line, then ``count - 1`` lines through via points, for the
-    problems of ``curves`` (:class:`diffkin.traj._descent.Curves` of one curve per problem), each problem's
-    drawn from its own PRNG key of ``keys`` ``(B,)``; where ``first`` (a bool, traced or not) is false, ``count``
-    lines through via points (a later round: the straight line was descended before)."""
+def seeds(curves, count: int, free: int, keys, first=True) -> tuple[jax.Array, jax.Array]:
+    """``(X, ends_clear)``: ``X`` ``(B, count, free, dof)`` the straight line, then ``count - 1`` lines through via
+    points, for the problems of ``curves`` (:class:`diffkin.traj._descent.Curves` of one curve per problem),
+    each problem's drawn from its own PRNG key of ``keys`` ``(B,)``; where ``first`` (a bool, traced or not) is
+    false, ``count`` lines through via points (a later round: the straight line was descended before).
+    ``ends_clear`` ``(B,)``: whether the start and the goal clear ``curves.avoid`` by its margin (measured with
+    the candidates; exact below it; true without ``avoid``)."""
     q_start, q_goal, lower, upper = curves.q_start, curves.q_goal, curves.lower, curves.upper
     line = lines(q_start, q_goal, (q_start + q_goal)[:, None] / 2, free)
     if curves.avoid is None:
         chosen = lines(q_start, q_goal, _near_middle(keys, q_start, q_goal, lower, upper, count), free)
+        ends_clear = jnp.ones(q_start.shape[:1], bool)
     else:
         k_any, k_mid = jax.vmap(jax.random.split, out_axes=1)(keys)
         drawn = max(CANDIDATES, count)
@@ -75,15 +78,18 @@ def seeds(curves, count: int, free: int, keys, first=True) -> jax.Array:
             via = jnp.where(jnp.asarray(curves.locked), curves.locked_q[:, None], via)
         X = lines(q_start, q_goal, via, free)  # (B, M, free, dof)
         length = jnp.linalg.norm(via - q_start[:, None], axis=-1) + jnp.linalg.norm(q_goal[:, None] - via, axis=-1)
-        score = jnp.minimum(clearance(curves, X), curves.cap()) - PER_RADIAN * length
+        smallest, ends = clearance(curves, X)
+        score = jnp.minimum(smallest, curves.cap()) - PER_RADIAN * length
+        ends_clear = jnp.all(ends >= curves.avoid.margin, axis=1)
         _, best = jax.lax.top_k(score, count)  # (B, count)
         chosen = jnp.take_along_axis(X, best[:, :, None, None], axis=1)
-    return jnp.where(first, jnp.concatenate([line, chosen[:, : count - 1]], axis=1), chosen)
+    return jnp.where(first, jnp.concatenate([line, chosen[:, : count - 1]], axis=1), chosen), ends_clear
 
 
-def clearance(curves, X: jax.Array) -> jax.Array:
-    """``(B, V)``: the smallest distance (counted up to ``curves.cap()``) along the curves of free control
-    points ``X`` ``(B, V, n, dof)`` of ``curves``' problems, at :data:`SAMPLES` points per segment and the end."""
+def clearance(curves, X: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """``(smallest (B, V), ends (B, 2))``: the smallest distance (counted up to ``curves.cap()``) along the curves
+    of free control points ``X`` ``(B, V, n, dof)`` of ``curves``' problems, at :data:`SAMPLES` points per
+    segment and the end, and at their start and goal (which all share)."""
     B, V, n, dof = X.shape
     ends = lambda q: jnp.broadcast_to(q[:, None], (B, V, dof))  # noqa: E731
     P = _spline.control_points(ends(curves.q_start), X, ends(curves.q_goal))  # (B, V, N, dof)
@@ -92,4 +98,4 @@ def clearance(curves, X: jax.Array) -> jax.Array:
     q = _spline.evaluate(P[:, :, None], u).reshape(B * V, -1, dof)  # (B V, Q, dof)
     d_self, d_world = _rows.distances(curves.model, curves.avoid, curves.locked, curves.base, V, q, curves.cap())
     d = _rows.smallest(d_self, d_world, (B * V, q.shape[1]), X.dtype)  # (B V, Q)
-    return jnp.min(d, axis=-1).reshape(B, V)
+    return jnp.min(d, axis=-1).reshape(B, V), d.reshape(B, V, -1)[:, 0, jnp.array([0, -1])]

@@ -1,6 +1,6 @@
 """dk.traj.optimize: certified clearance (never above what dense sampling measures, and below zero for
 a motion that passes through an obstacle between its knots), limits on the continuous motion, a
-narrow passage, joint and pose goals, a world per problem, bad input.
+narrow passage, joint and pose goals, a world per problem, a goal in contact, bad input.
 
 A two-link arm in the x-z plane (the collision example of docs/collision.md) among spheres; one
 compiled program per shape of call, shared by the tests (module level).
@@ -128,6 +128,23 @@ def test_a_later_round_solves_what_the_first_missed():
     world = jax.tree.map(lambda x: x[:1], WORLDS)
     assert _sampled_clearance(q, world).min() >= float(traj.clearance[0]) - 1e-6
     assert np.max(np.abs(np.asarray(traj.control[0, :, 1]))) > 0.2  # the elbow bends (straight: 0 throughout)
+
+
+def test_a_goal_in_contact_fails_honestly(planned):
+    # problem 2's goal inside a sphere (around its lower link's frame): no motion succeeds (it gets one
+    # round); its result is finite, marked not clear, its certified clearance at most the goal's, and the
+    # other problems' motions are as before
+    centre = np.asarray(dk.fk(ROBOT, GOAL[2], "lower"))[:3, 3].astype(np.float32)
+    worlds = jax.tree.map(lambda x: x.at[2].set(x[0]), WORLDS)
+    worlds = World(Sphere(worlds.spheres.center.at[2, 0].set(centre), worlds.spheres.radius.at[2, 0].set(0.05)))
+    goal_clearance = float(_sampled_clearance(GOAL[None], worlds)[0, 2])
+    assert goal_clearance < 0
+    traj = _plan(START, GOAL, worlds)
+    assert not bool(traj.success[2]) and not bool(traj.clear[2])
+    assert bool(traj.goal_ok[2]) and bool(traj.limits_ok[2])
+    assert float(traj.clearance[2]) <= goal_clearance + 1e-6
+    assert all(np.all(np.isfinite(np.asarray(x))) for x in (traj.control, traj.clearance, traj.duration))
+    np.testing.assert_allclose(np.asarray(traj.control[:2]), np.asarray(planned.control[:2]), rtol=1e-6, atol=1e-6)
 
 
 def test_limits_hold_on_the_continuous_motion(planned):
