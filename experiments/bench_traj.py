@@ -73,6 +73,7 @@ HEADER = [
     "success off goal",
     "motion time (s, mean solved)",
     "path length (rad, mean solved)",
+    "jerk (rad/s^3, RMS, mean solved)",
     "warm (s / problem)",
 ]
 PEER_HEADER = [
@@ -98,6 +99,14 @@ def velocity_limits(urdf: str, robot: dk.Robot) -> np.ndarray:
         j.get("name"): float(j.find("limit").get("velocity")) for j in root.iter("joint") if j.find("limit") is not None
     }
     return np.array([found[name] for name in robot.joint_names])
+
+
+def rms_jerk(traj) -> np.ndarray:
+    """Per motion, the root mean square over its duration of the joint-space jerk's norm (rad/s^3): a cubic
+    B-spline's jerk is constant on each segment, its control points' third differences over ``h^3``."""
+    h = np.asarray(traj.segment_time, np.float64)
+    third = np.diff(np.asarray(traj.control, np.float64), 3, axis=-2)  # (n, segments, dof), per u^3
+    return np.sqrt(np.mean(np.sum(third**2, axis=-1), axis=-1)) / h**3
 
 
 def plan(robot, geom, problems: list, kind: str, limits, args, dtype):
@@ -206,7 +215,7 @@ def main(argv=None) -> int:
         _, firsts[kind] = plan(robot, geom, first_scene, kind, limits, args, dtype)
         print(f"# {kind}: first call ({len(first_scene)} problems, compile included) {firsts[kind]:.1f} s", flush=True)
         total = {"problems": 0, "solvable": 0, "success": 0, "solved": 0, "contact": 0, "off limits": 0,
-                 "off goal": 0, "time": [], "length": [], "warm": 0.0}  # fmt: skip
+                 "off goal": 0, "time": [], "length": [], "jerk": [], "warm": 0.0}  # fmt: skip
         for scene, problems in scenes.items():
             traj, warm = plan(robot, geom, problems, kind, limits, args, dtype)
             j = judge_motions(judge, traj, problems, kind, limits, args.samples)
@@ -227,6 +236,7 @@ def main(argv=None) -> int:
                 "off goal": int((success & ~j["goal"]).sum()),
                 "time": list(np.asarray(traj.duration)[solved]),
                 "length": list(np.asarray(traj.path_length)[solved]),
+                "jerk": list(rms_jerk(traj)[solved]),
                 "warm": warm,
             }
             for key, value in c.items():
@@ -368,6 +378,7 @@ def _row(scene: str, kind: str, c: dict) -> list[str]:
         str(c["off goal"]),
         mean(c["time"]),
         mean(c["length"]),
+        mean(c["jerk"]),
         f"{c['warm'] / max(c['problems'], 1):.3f}",
     ]
 
