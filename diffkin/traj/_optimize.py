@@ -39,9 +39,6 @@ LATER_EXTRA = 0.03
 CHECKS = (4, 12)
 #: vertices of each polytope the seeds and the descent measure (:func:`_searched`; the certificate measures all)
 SEARCH_VERTICES = 32
-#: curves per problem (those of lowest cost) that descend on after the first check: by then the others mostly still
-#: pass through obstacles, and each costs its distances per iteration
-KEPT = 2
 
 
 def optimize(
@@ -70,12 +67,11 @@ def optimize(
     collision-aware IK at 8 samples per segment, pushed through the spline's basis; a curve stops once it
     has converged, and a problem once one of its curves is clear of every row; the seeds and the descent
     measure each convex polytope through at most :data:`SEARCH_VERTICES` of its vertices, the certificate the
-    geometry itself: :func:`_searched`; after the first check only a problem's :data:`KEPT` curves of lowest
-    cost descend on). After 4 and 12 iterations (:data:`CHECKS`) and where the descent ends, the curve of lowest
-    cost (of those whose samples clear the margin, if any) is timed and certified, and the problem stops at its
-    first success (a problem with none gets new seeds through via points, descended to :data:`LATER_EXTRA`
-    beyond the margin, up to :data:`ROUNDS` rounds in all; one whose start or goal is off the joint limits or
-    within the margin of ``avoid``, where no motion succeeds, only the first):
+    geometry itself: :func:`_searched`). After 4 and 12 iterations (:data:`CHECKS`) and where the descent
+    ends, the curve of lowest cost (of those whose samples clear the margin, if any) is timed and certified, and
+    the problem stops at its first success (a problem with none gets new seeds through via points, descended to
+    :data:`LATER_EXTRA` beyond the margin, up to :data:`ROUNDS` rounds in all; one whose start or goal is
+    off the joint limits or within the margin of ``avoid``, where no motion succeeds, only the first):
 
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
@@ -436,8 +432,7 @@ def _round(
     :data:`LATER_EXTRA` in later ones), its best curve timed and certified on ``avoid`` (:func:`_judged`) after
     :data:`CHECKS` iterations and where its descent ends: a problem stops at its first success (most curves clear
     the certificate after a few iterations; the rest of the descent would only smooth them). A check before the
-    end certifies only a problem with a curve whose samples clear the margin (a curve through it fails). After
-    the first check only each problem's :data:`KEPT` curves of lowest cost descend on.
+    end certifies only a problem with a curve whose samples clear the margin (a curve through it fails).
     ``possible`` ``(B,)``: whether the problem's ends lie within the limits and clear ``searched`` by the margin
     (else no motion succeeds: a certified clearance is at most the ends' distances, which ``searched``'s are at
     least)."""
@@ -454,36 +449,28 @@ def _round(
     until = jnp.asarray(sorted({min(c, iters) for c in CHECKS} | {iters}), jnp.int32)
 
     def more(carry):
-        c, state, _, done, dropped = carry
-        return (c == 0) | ((c < until.shape[0]) & ~jnp.all(done) & jnp.any(curves.going(state, rep(done) | dropped)))
+        c, state, _, done = carry
+        return (c == 0) | ((c < until.shape[0]) & ~jnp.all(done) & jnp.any(curves.going(state, rep(done))))
 
     def body(carry):
-        c, state, best, done, dropped = carry
-        state = curves.descend(state, until[c], rep(done) | dropped)
-        # after the first check only each problem's KEPT curves of lowest cost descend on
-        rank = jnp.argsort(jnp.argsort(_cost(state).reshape(B, seeds), axis=1), axis=1).reshape(-1)
-        dropped = dropped | ((c == 0) & (rank >= KEPT))
+        c, state, best, done = carry
+        state = curves.descend(state, until[c], rep(done))
         # a problem is judged where its descent has ended (its last check) or, among obstacles, where a curve's
         # samples clear the margin (the certificate of a curve through it would fail)
-        ended = ~jnp.any(curves.going(state, dropped).reshape(B, seeds), axis=1) | (c == until.shape[0] - 1)
+        ended = ~jnp.any(curves.going(state).reshape(B, seeds), axis=1) | (c == until.shape[0] - 1)
         judge = ~done & ended
         if avoid is not None:
             judge = judge | (~done & jnp.any(state.low.reshape(B, seeds) >= avoid.margin, axis=1))
         new = jax.lax.cond(jnp.any(judge), judged, lambda _: best, state)
         keep = lambda n, b: jnp.where(judge.reshape((-1,) + (1,) * (n.ndim - 1)), n, b)  # noqa: E731
         best = jax.tree.map(keep, new, best)
-        return c + 1, state, best, done | best[-1], dropped
+        return c + 1, state, best, done | best[-1]
 
     state = curves.start(X.reshape(B * seeds, free, dof))
     real, no = jnp.zeros((B,), q_start.dtype), jnp.zeros((B,), bool)
     start = (jnp.zeros((B, free + 6, dof), q_start.dtype), real, real, no, no, real, no)  # (a check replaces it)
-    _, _, best, _, _ = jax.lax.while_loop(more, body, (jnp.int32(0), state, start, no, jnp.zeros((B * seeds,), bool)))
+    _, _, best, _ = jax.lax.while_loop(more, body, (jnp.int32(0), state, start, no))
     return best, within & ends_clear
-
-
-def _cost(state) -> jax.Array:
-    """``(C,)`` each curve's cost in the descent's ``state``, ``inf`` where it is NaN."""
-    return jnp.where(jnp.isnan(state.cost), jnp.inf, state.cost)
 
 
 def _judged(model, curves: Curves, state, avoid, bounds, reach, base, locked, lower, upper):
@@ -499,7 +486,7 @@ def _judged(model, curves: Curves, state, avoid, bounds, reach, base, locked, lo
     # only the lowest-cost curves of each problem are timed and certified, those whose samples clear the margin
     # first (the certificate's distances cost about as much as a few descent iterations per curve)
     k = min(seeds, CERTIFIED)
-    cost = _cost(state).reshape(B, seeds)
+    cost = jnp.where(jnp.isnan(state.cost), jnp.inf, state.cost).reshape(B, seeds)
     through = (state.low < margin).reshape(B, seeds)
     kept = jnp.lexsort((cost, through))[:, :k]
     P = jnp.take_along_axis(P, kept[:, :, None, None], axis=1)  # (B, k, N, dof)
