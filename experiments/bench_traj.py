@@ -177,7 +177,7 @@ def main(argv=None) -> int:
     parser.add_argument("--per-scene", type=int, metavar="N", help="N problems per scene, spread evenly")
     parser.add_argument("--scenes", help="comma-separated scenes")
     parser.add_argument("--goals", default="goal_q,goal_pose", help="goal_q, goal_pose or both (default)")
-    parser.add_argument("--knots", type=int, default=12)
+    parser.add_argument("--knots", type=int, default=10)
     parser.add_argument("--seeds", type=int, default=4)
     parser.add_argument("--iters", type=int, default=30)
     parser.add_argument("--samples", type=int, default=200, help="coal samples per motion (default 200)")

@@ -48,7 +48,7 @@ def optimize(
     *,
     avoid: Avoid | None = None,
     limits: _limits.Limits | None = None,
-    knots: int = 12,
+    knots: int = 10,
     key=None,
     num_seeds: int = 4,
     max_iters: int = 30,
@@ -104,7 +104,8 @@ def optimize(
         limits: :class:`Limits`; default: the model's ``velocity`` (a URDF's ``<limit velocity>``;
             :data:`diffkin.traj._limits.DEFAULT_VELOCITY`, 1 rad/s, for a joint without one) and
             :data:`~diffkin.traj._limits.DEFAULT_ACCELERATION` (2 rad/s^2) per joint, no jerk bound.
-        knots: static, ``K >= 5``.
+        knots: static, ``K >= 5``: more make the segments shorter (the descent's samples and the certificate's
+            pieces closer along the motion), each iteration dearer.
         key: PRNG key of the random seeds (and of a pose goal's IK); default ``jax.random.key(0)``.
         num_seeds: static, ``>= 1`` seeds per problem (the first the straight line).
         max_iters: static, ``>= 0`` iterations per seed.
