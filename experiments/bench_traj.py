@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import inspect
 import json
 import sys
 import time
@@ -177,9 +178,10 @@ def main(argv=None) -> int:
     parser.add_argument("--per-scene", type=int, metavar="N", help="N problems per scene, spread evenly")
     parser.add_argument("--scenes", help="comma-separated scenes")
     parser.add_argument("--goals", default="goal_q,goal_pose", help="goal_q, goal_pose or both (default)")
-    parser.add_argument("--knots", type=int, default=10)
-    parser.add_argument("--seeds", type=int, default=4)
-    parser.add_argument("--iters", type=int, default=30)
+    defaults = inspect.signature(dk.traj.optimize).parameters  # the library's, so the benchmark follows them
+    parser.add_argument("--knots", type=int, default=defaults["knots"].default)
+    parser.add_argument("--seeds", type=int, default=defaults["num_seeds"].default)
+    parser.add_argument("--iters", type=int, default=defaults["max_iters"].default)
     parser.add_argument("--samples", type=int, default=200, help="coal samples per motion (default 200)")
     parser.add_argument("--dtype", choices=("float32", "float64"), default="float32")
     parser.add_argument("--write", action="store_true", help="write experiments/results/<machine>-traj.md")
