@@ -13,9 +13,10 @@ Only the pairs that a piece's motion could bring within the margin need their ex
 others get a cheap lower bound at least ``margin + 2 max_s delta_s + 1 cm``, the largest motion of the
 piece's shapes (:func:`diffkin.collision._near`),
 which keeps their pieces above the margin. Pieces of one size (rather than a tree of halvings, whose
-coarse pieces move far and so need almost every pair exactly) keep that reach short; then the few pieces
-of each curve whose bound is lowest (where a curve passes close to an obstacle) are cut finer, which
-tightens the bound where it decides, at a fixed cost.
+coarse pieces move far and so need almost every pair exactly) keep that reach short; then, where a curve's
+bound falls below the margin, the few pieces of each curve whose bound is lowest (where a curve passes close
+to an obstacle) are cut finer, which tightens the bound where it decides, at a fixed cost (a curve certified
+by its pieces is not: that cost would change nothing but how far above the margin its bound is).
 """
 
 from __future__ import annotations
@@ -80,9 +81,11 @@ def certified(
     motion of a piece plus 1 cm; a cheap lower bound, beyond that, for the others: at least the certified
     bound, at most the true smallest where it is within that reach).
 
-    Each segment is cut into ``pieces`` pieces; the :data:`REFINED` pieces of lowest bound of each curve
-    are then cut into :data:`SUB` sub-pieces each, and a refined piece's bound is the larger of its own and
-    its sub-pieces' smallest (both hold).
+    Each segment is cut into ``pieces`` pieces. Where a curve's bound falls below ``avoid.margin`` (any curve
+    of the batch: one test), the :data:`REFINED` pieces of lowest bound of each curve are then cut into
+    :data:`SUB` sub-pieces each, and a refined piece's bound is the larger of its own and its sub-pieces'
+    smallest (both hold); a batch whose curves all clear the margin keeps the pieces' bound (the curves are
+    certified already, and the finer pieces cost about as much again).
 
     ``avoid``'s world is shared or one per problem, flat ``(B, n_kind)`` (:meth:`diffkin.ik.Avoid.flat`);
     ``base`` ``(B, 4, 4)`` or ``None``; ``reach`` ``(dof, S)`` (:func:`diffkin.traj._reach.reach`).
@@ -93,11 +96,20 @@ def certified(
     mids = jnp.broadcast_to(jnp.asarray((np.arange(segs * pieces) + 0.5) / pieces, P.dtype), (B, K, segs * pieces))
     lower, sampled = _bounds(model, avoid, reach, P, mids, half, base, locked)
     refined = min(REFINED, segs * pieces)
-    _, worst = jax.lax.top_k(-lower, refined)  # (B, K, F)
-    offsets = jnp.asarray((2 * np.arange(SUB) + 1 - SUB) / SUB * half, P.dtype)  # sub-pieces' middles
-    u = jnp.take_along_axis(mids, worst, axis=-1)[..., None] + offsets  # (B, K, F, SUB)
-    fine, fine_sampled = _bounds(model, avoid, reach, P, u.reshape(B, K, -1), half / SUB, base, locked)
-    fine = jnp.min(fine.reshape(B, K, refined, SUB), axis=-1)
-    coarse = jnp.take_along_axis(lower, worst, axis=-1)
-    lower = jnp.put_along_axis(lower, worst, jnp.maximum(coarse, fine), axis=-1, inplace=False)
-    return jnp.min(lower, axis=-1), jnp.minimum(jnp.min(sampled, axis=-1), jnp.min(fine_sampled, axis=-1))
+
+    def finer(lower):
+        _, worst = jax.lax.top_k(-lower, refined)  # (B, K, F)
+        offsets = jnp.asarray((2 * np.arange(SUB) + 1 - SUB) / SUB * half, P.dtype)  # sub-pieces' middles
+        u = jnp.take_along_axis(mids, worst, axis=-1)[..., None] + offsets  # (B, K, F, SUB)
+        fine, fine_sampled = _bounds(model, avoid, reach, P, u.reshape(B, K, -1), half / SUB, base, locked)
+        fine = jnp.min(fine.reshape(B, K, refined, SUB), axis=-1)
+        coarse = jnp.take_along_axis(lower, worst, axis=-1)
+        lower = jnp.put_along_axis(lower, worst, jnp.maximum(coarse, fine), axis=-1, inplace=False)
+        return jnp.min(lower, axis=-1), jnp.min(fine_sampled, axis=-1)
+
+    def kept(lower):
+        return jnp.min(lower, axis=-1), jnp.full((B, K), jnp.inf, P.dtype)
+
+    below = jnp.any(jnp.min(lower, axis=-1) < avoid.margin)
+    lower, fine_sampled = jax.lax.cond(below, finer, kept, lower)
+    return lower, jnp.minimum(jnp.min(sampled, axis=-1), fine_sampled)

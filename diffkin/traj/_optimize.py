@@ -76,10 +76,10 @@ def optimize(
     - **timing**: the shortest duration for which the spline's velocity, acceleration (and jerk)
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
       hull of the control polygon's differences);
-    - **clearance**: a certified lower bound over the whole motion (each segment cut into 32 pieces, the
-      64 lowest of a curve cut 4 times finer; on a piece, the distances at its middle minus how far the
-      shapes can move within it, from the joint speeds and each joint's reach to the shapes it moves:
-      :mod:`diffkin.traj._certify`).
+    - **clearance**: a certified lower bound over the whole motion (each segment cut into 32 pieces; where
+      their bound falls below the margin, the 64 lowest of a curve cut 4 times finer; on a piece, the
+      distances at its middle minus how far the shapes can move within it, from the joint speeds and each
+      joint's reach to the shapes it moves: :mod:`diffkin.traj._certify`).
 
     The first successful curve is kept, else the one with the largest certified clearance. Failures stay
     honest: ``success=False`` with finite values and the reason in ``goal_ok``, ``limits_ok``, ``clear``.

@@ -169,11 +169,12 @@ def test_limits_hold_on_the_continuous_motion(planned):
 
 
 @jax.jit
-def _certify_line(q_start, q_goal, world):
-    """The certificate of the straight motion from ``q_start`` to ``q_goal`` (5 knots), and its knots."""
+def _certify_line(q_start, q_goal, world, margin=0.0):
+    """The certificate (at ``margin``) of the straight motion from ``q_start`` to ``q_goal`` (5 knots), and its
+    knots."""
     free = (q_start + q_goal)[None] / 2  # one free control point, in the middle
     P = _spline.control_points(q_start, free, q_goal)[None, None]  # (1, 1, 7, dof)
-    avoid = dk.ik.Avoid(GEOM, world, 0.0).flat(())
+    avoid = dk.ik.Avoid(GEOM, world, margin).flat(())
     reach = _reach.reach(ROBOT, GEOM)
     lower, sampled = _certify.certified(ROBOT, avoid, reach, P, None, (False, False))
     pieces = _certify.PIECES
@@ -197,8 +198,12 @@ def test_sampling_at_the_knots_misses_what_the_bound_rejects():
     q = _spline.evaluate(P, jnp.linspace(0.0, 4.0, 2001))
     truth = float(_clearance(q, world).min())
     assert 0 < float(lower) <= truth
-    # the lowest pieces cut finer: a tighter bound than the pieces' own, still below the truth
-    assert float(coarse) < float(lower) and truth - float(lower) < 0.5 * (truth - float(coarse))
+    # clear of the margin on the pieces already: their bound is kept, not refined
+    assert float(lower) == float(coarse)
+    # below the margin (1 m here), the lowest pieces are cut finer: a tighter bound than the pieces' own, still
+    # below the truth
+    finer, _, _, _, _ = _certify_line(jnp.array([-1.0, 0.0]), jnp.array([-0.4, 0.5]), world, 1.0)
+    assert float(coarse) < float(finer) <= truth and truth - float(finer) < 0.5 * (truth - float(coarse))
 
 
 def test_reach_of_each_joint_to_each_shape():
