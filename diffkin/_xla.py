@@ -25,7 +25,10 @@ The measurements that justify them are in docs/performance.md, "XLA CPU tricks".
   ``rsqrt``, which LLVM cannot vectorise on a host without AVX-512 (the whole fused loop around it
   then runs one entry at a time).
 - :data:`SOLVER_COMPILE` and :func:`solver_jit`: the IK solvers are compiled by XLA's classic CPU
-  kernel emitter, which compiles in two thirds of the time of the newer MLIR emitters (see there).
+  kernel emitter, which compiles in two thirds of the time of the newer MLIR emitters (see there);
+  a solver's ``compile_ahead`` compiles it in a background thread while the caller does other work
+  (XLA compiles a program on one core: a trajectory with a pose goal compiles its solver while IK
+  compiles and solves the goal).
 - :data:`TRAJ_COMPILE`: the trajectory solver, whose time is GJK's loops, also without YNNPACK fusions.
 - :func:`segment_end`: a long serial forward pass is materialised every :data:`SEGMENT` joints, so
   that XLA's fusion does not copy the pass into every output of a Jacobian.
@@ -47,6 +50,7 @@ each measured there.
 
 from __future__ import annotations
 
+import concurrent.futures
 import functools
 from collections.abc import Callable
 
@@ -91,11 +95,32 @@ def solver_jit(fn: Callable, options: dict | None = None, **kwargs) -> Callable:
     def top() -> Callable:  # at the first call: which options this jaxlib knows takes a compile
         return jax.jit(fn, compiler_options=supported(SOLVER_COMPILE if options is None else options), **kwargs)
 
+    def jitted(args, kw) -> Callable:
+        return top() if _default_backend() == "cpu" and top_level(args, kw) else plain
+
     @functools.wraps(fn)
     def call(*args, **kw):
-        return (top() if _default_backend() == "cpu" and top_level(args, kw) else plain)(*args, **kw)
+        return jitted(args, kw)(*args, **kw)
 
+    def compile_ahead(*args, **kw) -> concurrent.futures.Future | None:
+        """Start compiling the call with ``args`` (concrete, at the top level; else ``None``: nothing to
+        compile ahead) in a background thread; the future's ``result()`` is ``None`` once it is compiled
+        (a call then reuses it: JAX keeps a jit's compiled programs by their arguments' shapes)."""
+        if not top_level(args, kw):
+            return None
+        return _AHEAD.submit(_compile, jitted(args, kw), args, kw)
+
+    call.compile_ahead = compile_ahead
     return call
+
+
+#: the thread that compiles ahead (:func:`solver_jit`'s ``compile_ahead``): one, as XLA compiles a program on
+#: one core and the caller's own work takes the other
+_AHEAD = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="diffkin-compile")
+
+
+def _compile(jitted: Callable, args: tuple, kw: dict) -> None:
+    jitted.lower(*args, **kw).compile()
 
 
 def supported(options: dict) -> dict:

@@ -7,6 +7,7 @@ gives the distances per pair block). Every function that takes ``avoid=`` checks
 """
 
 from diffkin.ik._args import check_batched, default_key, finite
+from diffkin.ik._keywords import terms_of
 from diffkin.ik._prepare import cast, detach
 from diffkin.ik._problem import Kinematics, Problem, Spec
 from diffkin.ik._terms.avoid import BAND, AvoidTerm, check_avoid
@@ -23,4 +24,10 @@ __all__ = [
     "default_key",
     "detach",
     "finite",
+    "target_batch",
 ]
+
+
+def target_batch(model, target) -> tuple[int, ...]:
+    """The batch shape of :func:`diffkin.ik.solve`'s result for ``target`` (checked as ``solve`` checks it)."""
+    return tuple(terms_of(model, target, {}, None).batch)

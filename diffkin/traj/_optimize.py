@@ -15,7 +15,7 @@ from diffkin._static import combine, is_concrete, partition
 from diffkin._xla import TRAJ_COMPILE, in_steps, problems_at_once, solver_jit
 from diffkin.collision.interface import inner
 from diffkin.ik import Avoid
-from diffkin.ik.interface import cast, check_avoid, check_batched, default_key, detach, finite
+from diffkin.ik.interface import cast, check_avoid, check_batched, default_key, detach, finite, target_batch
 from diffkin.models.robot import Robot
 from diffkin.traj import _limits, _reach, _seeds, _spline
 from diffkin.traj._certify import certified
@@ -147,14 +147,10 @@ def optimize(
 
     pose_goal = isinstance(goal, Mapping) or (jnp.ndim(goal) >= 2 and jnp.shape(goal)[-2:] == (4, 4))
     if pose_goal:
-        from diffkin.ik import solve
-
         if isinstance(goal, Mapping) and not isinstance(model, Robot):
             raise TypeError("goal: a mapping {frame: pose} needs a diffkin.Robot; a chain takes (..., 4, 4) poses")
-        res = solve(
-            model, goal, key=key, q0=q_start, avoid=avoid, locked=locked, base=base, pos_tol=pos_tol, rot_tol=rot_tol
-        )
-        q_goal, goal_ok = res.q.astype(dtype), res.success
+        goal_batch = target_batch(model, goal)  # IK's result's (checked as IK checks it); solved below
+        q_goal, goal_ok = jnp.zeros(goal_batch + (dof,), dtype), jnp.zeros(goal_batch, bool)
     else:
         q_goal = real_array(goal, "goal", "joint values (or (..., 4, 4) poses)")
         if q_goal.ndim == 0 or q_goal.shape[-1] != dof:
@@ -187,7 +183,7 @@ def optimize(
         avoid_flat = avoid.cast(dtype).flat(batch)
         searched_flat = _searched(avoid).cast(dtype).flat(batch)
     static, traced = partition(model)
-    out = _solve(
+    args = [
         static,
         traced,
         flat(q_start, (dof,)),
@@ -200,11 +196,20 @@ def optimize(
         (velocity, acceleration, jerk),
         jnp.asarray(reach, dtype),
         key,
-        locked=mask,
-        free=knots - 4,
-        seeds=num_seeds,
-        iters=int(max_iters),
-    )
+    ]
+    static_args = {"locked": mask, "free": knots - 4, "seeds": num_seeds, "iters": int(max_iters)}
+    if pose_goal:
+        from diffkin.ik import solve
+
+        # the motion's program compiles (in another thread) while IK compiles and solves the goal
+        ahead = _solve.compile_ahead(*args, **static_args)
+        res = solve(
+            model, goal, key=key, q0=q_start, avoid=avoid, locked=locked, base=base, pos_tol=pos_tol, rot_tol=rot_tol
+        )
+        args[3], args[4] = flat(res.q.astype(dtype), (dof,)), flat(res.success, ())
+        if ahead is not None:
+            ahead.result()
+    out = _solve(*args, **static_args)
     return jax.tree.map(lambda x: x.reshape(batch + x.shape[1:]), out)
 
 

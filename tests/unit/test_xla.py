@@ -4,6 +4,7 @@ every public function. One compiled function per path and model kind, small batc
 :mod:`diffkin._xla` keeps the values of its plain formulation."""
 
 import itertools
+import logging
 import os
 
 import jax
@@ -253,6 +254,23 @@ def test_solver_jit_gives_its_options_to_the_cpu_backend_only(monkeypatch):
     monkeypatch.setattr(_xla, "_default_backend", lambda: "cpu")
     with pytest.raises(Exception, match="no_such_option_anywhere"):
         _xla.solver_jit(lambda x: x + 2.0)(np.zeros(3))
+
+
+def test_compile_ahead_compiles_what_the_call_then_reuses(caplog):
+    """A solver compiled ahead (in its thread) is not compiled again by the call with those arguments' shapes;
+    another shape is; inside a trace there is nothing to compile ahead."""
+    from diffkin._xla import solver_jit
+
+    g = solver_jit(lambda x: x * 2.0)
+    assert g.compile_ahead(np.zeros(3)).result() is None
+    with jax.log_compiles(True), caplog.at_level(logging.WARNING):
+        np.testing.assert_array_equal(np.asarray(g(np.ones(3))), np.full(3, 2.0))
+        assert not [r for r in caplog.records if "Compiling" in r.getMessage()]
+        np.testing.assert_array_equal(np.asarray(g(np.ones(4))), np.full(4, 2.0))
+        assert [r for r in caplog.records if "Compiling" in r.getMessage()]
+    ahead = []
+    jax.jit(lambda x: ahead.append(g.compile_ahead(x)) or x)(0.0)
+    assert ahead == [None]
 
 
 def test_supported_keeps_the_options_this_jaxlib_knows():
