@@ -14,8 +14,8 @@ others get a cheap lower bound at least ``margin + 2 max_s delta_s + 1 cm``, the
 piece's shapes (:func:`diffkin.collision._near`),
 which keeps their pieces above the margin. Pieces of one size (rather than a tree of halvings, whose
 coarse pieces move far and so need almost every pair exactly) keep that reach short; then, where a curve's
-bound falls below the margin, the few pieces of each curve whose bound is lowest (where a curve passes close
-to an obstacle) are cut finer, which tightens the bound where it decides, at a fixed cost (a curve certified
+bound falls below the margin, the quarter of each curve's pieces whose bound is lowest (where a curve passes
+close to an obstacle) are cut finer, which tightens the bound where it decides, at a fixed cost (a curve certified
 by its pieces is not: that cost would change nothing but how far above the margin its bound is).
 """
 
@@ -29,8 +29,8 @@ from diffkin.traj import _rows, _spline
 
 #: pieces per segment
 PIECES = 32
-#: pieces per curve whose bound is refined (the lowest), and the sub-pieces each is cut into
-REFINED, SUB = 64, 4
+#: the sub-pieces a refined piece is cut into; ``1 / SUB`` of a curve's pieces are refined (the lowest)
+SUB = 4
 
 
 def _piece_speed(start: jax.Array, mid: jax.Array, end: jax.Array) -> jax.Array:
@@ -81,35 +81,51 @@ def certified(
     motion of a piece plus 1 cm; a cheap lower bound, beyond that, for the others: at least the certified
     bound, at most the true smallest where it is within that reach).
 
-    Each segment is cut into ``pieces`` pieces. Where a curve's bound falls below ``avoid.margin`` (any curve
-    of the batch: one test), the :data:`REFINED` pieces of lowest bound of each curve are then cut into
-    :data:`SUB` sub-pieces each, and a refined piece's bound is the larger of its own and its sub-pieces'
-    smallest (both hold); a batch whose curves all clear the margin keeps the pieces' bound (the curves are
-    certified already, and the finer pieces cost about as much again).
+    Each segment is cut into ``pieces`` pieces (a multiple of :data:`SUB`). Where a curve's bound falls below
+    ``avoid.margin`` (any curve of the batch: one test), the quarter of each curve's pieces (``1 / SUB``) of
+    lowest bound are then cut into :data:`SUB` sub-pieces each, as many as the pieces, and a refined piece's
+    bound is the larger of its own and its sub-pieces' smallest (both hold); a batch whose curves all clear the
+    margin keeps the pieces' bound (the curves are certified already, and the finer pieces cost about as much
+    again). Both passes are one measurement in a loop of at most two steps: one compiled copy of the distances.
 
     ``avoid``'s world is shared or one per problem, flat ``(B, n_kind)`` (:meth:`diffkin.ik.Avoid.flat`);
     ``base`` ``(B, 4, 4)`` or ``None``; ``reach`` ``(dof, S)`` (:func:`diffkin.traj._reach.reach`).
     """
+    assert pieces % SUB == 0, pieces
     B, K, N, dof = P.shape
-    segs = _spline.segments(N)
+    Q = _spline.segments(N) * pieces
+    refined = Q // SUB
     half = 0.5 / pieces
-    mids = jnp.broadcast_to(jnp.asarray((np.arange(segs * pieces) + 0.5) / pieces, P.dtype), (B, K, segs * pieces))
-    lower, sampled = _bounds(model, avoid, reach, P, mids, half, base, locked)
-    refined = min(REFINED, segs * pieces)
+    mids = jnp.broadcast_to(jnp.asarray((np.arange(Q) + 0.5) / pieces, P.dtype), (B, K, Q))
+    offsets = jnp.asarray((2 * np.arange(SUB) + 1 - SUB) / SUB * half, P.dtype)  # sub-pieces' middles
 
-    def finer(lower):
-        _, worst = jax.lax.top_k(-lower, refined)  # (B, K, F)
-        offsets = jnp.asarray((2 * np.arange(SUB) + 1 - SUB) / SUB * half, P.dtype)  # sub-pieces' middles
-        u = jnp.take_along_axis(mids, worst, axis=-1)[..., None] + offsets  # (B, K, F, SUB)
-        fine, fine_sampled = _bounds(model, avoid, reach, P, u.reshape(B, K, -1), half / SUB, base, locked)
-        fine = jnp.min(fine.reshape(B, K, refined, SUB), axis=-1)
-        coarse = jnp.take_along_axis(lower, worst, axis=-1)
-        lower = jnp.put_along_axis(lower, worst, jnp.maximum(coarse, fine), axis=-1, inplace=False)
-        return jnp.min(lower, axis=-1), jnp.min(fine_sampled, axis=-1)
+    def worst(lower):  # (B, K, refined): the pieces of lowest bound
+        return jax.lax.top_k(-lower, refined)[1]
 
-    def kept(lower):
-        return jnp.min(lower, axis=-1), jnp.full((B, K), jnp.inf, P.dtype)
+    def finer(lower):  # (B, K, Q): the middles of the sub-pieces of the pieces of lowest bound
+        return (jnp.take_along_axis(mids, worst(lower), axis=-1)[..., None] + offsets).reshape(B, K, Q)
 
-    below = jnp.any(jnp.min(lower, axis=-1) < avoid.margin)
-    lower, fine_sampled = jax.lax.cond(below, finer, kept, lower)
-    return lower, jnp.minimum(jnp.min(sampled, axis=-1), fine_sampled)
+    def measure(state):
+        n, lower, sampled, fine, fine_sampled = state
+        first = n == 0
+        u = jax.lax.cond(first, lambda _: mids, finer, lower)
+        bound, at_middle = _bounds(model, avoid, reach, P, u, jnp.where(first, half, half / SUB), base, locked)
+        lower, sampled = jnp.where(first, bound, lower), jnp.where(first, at_middle, sampled)
+        fine = jnp.where(first, fine, jnp.min(bound.reshape(B, K, refined, SUB), axis=-1))
+        fine_sampled = jnp.where(first, fine_sampled, jnp.min(at_middle, axis=-1))
+        return n + 1, lower, sampled, fine, fine_sampled
+
+    def more(state):
+        n, lower, *_ = state
+        return (n == 0) | ((n == 1) & jnp.any(jnp.min(lower, axis=-1) < avoid.margin))
+
+    def refine(lower, fine):  # a refined piece's bound: the larger of its own and its sub-pieces' smallest
+        chosen = worst(lower)
+        coarse = jnp.take_along_axis(lower, chosen, axis=-1)
+        return jnp.put_along_axis(lower, chosen, jnp.maximum(coarse, fine), axis=-1, inplace=False)
+
+    unset = jnp.zeros((B, K, Q), P.dtype)
+    start = (jnp.int32(0), unset, unset, jnp.zeros((B, K, refined), P.dtype), jnp.full((B, K), jnp.inf, P.dtype))
+    n, lower, sampled, fine, fine_sampled = jax.lax.while_loop(more, measure, start)
+    lower = jax.lax.cond(n == 2, refine, lambda lower, _: lower, lower, fine)
+    return jnp.min(lower, axis=-1), jnp.minimum(jnp.min(sampled, axis=-1), fine_sampled)

@@ -77,7 +77,7 @@ def optimize(
       stay within ``limits`` along the whole curve, by exact bounds of its derivatives (the convex
       hull of the control polygon's differences);
     - **clearance**: a certified lower bound over the whole motion (each segment cut into 32 pieces; where
-      their bound falls below the margin, the 64 lowest of a curve cut 4 times finer; on a piece, the
+      their bound falls below the margin, the lowest quarter of a curve's cut 4 times finer; on a piece, the
       distances at its middle minus how far the shapes can move within it, from the joint speeds and each
       joint's reach to the shapes it moves: :mod:`diffkin.traj._certify`).
 
