@@ -23,7 +23,9 @@ the self pairs by the margin on the real meshes, and the start and ``goal_q`` li
 limits (a witness that the goal is reachable; not that a motion exists). A few of MBM's ``goal_q`` exceed
 a joint limit of example-robot-data's Panda (joint 4's upper): no motion within the limits reaches them.
 Times: the first call (the first scene's batch, compile included) apart, then each scene once, warm (its
-problems batched in one call, each with its own world).
+problems batched in one call, each with its own world), and ``--alone`` of its problems alone (one problem
+per call, after an untimed call of one problem: its own compiled program), the time a script pays that plans
+one problem at a time.
 
     python experiments/bench_traj.py --quick           # 3 scenes x 3 problems, hulls
     python experiments/bench_traj.py --all --write     # all 700 (long on a CPU)
@@ -76,6 +78,7 @@ HEADER = [
     "path length (rad, mean solved)",
     "jerk (rad/s^3, RMS, mean solved)",
     "warm (s / problem)",
+    "alone (s / problem)",
 ]
 PEER_HEADER = [
     "scene",
@@ -182,6 +185,9 @@ def main(argv=None) -> int:
     parser.add_argument("--knots", type=int, default=defaults["knots"].default)
     parser.add_argument("--seeds", type=int, default=defaults["num_seeds"].default)
     parser.add_argument("--iters", type=int, default=defaults["max_iters"].default)
+    parser.add_argument(
+        "--alone", type=int, default=2, metavar="N", help="N problems per scene also planned one per call (default 2)"
+    )
     parser.add_argument("--samples", type=int, default=200, help="coal samples per motion (default 200)")
     parser.add_argument("--dtype", choices=("float32", "float64"), default="float32")
     parser.add_argument("--write", action="store_true", help="write experiments/results/<machine>-traj.md")
@@ -216,10 +222,13 @@ def main(argv=None) -> int:
         first_scene = next(iter(scenes.values()))
         _, firsts[kind] = plan(robot, geom, first_scene, kind, limits, args, dtype)
         print(f"# {kind}: first call ({len(first_scene)} problems, compile included) {firsts[kind]:.1f} s", flush=True)
+        if args.alone:  # a call of one problem is another compiled program (not timed)
+            plan(robot, geom, first_scene[:1], kind, limits, args, dtype)
         total = {"problems": 0, "solvable": 0, "success": 0, "solved": 0, "contact": 0, "off limits": 0,
-                 "off goal": 0, "time": [], "length": [], "jerk": [], "warm": 0.0}  # fmt: skip
+                 "off goal": 0, "time": [], "length": [], "jerk": [], "warm": 0.0, "alone": []}  # fmt: skip
         for scene, problems in scenes.items():
             traj, warm = plan(robot, geom, problems, kind, limits, args, dtype)
+            alone = [plan(robot, geom, [p], kind, limits, args, dtype)[1] for p in subset(problems, args.alone)]
             j = judge_motions(judge, traj, problems, kind, limits, args.samples)
             goal_q = np.stack([np.r_[p["goal_q"], FINGER] for p in problems])
             g_world, g_own = judge.clearance(goal_q, [judge.coal.obstacles(p) for p in problems])
@@ -240,6 +249,7 @@ def main(argv=None) -> int:
                 "length": list(np.asarray(traj.path_length)[solved]),
                 "jerk": list(rms_jerk(traj)[solved]),
                 "warm": warm,
+                "alone": alone if args.alone else [],
             }
             for key, value in c.items():
                 total[key] = total[key] + value
@@ -268,7 +278,9 @@ def main(argv=None) -> int:
         busy,
         "First call (the first scene's problems, compile included): "
         + ", ".join(f"{k} **{v:.1f} s**" for k, v in firsts.items())
-        + ". warm: each scene's call once, per problem.\n",
+        + ". warm: each scene's call once, per problem; alone: "
+        + (f"{args.alone} problems of each scene (spread evenly), one per call, the mean" if args.alone else "not run")
+        + ".\n",
         table(HEADER, rows),
     ]
     if args.peer:
@@ -382,6 +394,7 @@ def _row(scene: str, kind: str, c: dict) -> list[str]:
         mean(c["length"]),
         mean(c["jerk"]),
         f"{c['warm'] / max(c['problems'], 1):.3f}",
+        f"{np.mean(c['alone']):.3f}" if len(c["alone"]) else "-",
     ]
 
 
