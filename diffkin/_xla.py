@@ -53,6 +53,7 @@ from __future__ import annotations
 import concurrent.futures
 import functools
 from collections.abc import Callable
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -81,7 +82,7 @@ def _default_backend() -> str:
     return jax.default_backend()
 
 
-def solver_jit(fn: Callable, options: dict | None = None, **kwargs) -> Callable:
+def solver_jit(fn: Callable, options: dict | None = None, **kwargs) -> SolverJit:
     """``jax.jit(fn, **kwargs)``, compiled with ``options`` (default :data:`SOLVER_COMPILE`), those this
     jaxlib knows (:func:`supported`), when called outside any trace and compiled for the CPU.
 
@@ -89,37 +90,42 @@ def solver_jit(fn: Callable, options: dict | None = None, **kwargs) -> Callable:
     ``jit``, ``vmap`` or ``grad``) the plain ``jit`` is used, and the outer one decides. The options
     are the CPU backend's: a GPU's compiler rejects them ("No such compile option").
     """
-    plain = jax.jit(fn, **kwargs)
+    return SolverJit(fn, SOLVER_COMPILE if options is None else options, kwargs)
 
-    @functools.cache
-    def top() -> Callable:  # at the first call: which options this jaxlib knows takes a compile
-        return jax.jit(fn, compiler_options=supported(SOLVER_COMPILE if options is None else options), **kwargs)
 
-    def jitted(args, kw) -> Callable:
-        return top() if _default_backend() == "cpu" and top_level(args, kw) else plain
+class SolverJit:
+    """What :func:`solver_jit` gives: called as ``fn``; :meth:`compile_ahead` compiles a call in the background."""
 
-    @functools.wraps(fn)
-    def call(*args, **kw):
-        return jitted(args, kw)(*args, **kw)
+    def __init__(self, fn: Callable, options: dict, kwargs: dict):
+        self._fn, self._options, self._kwargs = fn, options, kwargs
+        self._plain = jax.jit(fn, **kwargs)
+        functools.update_wrapper(self, fn)
 
-    def compile_ahead(*args, **kw) -> concurrent.futures.Future | None:
+    @functools.cached_property
+    def _top(self) -> Any:  # at the first call: which options this jaxlib knows takes a compile
+        return jax.jit(self._fn, compiler_options=supported(self._options), **self._kwargs)
+
+    def _jitted(self, args: tuple, kw: dict) -> Any:
+        return self._top if _default_backend() == "cpu" and top_level(args, kw) else self._plain
+
+    def __call__(self, *args, **kw):
+        return self._jitted(args, kw)(*args, **kw)
+
+    def compile_ahead(self, *args, **kw) -> concurrent.futures.Future | None:
         """Start compiling the call with ``args`` (concrete, at the top level; else ``None``: nothing to
         compile ahead) in a background thread; the future's ``result()`` is ``None`` once it is compiled
         (a call then reuses it: JAX keeps a jit's compiled programs by their arguments' shapes)."""
         if not top_level(args, kw):
             return None
-        return _AHEAD.submit(_compile, jitted(args, kw), args, kw)
-
-    call.compile_ahead = compile_ahead
-    return call
+        return _AHEAD.submit(_compile, self._jitted(args, kw), args, kw)
 
 
-#: the thread that compiles ahead (:func:`solver_jit`'s ``compile_ahead``): one, as XLA compiles a program on
+#: the thread that compiles ahead (:meth:`SolverJit.compile_ahead`): one, as XLA compiles a program on
 #: one core and the caller's own work takes the other
 _AHEAD = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="diffkin-compile")
 
 
-def _compile(jitted: Callable, args: tuple, kw: dict) -> None:
+def _compile(jitted: Any, args: tuple, kw: dict) -> None:
     jitted.lower(*args, **kw).compile()
 
 
