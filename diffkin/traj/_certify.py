@@ -99,33 +99,25 @@ def certified(
     mids = jnp.broadcast_to(jnp.asarray((np.arange(Q) + 0.5) / pieces, P.dtype), (B, K, Q))
     offsets = jnp.asarray((2 * np.arange(SUB) + 1 - SUB) / SUB * half, P.dtype)  # sub-pieces' middles
 
-    def worst(lower):  # (B, K, refined): the pieces of lowest bound
-        return jax.lax.top_k(-lower, refined)[1]
+    def finer(lower):  # the middles of the sub-pieces (B, K, Q) of the pieces of lowest bound (B, K, refined)
+        chosen = jax.lax.top_k(-lower, refined)[1]
+        return (jnp.take_along_axis(mids, chosen, axis=-1)[..., None] + offsets).reshape(B, K, Q), chosen
 
-    def finer(lower):  # (B, K, Q): the middles of the sub-pieces of the pieces of lowest bound
-        return (jnp.take_along_axis(mids, worst(lower), axis=-1)[..., None] + offsets).reshape(B, K, Q)
-
-    def measure(state):
-        n, lower, sampled, fine, fine_sampled = state
+    def measure(state):  # the pieces' bound, then (a second step) a refined piece's: its own or its sub-pieces'
+        n, lower, sampled = state
         first = n == 0
-        u = jax.lax.cond(first, lambda _: mids, finer, lower)
+        u, chosen = jax.lax.cond(first, lambda _: (mids, jnp.zeros((B, K, refined), jnp.int32)), finer, lower)
         bound, at_middle = _bounds(model, avoid, reach, P, u, jnp.where(first, half, half / SUB), base, locked)
-        lower, sampled = jnp.where(first, bound, lower), jnp.where(first, at_middle, sampled)
-        fine = jnp.where(first, fine, jnp.min(bound.reshape(B, K, refined, SUB), axis=-1))
-        fine_sampled = jnp.where(first, fine_sampled, jnp.min(at_middle, axis=-1))
-        return n + 1, lower, sampled, fine, fine_sampled
+        fine = jnp.maximum(
+            jnp.take_along_axis(lower, chosen, axis=-1), jnp.min(bound.reshape(B, K, refined, SUB), axis=-1)
+        )
+        lower = jnp.where(first, bound, jnp.put_along_axis(lower, chosen, fine, axis=-1, inplace=False))
+        return n + 1, lower, jnp.minimum(sampled, jnp.min(at_middle, axis=-1))
 
     def more(state):
-        n, lower, *_ = state
+        n, lower, _ = state
         return (n == 0) | ((n == 1) & jnp.any(jnp.min(lower, axis=-1) < avoid.margin))
 
-    def refine(lower, fine):  # a refined piece's bound: the larger of its own and its sub-pieces' smallest
-        chosen = worst(lower)
-        coarse = jnp.take_along_axis(lower, chosen, axis=-1)
-        return jnp.put_along_axis(lower, chosen, jnp.maximum(coarse, fine), axis=-1, inplace=False)
-
-    unset = jnp.zeros((B, K, Q), P.dtype)
-    start = (jnp.int32(0), unset, unset, jnp.zeros((B, K, refined), P.dtype), jnp.full((B, K), jnp.inf, P.dtype))
-    n, lower, sampled, fine, fine_sampled = jax.lax.while_loop(more, measure, start)
-    lower = jax.lax.cond(n == 2, refine, lambda lower, _: lower, lower, fine)
-    return jnp.min(lower, axis=-1), jnp.minimum(jnp.min(sampled, axis=-1), fine_sampled)
+    start = (jnp.int32(0), jnp.zeros((B, K, Q), P.dtype), jnp.full((B, K), jnp.inf, P.dtype))
+    _, lower, sampled = jax.lax.while_loop(more, measure, start)
+    return jnp.min(lower, axis=-1), sampled

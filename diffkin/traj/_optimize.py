@@ -183,33 +183,37 @@ def optimize(
         avoid_flat = avoid.cast(dtype).flat(batch)
         searched_flat = _searched(avoid).cast(dtype).flat(batch)
     static, traced = partition(model)
-    args = [
-        static,
-        traced,
-        flat(q_start, (dof,)),
-        flat(q_goal, (dof,)),
-        flat(goal_ok, ()),
-        avoid_flat,
-        searched_flat,
-        None if base is None else flat(base.astype(dtype), (4, 4)),
-        None if locked_q is None else flat(locked_q.astype(dtype), (dof,)),
-        (velocity, acceleration, jerk),
-        jnp.asarray(reach, dtype),
-        key,
-    ]
-    static_args = {"locked": mask, "free": knots - 4, "seeds": num_seeds, "iters": int(max_iters)}
+
+    def arguments(q_goal, goal_ok) -> tuple:  # _solve's, its static ones apart
+        return (
+            static,
+            traced,
+            flat(q_start, (dof,)),
+            flat(q_goal, (dof,)),
+            flat(goal_ok, ()),
+            avoid_flat,
+            searched_flat,
+            None if base is None else flat(base.astype(dtype), (4, 4)),
+            None if locked_q is None else flat(locked_q.astype(dtype), (dof,)),
+            (velocity, acceleration, jerk),
+            jnp.asarray(reach, dtype),
+            key,
+        )
+
+    statics = {"locked": mask, "free": knots - 4, "seeds": num_seeds, "iters": int(max_iters)}
     if pose_goal:
         from diffkin.ik import solve
 
-        # the motion's program compiles (in another thread) while IK compiles and solves the goal
-        ahead = _solve.compile_ahead(*args, **static_args)
+        # the motion's program compiles (in another thread, from the goal's placeholders) while IK compiles and
+        # solves the goal
+        ahead = _solve.compile_ahead(*arguments(q_goal, goal_ok), **statics)
         res = solve(
             model, goal, key=key, q0=q_start, avoid=avoid, locked=locked, base=base, pos_tol=pos_tol, rot_tol=rot_tol
         )
-        args[3], args[4] = flat(res.q.astype(dtype), (dof,)), flat(res.success, ())
+        q_goal, goal_ok = res.q.astype(dtype), res.success
         if ahead is not None:
             ahead.result()
-    out = _solve(*args, **static_args)
+    out = _solve(*arguments(q_goal, goal_ok), **statics)
     return jax.tree.map(lambda x: x.reshape(batch + x.shape[1:]), out)
 
 
