@@ -17,6 +17,9 @@ The measurements that justify them are in docs/performance.md, "XLA CPU tricks".
   as two independent halves (:func:`_in_halves`), so that both CPU threads have work.
 - :func:`problems_at_once`: independent problems that each iterate until solved go one at a time
   through :func:`in_steps` on the CPU, so that none waits for the slowest.
+- :func:`spans` and :func:`in_threads`: such problems, called at the top level on the CPU, are split into one
+  span per core, each planned by the same compiled program in a host thread of its own: one problem's
+  kernels are too small and too serial to keep more than about one core and a quarter busy.
 - :func:`blocks_joined`: blocks of a result with the batch innermost, joined.
 - :data:`LAST_STEPPED`: an output with the configurations last is moved to the front in a kernel
   of its own (through the stepped loop), not fused into the computation, which would then not be
@@ -52,6 +55,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import functools
+import os
 from collections.abc import Callable
 from typing import Any
 
@@ -396,6 +400,40 @@ def problems_at_once(n: int) -> int:
     already vectorises hundreds of configurations and a batch's loop runs as long as its slowest problem;
     elsewhere all ``n`` (a GPU wants the width)."""
     return 1 if jax.default_backend() == "cpu" else n
+
+
+def _cores() -> int:
+    """The CPU cores this process may run on."""
+    affinity = getattr(os, "sched_getaffinity", None)
+    return len(affinity(0)) if affinity is not None else os.cpu_count() or 1
+
+
+#: the host threads of :func:`in_threads`, one per core
+_THREADS = concurrent.futures.ThreadPoolExecutor(max_workers=_cores(), thread_name_prefix="diffkin-problems")
+
+
+def spans(n: int, *args) -> list[tuple[int, int]]:
+    """``(start, size)`` spans of ``n`` independent problems for :func:`in_threads`: one per core (at most ``n``),
+    of one size (the last overlaps the one before it where the count does not divide ``n``: one compiled
+    program serves them all), when the call with ``args`` is at the top level on the CPU; else the one span
+    ``(0, n)`` (a GPU wants the width, and inside a trace there is nothing to run)."""
+    count = min(n, _cores()) if _default_backend() == "cpu" and top_level(*args) else 1
+    size = -(-n // max(count, 1))
+    return [(min(i * size, n - size), size) for i in range(-(-n // size))] if n else [(0, 0)]
+
+
+def in_threads(fn: Callable[[int, int], Any], parts: list[tuple[int, int]]) -> Any:
+    """``fn(start, size)`` (a pytree of arrays with a leading axis of ``size``) for each span of ``parts``
+    (:func:`spans`), each in a host thread of its own where there are several (XLA's CPU client runs programs
+    called from different threads at once), joined along that axis: a pytree over all the spans' problems."""
+    if len(parts) == 1:
+        return fn(*parts[0])
+    futures = [_THREADS.submit(lambda part: jax.block_until_ready(fn(*part)), part) for part in parts]
+    pieces, done = [], 0
+    for future, (start, size) in zip(futures, parts, strict=True):
+        pieces.append(jax.tree.map(lambda x, skip=done - start: x[skip:], future.result()))
+        done = start + size
+    return jax.tree.map(lambda *xs: jnp.concatenate(xs), *pieces)
 
 
 def in_steps(

@@ -12,7 +12,7 @@ import numpy as np
 
 from diffkin._checks import positive_int, real_array
 from diffkin._static import combine, is_concrete, partition
-from diffkin._xla import TRAJ_COMPILE, in_steps, problems_at_once, solver_jit
+from diffkin._xla import TRAJ_COMPILE, in_steps, in_threads, problems_at_once, solver_jit, spans
 from diffkin.collision.interface import inner
 from diffkin.ik import Avoid
 from diffkin.ik.interface import cast, check_avoid, check_batched, default_key, detach, finite, target_batch
@@ -86,7 +86,8 @@ def optimize(
     Problems are independent (a world per
     problem where ``avoid.world`` has problem axes): a problem's motion depends on its own data and its
     place in the batch (its seeds' key) only. On the CPU one compiled loop plans them one after another
-    (a batch costs the sum of its problems, not its slowest times their number); elsewhere all at once.
+    (a batch costs the sum of its problems, not its slowest times their number), called at the top level in
+    one span of the batch per core, each from a host thread of its own; elsewhere all at once.
     Compiled once per model, batch shape and static argument; works inside ``jit`` with the model and
     ``avoid.geom`` closed over (the certificate reads them on the host) and the starts, goals and worlds
     traced (batch problems by their leading axes rather than by ``vmap``).
@@ -183,37 +184,47 @@ def optimize(
         avoid_flat = avoid.cast(dtype).flat(batch)
         searched_flat = _searched(avoid).cast(dtype).flat(batch)
     static, traced = partition(model)
+    q_start_flat = flat(q_start, (dof,))
+    base_flat = None if base is None else flat(base.astype(dtype), (4, 4))
+    locked_flat = None if locked_q is None else flat(locked_q.astype(dtype), (dof,))
+    # on the CPU, the problems in spans planned at once, a host thread each (diffkin._xla.in_threads)
+    parts = spans(B, q_start, goal, avoid, base)
 
-    def arguments(q_goal, goal_ok) -> tuple:  # _solve's, its static ones apart
+    def arguments(q_goal, goal_ok, start: int, size: int) -> tuple:  # _solve's for problems [start, start + size)
+        part = lambda x: None if x is None else x[start : start + size]  # noqa: E731
+        own = lambda a: None if a is None else a.tiled(part)  # noqa: E731  (a world per problem, or shared)
         return (
             static,
             traced,
-            flat(q_start, (dof,)),
-            flat(q_goal, (dof,)),
-            flat(goal_ok, ()),
-            avoid_flat,
-            searched_flat,
-            None if base is None else flat(base.astype(dtype), (4, 4)),
-            None if locked_q is None else flat(locked_q.astype(dtype), (dof,)),
+            jnp.arange(start, start + size, dtype=jnp.int32),
+            part(q_start_flat),
+            part(flat(q_goal, (dof,))),
+            part(flat(goal_ok, ())),
+            own(avoid_flat),
+            own(searched_flat),
+            part(base_flat),
+            part(locked_flat),
             (velocity, acceleration, jerk),
             jnp.asarray(reach, dtype),
             key,
         )
 
     statics = {"locked": mask, "free": knots - 4, "seeds": num_seeds, "iters": int(max_iters)}
+    # one compile serves every span: the motion's program compiles first (with a pose goal, in another thread,
+    # from the goal's placeholders, while IK compiles and solves the goal)
+    ahead = None
+    if len(parts) > 1 or pose_goal:
+        ahead = _solve.compile_ahead(*arguments(q_goal, goal_ok, *parts[0]), **statics)
     if pose_goal:
         from diffkin.ik import solve
 
-        # the motion's program compiles (in another thread, from the goal's placeholders) while IK compiles and
-        # solves the goal
-        ahead = _solve.compile_ahead(*arguments(q_goal, goal_ok), **statics)
         res = solve(
             model, goal, key=key, q0=q_start, avoid=avoid, locked=locked, base=base, pos_tol=pos_tol, rot_tol=rot_tol
         )
         q_goal, goal_ok = res.q.astype(dtype), res.success
-        if ahead is not None:
-            ahead.result()
-    out = _solve(*arguments(q_goal, goal_ok), **statics)
+    if ahead is not None:
+        ahead.result()
+    out = in_threads(lambda start, size: _solve(*arguments(q_goal, goal_ok, start, size), **statics), parts)
     return jax.tree.map(lambda x: x.reshape(batch + x.shape[1:]), out)
 
 
@@ -268,6 +279,7 @@ def _locked(model, locked, batch) -> tuple[tuple[bool, ...], jax.Array | None]:
 def _core(
     static,
     traced,
+    index,
     q_start,
     q_goal,
     goal_ok,
@@ -293,7 +305,7 @@ def _core(
         q_start, q_goal = jnp.where(held, locked_q, q_start), jnp.where(held, locked_q, q_goal)
     B = q_start.shape[0]
     per_problem = avoid is not None and avoid.world is not None and bool(avoid.world.batch)
-    mapped = (jnp.arange(B), q_start, q_goal, valid, base, locked_q, avoid.world if per_problem else None)
+    mapped = (index, q_start, q_goal, valid, base, locked_q, avoid.world if per_problem else None)
     leaves, tree = jax.tree.flatten(mapped)
     seed_key = jax.random.fold_in(key, 1)
 
