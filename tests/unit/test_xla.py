@@ -301,3 +301,29 @@ def test_traj_compile_keeps_gjk_free_of_ynnpack_fusions():
     plain, traj = jax.jit(_gjk.distance), jax.jit(_gjk.distance, compiler_options=options)
     assert "__ynn_fusion" not in traj.lower(a, b).compile().as_text()
     np.testing.assert_allclose(np.asarray(traj(a, b)), np.asarray(plain(a, b)), rtol=0, atol=2e-6)
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 8])
+def test_spans_in_threads_cover_the_batch_once_each(n, monkeypatch):
+    """Spans of one size cover every problem (the last overlapping the one before it where the count does not
+    divide ``n``); ``in_threads`` joins what each thread computed into the batch's result, as one call would
+    compute it; inside a trace, or off the CPU, there is one span."""
+    from diffkin import _xla
+
+    monkeypatch.setattr(_xla, "_cores", lambda: 3)
+    x = jnp.arange(n * 2.0).reshape(n, 2)
+    parts = _xla.spans(n, x)
+    assert len({size for _, size in parts}) == 1 and len(parts) == min(n, 3)
+    covered = np.zeros(n, int)
+    for start, size in parts:
+        assert 0 <= start and start + size <= n
+        covered[start : start + size] += 1
+    assert np.all(covered >= 1)
+    out = _xla.in_threads(
+        lambda start, size: {"y": 2 * x[start : start + size], "i": jnp.arange(start, start + size)}, parts
+    )
+    np.testing.assert_array_equal(out["y"], 2 * x)
+    np.testing.assert_array_equal(out["i"], np.arange(n))
+    assert jax.jit(lambda x: jnp.asarray(len(_xla.spans(n, x))))(x) == 1
+    monkeypatch.setattr(_xla, "_default_backend", lambda: "gpu")
+    assert _xla.spans(n, x) == [(0, n)]
