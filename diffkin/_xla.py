@@ -417,9 +417,10 @@ def spans(n: int, *args) -> list[tuple[int, int]]:
     of one size (the last overlaps the one before it where the count does not divide ``n``: one compiled
     program serves them all), when the call with ``args`` is at the top level on the CPU; else the one span
     ``(0, n)`` (a GPU wants the width, and inside a trace there is nothing to run)."""
-    count = min(n, _cores()) if _default_backend() == "cpu" and top_level(*args) else 1
-    size = -(-n // max(count, 1))
-    return [(min(i * size, n - size), size) for i in range(-(-n // size))] if n else [(0, 0)]
+    if n <= 1 or _default_backend() != "cpu" or not top_level(*args):
+        return [(0, n)]
+    size = -(-n // min(n, _cores()))
+    return [(min(i * size, n - size), size) for i in range(-(-n // size))]
 
 
 def in_threads(fn: Callable[[int, int], Any], parts: list[tuple[int, int]]) -> Any:

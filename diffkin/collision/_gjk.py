@@ -241,7 +241,7 @@ def _axes(shape) -> list[jax.Array]:
     return []
 
 
-def _overlap_direction(a, b, hint: jax.Array, dtype, depth: bool = True) -> jax.Array:
+def _overlap_direction(a, b, hint: jax.Array, dtype, depth: bool) -> jax.Array:
     """The best separating direction of overlapping shapes among candidates, refined by projected ascent (the
     candidates: the pair's own directions, and with ``depth`` the sphere's spread)."""
     batch = jnp.broadcast_shapes(hint.shape, a.centre().shape, b.centre().shape)
