@@ -46,10 +46,6 @@ STEPS = 128
 IDLE = 4
 #: projected-ascent steps refining an overlapping pair's direction
 ASCENT_STEPS = 24
-#: those of the rough search (``depth=False``: from the pair's own directions only, not the sphere's spread), for a
-#: caller that needs an overlap's lower bound and a direction out of it, not its depth: an overlapping pair costs
-#: several times a pair apart, mostly in the spread's supports and the ascent (docs/performance.md)
-ROUGH_ASCENT_STEPS = 8
 #: the overlap search runs on the overlapping pairs, 1 / OVERLAP_SHARE of a batch at a time
 OVERLAP_SHARE = 8
 
@@ -241,16 +237,14 @@ def _axes(shape) -> list[jax.Array]:
     return []
 
 
-def _overlap_direction(a, b, hint: jax.Array, dtype, depth: bool) -> jax.Array:
-    """The best separating direction of overlapping shapes among candidates, refined by projected ascent (the
-    candidates: the pair's own directions, and with ``depth`` the sphere's spread)."""
+def _overlap_direction(a, b, hint: jax.Array, dtype) -> jax.Array:
+    """The best separating direction of overlapping shapes among candidates, refined by projected ascent."""
     batch = jnp.broadcast_shapes(hint.shape, a.centre().shape, b.centre().shape)
+    spread = jnp.asarray(_SPREAD, dtype).reshape((len(_SPREAD),) + (1,) * (len(batch) - 1) + (3,))
     own = [hint, b.centre() - a.centre()] + _axes(a) + _axes(b)
     fallback = jnp.array([1.0, 0.0, 0.0], dtype)
     tries = _unit(jnp.stack([jnp.broadcast_to(c, batch) for c in own]), fallback)  # (K, ..., 3): one _unit, not K
-    if depth:
-        spread = jnp.asarray(_SPREAD, dtype).reshape((len(_SPREAD),) + (1,) * (len(batch) - 1) + (3,))
-        tries = jnp.concatenate([tries, jnp.broadcast_to(spread, (len(_SPREAD),) + batch)])
+    tries = jnp.concatenate([tries, jnp.broadcast_to(spread, (len(_SPREAD),) + batch)])
     tries = jnp.concatenate([tries, -tries])
     s = separation(a, b, tries)  # every candidate in one evaluation: (2K, ...)
     best = jnp.argmax(s, axis=0)
@@ -272,14 +266,14 @@ def _overlap_direction(a, b, hint: jax.Array, dtype, depth: bool) -> jax.Array:
         )
 
     step = jnp.ones_like(best_s) * 2.0
-    n, _, _ = jax.lax.fori_loop(0, ASCENT_STEPS if depth else ROUGH_ASCENT_STEPS, ascend, (best_n, best_s, step))
+    n, _, _ = jax.lax.fori_loop(0, ASCENT_STEPS, ascend, (best_n, best_s, step))
     return n
 
 
-def _overlap_directions(a, b, n: jax.Array, overlap: jax.Array, dtype, depth: bool) -> jax.Array:
+def _overlap_directions(a, b, n: jax.Array, overlap: jax.Array, dtype) -> jax.Array:
     """``n`` ``batch + (3,)`` with the direction of every ``overlap``-ping pair found by
-    :func:`_overlap_direction` (with ``depth``, or roughly), for those pairs only, ``1 / OVERLAP_SHARE`` of the
-    batch at a time (gathered: no step when none overlaps, one when few do)."""
+    :func:`_overlap_direction`, for those pairs only, ``1 / OVERLAP_SHARE`` of the batch at a time
+    (gathered: no step when none overlaps, one when few do)."""
     batch = overlap.shape
     total = int(np.prod(batch))
     budget = -(-total // OVERLAP_SHARE)
@@ -288,25 +282,23 @@ def _overlap_directions(a, b, n: jax.Array, overlap: jax.Array, dtype, depth: bo
         left, flat = state
         idx = jnp.nonzero(left, size=budget, fill_value=total)[0]
         safe = jnp.minimum(idx, total - 1)
-        found = _overlap_direction(taken(a, batch, safe), taken(b, batch, safe), flat[safe], dtype, depth)
+        found = _overlap_direction(taken(a, batch, safe), taken(b, batch, safe), flat[safe], dtype)
         return left.at[idx].set(False, mode="drop"), flat.at[idx].set(found, mode="drop")
 
     start = (overlap.reshape(total), n.reshape(total, 3))
     return jax.lax.while_loop(lambda state: jnp.any(state[0]), step, start)[1].reshape(batch + (3,))
 
 
-def witnesses(a, b, reach=jnp.inf, depth: bool = True) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+def witnesses(a, b, reach=jnp.inf) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
     """``(n, p_a, p_b, s)`` without gradients: the unit direction from ``a`` to ``b`` whose separation is the
     signed distance, the cores' witness points (apart, their closest points; overlapping, their support
     points along ``n`` (``a``) and ``-n`` (``b``)) and the cores' separation along ``n``. Where the
     distance is at least ``reach`` (``(...,)``, rounding included), GJK may stop short: ``s`` less the
-    roundings is then a lower bound at least ``reach`` and ``n`` and the points are not the closest.
-    Without ``depth`` (static) an overlap's direction is searched roughly (:data:`ROUGH_ASCENT_STEPS`): ``s``
-    is still a lower bound (it is a separation), but may be deeper than the widest search's."""
+    roundings is then a lower bound at least ``reach`` and ``n`` and the points are not the closest."""
     a, b = jax.lax.stop_gradient((a, b))
     dtype = jnp.result_type(*jax.tree.leaves((a, b)))
     pa, pb, apart = _gjk(a, b, dtype, reach + a.rounding() + b.rounding())
-    n = _overlap_directions(a, b, _unit(pb - pa, jnp.array([1.0, 0.0, 0.0], dtype)), ~apart, dtype, depth)
+    n = _overlap_directions(a, b, _unit(pb - pa, jnp.array([1.0, 0.0, 0.0], dtype)), ~apart, dtype)
     sa, sb = core_supports(a, b, n)
     return n, jnp.where(apart[..., None], pa, sa), jnp.where(apart[..., None], pb, sb), _dot(n, sb - sa)
 

@@ -74,11 +74,8 @@ def _padded(solid, size: int):
     return solid.replace(vertices=jnp.concatenate([v, extra], axis=-2))
 
 
-def _general(
-    pairs: list, batches: list, reach, share: int, depth: bool
-) -> list[tuple[jax.Array, jax.Array, jax.Array]]:
-    """The general pairs of every kind in one gathered batch (the module docstring); overlaps to their ``depth``
-    (:func:`diffkin.collision._gjk.witnesses`)."""
+def _general(pairs: list, batches: list, reach, share: int) -> list[tuple[jax.Array, jax.Array, jax.Array]]:
+    """The general pairs of every kind in one gathered batch (the module docstring)."""
     sizes = [int(np.prod(b)) for b in batches]
     starts = np.cumsum([0, *sizes])
     bound = jnp.concatenate(
@@ -106,7 +103,7 @@ def _general(
                 )
         assert sides is not None  # (at least one block)
         a, b = sides
-        n, pa, pb, s = _gjk.witnesses(a, b, reach, depth)
+        n, pa, pb, s = _gjk.witnesses(a, b, reach)
         return s - a.radius - b.radius, _wrench(-n, pa), _wrench(n, pb)
 
     d, Wa, Wb = _gathered(bound, reach, measure, share)
@@ -116,25 +113,21 @@ def _general(
     ]
 
 
-def near_motions(
-    pairs: list, reach, share: int = NEAR_SHARE, depth: bool = True
-) -> list[tuple[jax.Array, jax.Array, jax.Array]]:
+def near_motions(pairs: list, reach, share: int = NEAR_SHARE) -> list[tuple[jax.Array, jax.Array, jax.Array]]:
     """Per pair of shape batches ``(a, b)`` (their batch axes broadcast to ``B``): ``(d, W_a, W_b)``, ``d`` ``B``
     and the wrenches ``B + (6,)`` of :func:`diffkin.collision._distance.motion`, exact where the
     distance is below ``reach``; elsewhere ``d`` is a lower bound at least ``reach`` and the wrenches
     are zero (the module docstring). ``reach``: metres, a scalar or an array that broadcasts to every
     ``B`` (one per configuration, ``(P,)``, where the batches end in ``P``: a search's states). ``share``:
     ``1 / share`` of the pairs measured exactly at a time (a step costs its whole size, padding included,
-    and a few GJK iterations whatever its size: the fewer pairs are near, the larger ``share`` pays). ``depth``:
-    the general pairs' overlaps to their depth, else a rougher lower bound
-    (:func:`diffkin.collision._gjk.witnesses`)."""
+    and a few GJK iterations whatever its size: the fewer pairs are near, the larger ``share`` pays)."""
     batches = [tuple(jnp.broadcast_shapes(batch_shape(a), batch_shape(b))) for a, b in pairs]
     out: list = [None] * len(pairs)
     kinds = [(type(a), type(b)) for a, b in pairs]
     general = [k for k in range(len(pairs)) if kinds[k] in GENERAL and np.prod(batches[k]) > 0]
     if general:  # the closed forms' pairs join the batch: its one GJK serves them too, their code is not compiled
         general += [k for k in range(len(pairs)) if kinds[k] in BOUNDED - GENERAL and np.prod(batches[k]) > 0]
-        joined = _general([pairs[k] for k in general], [batches[k] for k in general], reach, share, depth)
+        joined = _general([pairs[k] for k in general], [batches[k] for k in general], reach, share)
         for k, result in zip(general, joined, strict=True):
             out[k] = result
     for k, ((a, b), batch) in enumerate(zip(pairs, batches, strict=True)):

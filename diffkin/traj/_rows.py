@@ -21,9 +21,6 @@ from diffkin.ik.interface import AvoidTerm, Kinematics, Problem, Spec
 #: ``1 / SHARE`` of the pairs measured exactly at a time (:func:`diffkin.collision.interface.near_motions`):
 #: along a curve far fewer pairs are near than among IK's seeds, and a step costs its whole size
 SHARE = 512
-#: overlaps measured to their depth: no. A curve's overlap fails it whatever its depth; the rows need a lower bound
-#: and a direction out (:func:`diffkin.collision._gjk.witnesses`), and the early curves overlap much
-DEPTH = False
 
 
 def _with_margins(avoid: Avoid, margin: jax.Array) -> Avoid:
@@ -43,7 +40,7 @@ def problem(
     avoid = avoid.tiled(lambda v: jnp.repeat(v, reps, axis=0))
     if margin is not None:
         avoid = _with_margins(avoid, margin)
-    term = dataclasses.replace(AvoidTerm.of(avoid), share=SHARE, depth=DEPTH)
+    term = dataclasses.replace(AvoidTerm.of(avoid), share=SHARE)
     spec = Spec((), (term,), tuple(locked), (), False, True)
     root = rg.IDENTITY if base is None else rg.from_matrix(jnp.repeat(base, reps, axis=0))
     return spec.problem(model, spec.bind([], (avoid,)), root=root), term, avoid

@@ -19,7 +19,7 @@ import pytest
 from _shapes import coal_shape, random_cylinders, random_fields, shape
 
 from diffkin.collision import distance
-from diffkin.collision._gjk import contact, witnesses
+from diffkin.collision._gjk import contact
 
 N = 2000
 OTHERS = ["sphere", "capsule", "box", "cylinder", "plane"]
@@ -166,24 +166,3 @@ def test_overlaps_never_shallower(placements, other):
     lower = -_core_support_value(other, fb, -n) - _support_cylinder(fa, n) - radius_b
     np.testing.assert_allclose(d[overlapping], lower[overlapping], rtol=0, atol=1e-12)
     assert np.mean(d[overlapping] >= ref[overlapping] - 1e-3) > 0.6
-
-
-@pytest.mark.parametrize("other", ["capsule", "box", "cylinder"])
-def test_rough_overlap_search_is_a_lower_bound(placements, other):
-    """The rough overlap search (``depth=False``: the pair's own directions only, fewer ascent steps; what a
-    trajectory's rows and certificate use): pairs apart are measured as with the wide search (the same GJK, in
-    another program: to 1e-9); an
-    overlap's separation is that along its direction (NumPy supports: never shallower than the truth), at most
-    the wide search's in most overlaps and within 1 mm of it in at least 60 % of them."""
-    fa, fb, _ = placements[other]
-    a, b = shape("cylinder", fa), shape(other, fb)
-    wide, rough = (jax.jit(lambda a, b, depth=depth: witnesses(a, b, jnp.inf, depth))(a, b) for depth in (True, False))
-    n, _, _, s = (np.asarray(x) for x in rough)
-    s_wide = np.asarray(wide[3])
-    overlapping = s_wide < 0
-    assert 0.03 < overlapping.mean() < 0.5
-    np.testing.assert_allclose(s[~overlapping], s_wide[~overlapping], rtol=0, atol=1e-9)
-    np.testing.assert_allclose(s, -_core_support_value(other, fb, -n) - _support_cylinder(fa, n), rtol=0, atol=1e-12)
-    assert np.all(s[overlapping] < 0)
-    assert np.mean(s[overlapping] <= s_wide[overlapping] + 1e-12) > 0.85
-    assert np.mean(s[overlapping] >= s_wide[overlapping] - 1e-3) > 0.6

@@ -178,8 +178,6 @@ class AvoidTerm:
     self_collision: bool
     #: ``1 / share`` of the pairs measured exactly at a time (:func:`near_motions`)
     share: int = NEAR_SHARE
-    #: overlaps measured to their depth (:func:`near_motions`; ``False``: a rougher lower bound, cheaper)
-    depth: bool = True
     #: its rows (every pair's distance and motion) cost far more than a pose target's: a search
     #: iterates without them (:meth:`diffkin.ik._problem.Problem.undeferred`) and checks the clearance
     #: (:meth:`clearance`) of its first round's best states and of every seed of its later rounds; a target
@@ -209,7 +207,7 @@ class AvoidTerm:
         pairs = [(take(shapes[ka], ia), take(shapes[kb], ib)) for _, ka, kb, ia, ib in blocks]
         if world is not None:  # each robot kind against each obstacle kind: (n_kind, n_obstacles, P)
             pairs += [(expanded(shape), obstacles) for shape in shapes for obstacles in obstacles_last(world)]
-        measured = near_motions(pairs, reach, self.share, self.depth)
+        measured = near_motions(pairs, reach, self.share)
         d_self = [d for d, _, _ in measured[: len(blocks)]]
         w_self = [(Wa, Wb) for _, Wa, Wb in measured[: len(blocks)]] if jacobian else []
         d_world, w_world = None, []
