@@ -410,23 +410,27 @@ def _cores() -> int:
 
 #: the host threads of :func:`in_threads`, one per core
 _THREADS = concurrent.futures.ThreadPoolExecutor(max_workers=_cores(), thread_name_prefix="diffkin-problems")
+#: spans per core of :func:`spans`: the threads take them as they come free, so that they end together when the
+#: problems' costs differ (one that fails every round of ``dk.traj`` costs many that succeed in the first)
+SPANS_PER_CORE = 5
 
 
 def spans(n: int, *args) -> list[tuple[int, int]]:
-    """``(start, size)`` spans of ``n`` independent problems for :func:`in_threads`: one per core (at most ``n``),
-    of one size (the last overlaps the one before it where the count does not divide ``n``: one compiled
-    program serves them all), when the call with ``args`` is at the top level on the CPU; else the one span
-    ``(0, n)`` (a GPU wants the width, and inside a trace there is nothing to run)."""
+    """``(start, size)`` spans of ``n`` independent problems for :func:`in_threads`: :data:`SPANS_PER_CORE` per
+    core (at most ``n``), of one size (the last overlaps the one before it where the count does not divide
+    ``n``: one compiled program serves them all), when the call with ``args`` is at the top level on the CPU;
+    else the one span ``(0, n)`` (a GPU wants the width, and inside a trace there is nothing to run)."""
     if n <= 1 or _default_backend() != "cpu" or not top_level(*args):
         return [(0, n)]
-    size = -(-n // min(n, _cores()))
+    size = -(-n // min(n, SPANS_PER_CORE * _cores()))
     return [(min(i * size, n - size), size) for i in range(-(-n // size))]
 
 
 def in_threads(fn: Callable[[int, int], Any], parts: list[tuple[int, int]]) -> Any:
     """``fn(start, size)`` (a pytree of arrays with a leading axis of ``size``) for each span of ``parts``
-    (:func:`spans`), each in a host thread of its own where there are several (XLA's CPU client runs programs
-    called from different threads at once), joined along that axis: a pytree over all the spans' problems."""
+    (:func:`spans`), where there are several on the host threads (one per core, each taking the next span as it
+    comes free: XLA's CPU client runs programs called from different threads at once), joined along that axis:
+    a pytree over all the spans' problems."""
     if len(parts) == 1:
         return fn(*parts[0])
     futures = [_THREADS.submit(lambda part: jax.block_until_ready(fn(*part)), part) for part in parts]

@@ -86,8 +86,9 @@ def optimize(
     Problems are independent (a world per
     problem where ``avoid.world`` has problem axes): a problem's motion depends on its own data and its
     place in the batch (its seeds' key) only. On the CPU one compiled loop plans them one after another
-    (a batch costs the sum of its problems, not its slowest times their number), called at the top level in
-    one span of the batch per core, each from a host thread of its own; elsewhere all at once.
+    (a batch costs the sum of its problems, not its slowest times their number), called at the top level on
+    spans of the batch by one host thread per core, each taking the next span as it comes free; elsewhere all
+    at once.
     Compiled once per model, batch shape and static argument; works inside ``jit`` with the model and
     ``avoid.geom`` closed over (the certificate reads them on the host) and the starts, goals and worlds
     traced (batch problems by their leading axes rather than by ``vmap``).

@@ -303,7 +303,7 @@ def test_traj_compile_keeps_gjk_free_of_ynnpack_fusions():
     np.testing.assert_allclose(np.asarray(traj(a, b)), np.asarray(plain(a, b)), rtol=0, atol=2e-6)
 
 
-@pytest.mark.parametrize("n", [1, 2, 5, 8])
+@pytest.mark.parametrize("n", [1, 2, 5, 8, 37])
 def test_spans_in_threads_cover_the_batch_once_each(n, monkeypatch):
     """Spans of one size cover every problem (the last overlapping the one before it where the count does not
     divide ``n``); ``in_threads`` joins what each thread computed into the batch's result, as one call would
@@ -313,7 +313,8 @@ def test_spans_in_threads_cover_the_batch_once_each(n, monkeypatch):
     monkeypatch.setattr(_xla, "_cores", lambda: 3)
     x = jnp.arange(n * 2.0).reshape(n, 2)
     parts = _xla.spans(n, x)
-    assert len({size for _, size in parts}) == 1 and len(parts) == min(n, 3)
+    size = -(-n // min(n, 3 * _xla.SPANS_PER_CORE))
+    assert {s for _, s in parts} == {size} and len(parts) == -(-n // size)
     covered = np.zeros(n, int)
     for start, size in parts:
         assert 0 <= start and start + size <= n
