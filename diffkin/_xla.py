@@ -17,9 +17,9 @@ The measurements that justify them are in docs/performance.md, "XLA CPU tricks".
   as two independent halves (:func:`_in_halves`), so that both CPU threads have work.
 - :func:`problems_at_once`: independent problems that each iterate until solved go one at a time
   through :func:`in_steps` on the CPU, so that none waits for the slowest.
-- :func:`spans` and :func:`in_threads`: such problems, called at the top level on the CPU, are split into one
-  span per core, each planned by the same compiled program in a host thread of its own: one problem's
-  kernels are too small and too serial to keep more than about one core and a quarter busy.
+- :func:`spans` and :func:`in_threads`: such problems, called at the top level on the CPU, are split into
+  spans (:data:`SPANS_PER_CORE` per core), each planned by the same compiled program on one host thread per
+  core: one problem's kernels are too small and too serial to keep more than about one core and a quarter busy.
 - :func:`blocks_joined`: blocks of a result with the batch innermost, joined.
 - :data:`LAST_STEPPED`: an output with the configurations last is moved to the front in a kernel
   of its own (through the stepped loop), not fused into the computation, which would then not be

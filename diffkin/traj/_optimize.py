@@ -188,10 +188,10 @@ def optimize(
     q_start_flat = flat(q_start, (dof,))
     base_flat = None if base is None else flat(base.astype(dtype), (4, 4))
     locked_flat = None if locked_q is None else flat(locked_q.astype(dtype), (dof,))
-    # on the CPU, the problems in spans planned at once, a host thread each (diffkin._xla.in_threads)
+    # on the CPU, spans of the problems planned by one host thread per core (diffkin._xla.in_threads)
     parts = spans(B, q_start, goal, avoid, base)
 
-    def arguments(q_goal, goal_ok, start: int, size: int) -> tuple:  # _solve's for problems [start, start + size)
+    def arguments(q_goal_flat, goal_ok_flat, start: int, size: int) -> tuple:  # _solve's, [start, start + size)
         part = lambda x: None if x is None else x[start : start + size]  # noqa: E731
         own = lambda a: None if a is None else a.tiled(part)  # noqa: E731  (a world per problem, or shared)
         return (
@@ -199,8 +199,8 @@ def optimize(
             traced,
             jnp.arange(start, start + size, dtype=jnp.int32),
             part(q_start_flat),
-            part(flat(q_goal, (dof,))),
-            part(flat(goal_ok, ())),
+            part(q_goal_flat),
+            part(goal_ok_flat),
             own(avoid_flat),
             own(searched_flat),
             part(base_flat),
@@ -213,19 +213,20 @@ def optimize(
     statics = {"locked": mask, "free": knots - 4, "seeds": num_seeds, "iters": int(max_iters)}
     # one compile serves every span: the motion's program compiles first (with a pose goal, in another thread,
     # from the goal's placeholders, while IK compiles and solves the goal)
+    goal_flat = (flat(q_goal, (dof,)), flat(goal_ok, ()))  # (a pose goal's placeholders until IK solves it)
     ahead = None
     if len(parts) > 1 or pose_goal:
-        ahead = _solve.compile_ahead(*arguments(q_goal, goal_ok, *parts[0]), **statics)
+        ahead = _solve.compile_ahead(*arguments(*goal_flat, *parts[0]), **statics)
     if pose_goal:
         from diffkin.ik import solve
 
         res = solve(
             model, goal, key=key, q0=q_start, avoid=avoid, locked=locked, base=base, pos_tol=pos_tol, rot_tol=rot_tol
         )
-        q_goal, goal_ok = res.q.astype(dtype), res.success
+        goal_flat = (flat(res.q.astype(dtype), (dof,)), flat(res.success, ()))
     if ahead is not None:
         ahead.result()
-    out = in_threads(lambda start, size: _solve(*arguments(q_goal, goal_ok, start, size), **statics), parts)
+    out = in_threads(lambda start, size: _solve(*arguments(*goal_flat, start, size), **statics), parts)
     return jax.tree.map(lambda x: x.reshape(batch + x.shape[1:]), out)
 
 

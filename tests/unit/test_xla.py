@@ -316,9 +316,9 @@ def test_spans_in_threads_cover_the_batch_once_each(n, monkeypatch):
     size = -(-n // min(n, 3 * _xla.SPANS_PER_CORE))
     assert {s for _, s in parts} == {size} and len(parts) == -(-n // size)
     covered = np.zeros(n, int)
-    for start, size in parts:
-        assert 0 <= start and start + size <= n
-        covered[start : start + size] += 1
+    for start, span in parts:
+        assert 0 <= start and start + span <= n
+        covered[start : start + span] += 1
     assert np.all(covered >= 1)
     out = _xla.in_threads(
         lambda start, size: {"y": 2 * x[start : start + size], "i": jnp.arange(start, start + size)}, parts
